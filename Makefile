@@ -1,0 +1,45 @@
+# sdmpi: `make run` (demonstration, end to end) and `make test` (the suite).
+# Both bootstrap a fresh Debian 12 machine: Debian packages (idempotent), a
+# virtualenv that sees them (--system-site-packages), and `pip install -e .[test]`.
+
+PY        := /usr/bin/python3
+VENV      := .venv
+VPY       := $(VENV)/bin/python
+DEB_PKGS  := openmpi-bin python3-mpi4py python3-h5py-mpi python3-petsc4py \
+             python3-numba python3-scipy python3-matplotlib python3-venv python3-pip
+export PETSC_DIR ?= /usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real
+export OMPI_ALLOW_RUN_AS_ROOT := 1
+export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
+export OMP_NUM_THREADS := 1
+export OPENBLAS_NUM_THREADS := 1
+export MKL_NUM_THREADS := 1
+export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
+
+.PHONY: setup run test bench clean
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	@missing=""; for p in $(DEB_PKGS); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "install ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
+	fi
+	$(PY) -m venv --system-site-packages $(VENV)
+	$(VPY) -m pip install -q -e '.[test]'
+	touch $@
+
+run: setup
+	$(VENV)/bin/sdmpi demo
+
+test: setup
+	$(VPY) -m pytest -q tests
+
+bench: setup
+	$(VPY) bench/bench_hydro.py --out bench/results.json
+
+clean:
+	rm -rf $(VENV) .numba_cache build *.egg-info

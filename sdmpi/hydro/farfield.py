@@ -1,0 +1,413 @@
+"""Far-field grand mobility M_inf at the force-torque-stresslet (FTS) level.
+
+Unbounded fluid: Durlofsky, Brady & Bossis, J. Fluid Mech. 180, 21 (1987) (DBB), with the
+Faxen laws of unequal spheres. Periodic, Lees-Edwards-sheared box: Beenakker's Ewald
+splitting, J. Chem. Phys. 85, 1581 (1986), as used for SD by Brady, Phillips, Lester &
+Bossis, J. Fluid Mech. 195, 257 (1988), on the deformed lattice of `geometry.Lattice`.
+
+Construction (viscosity 1). Every coupling is a pair of differential operators applied
+to the biharmonic scalar chi(r) = r/(8 pi), whose Oseen tensor is
+J = (I lap - grad grad) chi. The source operators of sphere j (radius a_j) are the
+force F: (1 + a_j^2/6 lap) J F; the torque L: force density curl(L delta)/2; the
+stresslet: force density -S.grad(delta) with (1 + a_j^2/10 lap). The receiver operators
+of sphere i are their adjoints: U = (1 + a_i^2/6 lap) u, Omega = curl(u)/2,
+E = (1 + a_i^2/10 lap) sym grad u. This reproduces DBB's far-field (Rotne-Prager-level)
+mobility, and, being a Gram form, is symmetric positive semi-definite by construction.
+
+Generalized vectors (the sdmpi sign convention, shared with `two_sphere`): the mobility
+maps (F, L, -S) -> (U - U_inf, Omega - Omega_inf, -E_inf), with F, L the force and
+torque a particle exerts on the fluid, S its stresslet, and strain-type 3x3 tensors
+stored as 5-vectors in `basis.BASIS`. Per particle 11 rows: 3 U, 3 Omega, 5 E.
+
+Ewald sum (Hasimoto 1959 / Beenakker 1986): chi = chi_r + chi_k with
+chi_k^(k) = -h(k)/k^4, h = (1 + k^2/4xi^2 + k^4/8xi^4) exp(-k^2/4xi^2); in real space
+this gives exactly chi_r = r erfc(xi r)/(8 pi). The real-space part is summed over pairs
+and lattice images within r_c, the reciprocal part over k != 0 within k_c (k = 0
+omitted: zero-volume-flux frame), and the self terms are the isolated-sphere values
+minus the k-space field at r = 0. Truncation errors fall like exp(-(xi r_c)^2) and
+exp(-(k_c/2xi)^2); `EwaldParameters.choose` picks xi, r_c, k_c for a requested accuracy.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy.special import gamma as gamma_function
+
+from .basis import BASIS
+from .geometry import Lattice
+
+NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
+
+
+# ---------------------------------------------------------------------------------
+# radial functions  f(r) = erfc(xi r) sum_n c_n r^n + exp(-xi^2 r^2) sum_n d_n r^n
+# ---------------------------------------------------------------------------------
+
+_P0 = 12  # array index of the power r^0
+_NPOW = 28  # powers r^-12 .. r^15
+
+
+class RadialFunction:
+    """f(r) = erfc(xi r) sum c_n r^n + exp(-xi^2 r^2) sum d_n r^n, closed under d/dr.
+
+    xi = 0 gives plain Laurent polynomials (the unbounded-fluid kernels)."""
+
+    def __init__(self, xi, erfc_coeffs, exp_coeffs):
+        self.xi = xi
+        self.c = np.asarray(erfc_coeffs, dtype=float)
+        self.d = np.asarray(exp_coeffs, dtype=float)
+
+    def derivative(self):
+        xi = self.xi
+        n = np.arange(_NPOW) - _P0
+        c, d = np.zeros(_NPOW), np.zeros(_NPOW)
+        c[:-1] += (n * self.c)[1:]  # n c_n r^(n-1) erfc
+        d += -2 * xi / math.sqrt(math.pi) * self.c  # c_n r^n d/dr erfc(xi r)
+        d[:-1] += (n * self.d)[1:]  # n d_n r^(n-1) exp
+        d[1:] += (-2 * xi * xi * self.d)[:-1]  # -2 xi^2 d_n r^(n+1) exp
+        if abs(c[0]) + abs(d[0]) + abs(c[-1]) + abs(d[-1]) > 0:
+            raise ArithmeticError("radial function powers out of range")
+        return RadialFunction(xi, c, d)
+
+    def laplacian(self):
+        """f'' + 2 f'/r (the Laplacian of a radial function, r > 0)."""
+        first = self.derivative()
+        second = first.derivative()
+        c, d = second.c.copy(), second.d.copy()
+        c[:-1] += 2 * first.c[1:]
+        d[:-1] += 2 * first.d[1:]
+        return RadialFunction(self.xi, c, d)
+
+    def __call__(self, r):
+        r = np.asarray(r, dtype=float)
+        powers = r[..., None] ** (np.arange(_NPOW) - _P0)
+        erfc = np.vectorize(math.erfc)(self.xi * r)
+        return erfc * (powers @ self.c) + np.exp(-((self.xi * r) ** 2)) * (powers @ self.d)
+
+
+def radial_table(xi):
+    """T[p, m] = coefficients (2, NPOW) of d^m/dr^m of phi_p = lap^p chi_r,
+    p = 0..3, m = 0..4, with chi_r = r erfc(xi r)/(8 pi)."""
+    c = np.zeros(_NPOW)
+    c[_P0 + 1] = 1.0 / (8 * math.pi)
+    phi = RadialFunction(xi, c, np.zeros(_NPOW))
+    table = np.zeros((4, 5, 2, _NPOW))
+    for p in range(4):
+        f = phi
+        for m in range(5):
+            table[p, m, 0], table[p, m, 1] = f.c, f.d
+            f = f.derivative()
+        phi = phi.laplacian()
+    return table
+
+
+# ---------------------------------------------------------------------------------
+# real-space pair kernel (numba)
+# ---------------------------------------------------------------------------------
+
+_LEVI = np.zeros((3, 3, 3))
+_LEVI[0, 1, 2] = _LEVI[1, 2, 0] = _LEVI[2, 0, 1] = 1.0
+_LEVI[0, 2, 1] = _LEVI[2, 1, 0] = _LEVI[1, 0, 2] = -1.0
+
+
+@numba.njit(cache=True)
+def _radial_values(table, xi, r, out):
+    """out[p, m] = d^m phi_p / dr^m at r."""
+    erfc = math.erfc(xi * r)
+    gauss = math.exp(-xi * xi * r * r)
+    npow = table.shape[3]
+    pw = np.empty(npow)
+    pw[_P0] = 1.0
+    for n in range(_P0 + 1, npow):
+        pw[n] = pw[n - 1] * r
+    inv = 1.0 / r
+    for n in range(_P0 - 1, -1, -1):
+        pw[n] = pw[n + 1] * inv
+    for p in range(4):
+        for m in range(5):
+            sc = 0.0
+            sd = 0.0
+            for n in range(npow):
+                sc += table[p, m, 0, n] * pw[n]
+                sd += table[p, m, 1, n] * pw[n]
+            out[p, m] = erfc * sc + gauss * sd
+
+
+@numba.njit(cache=True)
+def _pair_block(rvec, ai, aj, table, xi, basis, levi, out):
+    """11x11 real-space block coupling receiver sphere i to source sphere j at
+    rvec = x_i - x_j (plus a lattice translation); adds into out."""
+    r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
+    e = rvec / r
+    v = np.empty((4, 5))
+    _radial_values(table, xi, r, v)
+    al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
+    be_i, be_j = ai * ai / 10.0, aj * aj / 10.0
+    ir = 1.0 / r
+
+    # UF: I lap Psi0 - grad grad Psi0,  Psi0 = (1 + al_i lap)(1 + al_j lap) chi_r
+    s1, s2 = al_i + al_j, al_i * al_j
+    psi1 = v[1, 0] + s1 * v[2, 0] + s2 * v[3, 0]
+    d1 = v[0, 1] + s1 * v[1, 1] + s2 * v[2, 1]
+    d2 = v[0, 2] + s1 * v[1, 2] + s2 * v[2, 2]
+    a2 = d2 - d1 * ir
+    b2 = d1 * ir
+    for a in range(3):
+        for b in range(3):
+            out[a, b] += -a2 * e[a] * e[b]
+        out[a, a] += psi1 - b2
+
+    # UL and Omega-F: (1/2) eps grad (lap chi_r + al lap^2 chi_r)
+    f_ul = v[1, 1] + al_i * v[2, 1]
+    f_of = v[1, 1] + al_j * v[2, 1]
+    for a in range(3):
+        for m in range(3):
+            for c in range(3):
+                out[a, 3 + m] += 0.5 * levi[m, a, c] * f_ul * e[c]
+                out[3 + m, a] += 0.5 * levi[m, c, a] * f_of * e[c]
+
+    # Omega-L: (1/4)(grad grad lap chi_r - I lap^2 chi_r)
+    a2 = v[1, 2] - v[1, 1] * ir
+    b2 = v[1, 1] * ir
+    for m in range(3):
+        for n in range(3):
+            out[3 + m, 3 + n] += 0.25 * a2 * e[m] * e[n]
+        out[3 + m, 3 + m] += 0.25 * (b2 - v[2, 0])
+
+    # B^n . e and e . B^n . e
+    be = np.zeros((5, 3))
+    q = np.zeros(5)
+    for n in range(5):
+        for k in range(3):
+            for l in range(3):
+                be[n, k] += basis[n, k, l] * e[l]
+        for k in range(3):
+            q[n] += e[k] * be[n, k]
+
+    # U-S:  -I.grad lap Gamma + grad^3 Gamma, Gamma = (1 + al_i lap)(1 + be_j lap) chi_r
+    # E-F:  same with (be_i, al_j), transposed
+    for side in range(2):
+        if side == 0:
+            t1, t2 = al_i + be_j, al_i * be_j
+        else:
+            t1, t2 = be_i + al_j, be_i * al_j
+        g1 = v[1, 1] + t1 * v[2, 1] + t2 * v[3, 1]
+        f1 = v[0, 1] + t1 * v[1, 1] + t2 * v[2, 1]
+        f2 = v[0, 2] + t1 * v[1, 2] + t2 * v[2, 2]
+        f3 = v[0, 3] + t1 * v[1, 3] + t2 * v[2, 3]
+        c1 = f3 - 3 * f2 * ir + 3 * f1 * ir * ir
+        c2 = f2 * ir - f1 * ir * ir
+        for n in range(5):
+            for a in range(3):
+                val = (2 * c2 - g1) * be[n, a] + c1 * e[a] * q[n]
+                if side == 0:
+                    out[a, 6 + n] += val
+                else:
+                    out[6 + n, a] -= val
+
+    # Omega-S and E-L:  -(1/2) A2 (e x B e)  and  (1/2) A2 (B e x e)
+    for side in range(2):
+        bb = be_j if side == 0 else be_i
+        f1 = v[1, 1] + bb * v[2, 1]
+        f2 = v[1, 2] + bb * v[2, 2]
+        a2 = f2 - f1 * ir
+        for n in range(5):
+            for m in range(3):
+                cross = 0.0
+                for b in range(3):
+                    for k in range(3):
+                        cross += levi[m, b, k] * e[b] * be[n, k]
+                if side == 0:
+                    out[3 + m, 6 + n] += -0.5 * a2 * cross
+                else:
+                    out[6 + n, 3 + m] += -0.5 * a2 * cross
+
+    # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I
+    u1, u2 = be_i + be_j, be_i * be_j
+    h1 = v[1, 1] + u1 * v[2, 1] + u2 * v[3, 1]
+    h2 = v[1, 2] + u1 * v[2, 2] + u2 * v[3, 2]
+    f1 = v[0, 1] + u1 * v[1, 1] + u2 * v[2, 1]
+    f2 = v[0, 2] + u1 * v[1, 2] + u2 * v[2, 2]
+    f3 = v[0, 3] + u1 * v[1, 3] + u2 * v[2, 3]
+    f4 = v[0, 4] + u1 * v[1, 4] + u2 * v[2, 4]
+    a2 = h2 - h1 * ir
+    b2 = h1 * ir
+    dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir * ir - 15 * f1 * ir ** 3
+    dd2 = f3 * ir - 3 * f2 * ir * ir + 3 * f1 * ir ** 3
+    dd3 = f2 * ir * ir - f1 * ir ** 3
+    for m in range(5):
+        for n in range(5):
+            w = be[m, 0] * be[n, 0] + be[m, 1] * be[n, 1] + be[m, 2] * be[n, 2]
+            out[6 + m, 6 + n] += (4 * dd2 - a2) * w + dd1 * q[m] * q[n]
+        out[6 + m, 6 + m] += 2 * dd3 - b2
+
+
+@numba.njit(cache=True)
+def _real_space_sum(pos, radii, shifts, rcut, table, xi, basis, levi, mob):
+    """Adds the real-space Ewald sum (or, with xi = 0 and one zero shift, the unbounded
+    pair couplings) into the (11N, 11N) matrix mob. Pairs i < j are computed once and
+    mirrored with the reciprocal symmetry M_ji = M_ij^T."""
+    n = pos.shape[0]
+    block = np.zeros((NDOF, NDOF))
+    rvec = np.empty(3)
+    rc2 = rcut * rcut
+    for i in range(n):
+        for j in range(i, n):
+            block[:, :] = 0.0
+            hit = False
+            for s in range(shifts.shape[0]):
+                for c in range(3):
+                    rvec[c] = pos[i, c] - pos[j, c] + shifts[s, c]
+                r2 = rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2
+                if r2 > rc2 or r2 == 0.0:
+                    continue
+                _pair_block(rvec, radii[i], radii[j], table, xi, basis, levi, block)
+                hit = True
+            if not hit:
+                continue
+            for a in range(NDOF):
+                for b in range(NDOF):
+                    mob[NDOF * i + a, NDOF * j + b] += block[a, b]
+                    if i != j:
+                        mob[NDOF * j + b, NDOF * i + a] += block[a, b]
+
+
+# ---------------------------------------------------------------------------------
+# reciprocal space and self terms (numpy + BLAS)
+# ---------------------------------------------------------------------------------
+
+
+def _hasimoto(k2, xi):
+    """h(k) = (1 + k^2/4xi^2 + k^4/8xi^4) exp(-k^2/4xi^2)."""
+    u = k2 / (4 * xi * xi)
+    return (1 + u + 2 * u * u) * np.exp(-u)
+
+
+def _reciprocal_matrix(pos, radii, kvec, xi, volume):
+    """(2/V) sum over half-space k of Re[Z Z^H], Z_i = R_i(k) Q sqrt(h)/k exp(i k.x_i)."""
+    n = pos.shape[0]
+    nk = kvec.shape[0]
+    if nk == 0:
+        return np.zeros((NDOF * n, NDOF * n))
+    k2 = np.einsum("ij,ij->i", kvec, kvec)
+    kmag = np.sqrt(k2)
+    khat = kvec / kmag[:, None]
+    trial = np.where(np.abs(khat[:, [2]]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    q1 = np.cross(khat, trial)
+    q1 /= np.linalg.norm(q1, axis=1)[:, None]
+    q2 = np.cross(khat, q1)
+    q = np.stack([q1, q2], axis=1)  # (nk, 2, 3)
+    q = q * (np.sqrt(_hasimoto(k2, xi)) / kmag)[:, None, None]
+    kq = np.einsum("mab,ka,kqb->kqm", BASIS, kvec, q)  # k . B^m . q   (nk, 2, 5)
+    kxq = np.cross(kvec[:, None, :], q)  # (nk, 2, 3)
+    a2 = radii * radii
+    fu = 1 - np.outer(k2, a2) / 6  # (nk, n)
+    fe = 1 - np.outer(k2, a2) / 10
+    re = np.zeros((nk, 2, n, NDOF))  # real part of R_i(k) Q: U rows
+    im = np.zeros((nk, 2, n, NDOF))  # imaginary part: Omega, E rows
+    re[..., 0:3] = fu[:, None, :, None] * q[:, :, None, :]
+    im[..., 3:6] = 0.5 * kxq[:, :, None, :]
+    im[..., 6:11] = fe[:, None, :, None] * kq[:, :, None, :]
+    phase = kvec @ pos.T  # (nk, n)
+    cos = np.cos(phase)[:, None, :, None]
+    sin = np.sin(phase)[:, None, :, None]
+    zr = (re * cos - im * sin).reshape(2 * nk, n * NDOF)
+    zi = (re * sin + im * cos).reshape(2 * nk, n * NDOF)
+    z = np.concatenate([zr, zi], axis=0)
+    return (2.0 / volume) * (z.T @ z)
+
+
+def _gauss_moment(p, xi):
+    """int_0^inf k^(2p) exp(-k^2/4xi^2) dk = Gamma(p + 1/2) (2 xi)^(2p+1) / 2."""
+    return 0.5 * gamma_function(p + 0.5) * (2 * xi) ** (2 * p + 1)
+
+
+def _h_integral(poly, xi):
+    """int_0^inf P(k^2) h(k) dk for P given by coefficients in powers of k^2."""
+    hpoly = np.array([1.0, 1 / (4 * xi * xi), 1 / (8 * xi ** 4)])
+    total = np.convolve(poly, hpoly)
+    return sum(c * _gauss_moment(p, xi) for p, c in enumerate(total))
+
+
+def self_mobility(radius, xi=None):
+    """Diagonal 11x11 self block: the isolated sphere, U = F/(6 pi a),
+    Omega = L/(8 pi a^3), -E = -S 3/(20 pi a^3), minus (for xi given) the k-space
+    Ewald field at r = 0, obtained from int d^3k/(2pi)^3 R(k) J^(k) R(k)^H with the
+    angular averages <I - kk> = 2/3, and 1/5 for the strain block."""
+    a = float(radius)
+    diag = np.empty(NDOF)
+    diag[0:3] = 1 / (6 * math.pi * a)
+    diag[3:6] = 1 / (8 * math.pi * a ** 3)
+    diag[6:11] = 3 / (20 * math.pi * a ** 3)
+    if xi is not None and xi > 0:
+        c = 1 / (2 * math.pi ** 2)
+        al, be = a * a / 6, a * a / 10
+        diag[0:3] -= c * (2 / 3) * _h_integral([1.0, -2 * al, al * al], xi)
+        diag[3:6] -= c * (1 / 6) * _h_integral([0.0, 1.0], xi)
+        diag[6:11] -= c * (1 / 5) * _h_integral([0.0, 1.0, -2 * be, be * be], xi)
+    return np.diag(diag)
+
+
+# ---------------------------------------------------------------------------------
+# parameters and the public entry point
+# ---------------------------------------------------------------------------------
+
+
+def _truncation_parameter(tol):
+    """s with exp(-s^2) s^6 = tol: the reach, in units of 1/xi (real space) and 2 xi
+    (reciprocal space), at which the slowest-decaying kernel (the 4th derivative of
+    r erfc(xi r) times Faxen Laplacians) has fallen to tol relative to its scale."""
+    s = math.sqrt(-math.log(tol))
+    for _ in range(50):
+        s = math.sqrt(-math.log(tol) + 6 * math.log(s))
+    return s
+
+
+@dataclass(frozen=True)
+class EwaldParameters:
+    """Splitting parameter xi, real-space cut-off r_c and reciprocal cut-off k_c."""
+
+    xi: float
+    rcut: float
+    kcut: float
+
+    @classmethod
+    def choose(cls, lattice, n_particles, tol=1e-8, xi=None, cost_ratio=25.0):
+        """Parameters for relative accuracy tol. Unless given, xi balances the
+        real-space cost (pairs within r_c ~ N^2 r_c^3 / V, each a numba kernel) against
+        the reciprocal cost (N^2 k_c^3 V, each a BLAS rank update); cost_ratio is the
+        measured ratio of one kernel evaluation to one rank-update element."""
+        s = _truncation_parameter(tol)
+        if xi is None:
+            xi = (2 * math.pi ** 3 * cost_ratio) ** (1 / 6) / lattice.volume ** (1 / 3)
+        return cls(xi=float(xi), rcut=s / xi, kcut=2 * xi * s)
+
+
+def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None):
+    """The (11N, 11N) far-field grand mobility M_inf, symmetric positive definite.
+
+    positions (N, 3), radii (N,); box (3,) for a periodic Lees-Edwards box at the given
+    strain, or None for unbounded fluid (DBB 1987). Periodic sums are converged to
+    relative accuracy ~tol; xi overrides the Ewald splitting parameter."""
+    pos = np.ascontiguousarray(positions, dtype=float)
+    radii = np.ascontiguousarray(radii, dtype=float)
+    n = pos.shape[0]
+    mob = np.zeros((NDOF * n, NDOF * n))
+    if box is None:
+        table = radial_table(0.0)
+        _real_space_sum(pos, radii, np.zeros((1, 3)), np.inf, table, 0.0, BASIS, _LEVI, mob)
+        blocks = {a: self_mobility(a) for a in np.unique(radii)}
+    else:
+        lattice = Lattice(box, strain)
+        pos = lattice.wrap(pos)
+        par = EwaldParameters.choose(lattice, n, tol=tol, xi=xi)
+        table = radial_table(par.xi)
+        shifts = lattice.image_shifts(par.rcut)
+        _real_space_sum(pos, radii, shifts, par.rcut, table, par.xi, BASIS, _LEVI, mob)
+        mob += _reciprocal_matrix(pos, radii, lattice.wave_vectors(par.kcut), par.xi, lattice.volume)
+        blocks = {a: self_mobility(a, par.xi) for a in np.unique(radii)}
+    for i, a in enumerate(radii):
+        mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += blocks[a]
+    return mob

@@ -1,0 +1,66 @@
+"""Periodic boxes with Lees-Edwards shear, as a deformed lattice.
+
+Axes: flow x, gradient y, vorticity z. A box (Lx, Ly, Lz) at strain gamma has the
+lattice vectors L1 = (Lx, 0, 0), L2 = (gamma Ly, Ly, 0), L3 = (0, 0, Lz): the image
+at +Ly is shifted in x by gamma Ly (Lees & Edwards 1972). The lattice is unchanged by
+gamma -> gamma + Lx/Ly, so the strain is reduced to |gamma| <= Lx/(2 Ly) before use;
+this keeps the lattice vectors short and makes every result periodic in the strain.
+"""
+
+import numpy as np
+
+
+def check_box(box):
+    """Validate a box argument: None, or three finite positive lengths."""
+    if box is None:
+        return None
+    box = np.asarray(box, dtype=float)
+    if box.shape != (3,):
+        raise ValueError(f"box must have shape (3,) (Lx, Ly, Lz) or be None, got shape {box.shape}")
+    if not np.all(np.isfinite(box)) or np.any(box <= 0):
+        raise ValueError(f"box lengths must be finite and > 0, got {box.tolist()}")
+    return box
+
+
+class Lattice:
+    """The periodic lattice of a box (Lx, Ly, Lz) sheared by Lees-Edwards strain."""
+
+    def __init__(self, box, strain=0.0):
+        box = check_box(box)
+        if not np.isfinite(strain):
+            raise ValueError(f"strain must be finite, got {strain}")
+        lx, ly, lz = box
+        period = lx / ly
+        self.box = box
+        self.strain = float(strain) - np.round(float(strain) / period) * period
+        #: rows are the lattice vectors L1, L2, L3
+        self.vectors = np.array([[lx, 0.0, 0.0], [self.strain * ly, ly, 0.0], [0.0, 0.0, lz]])
+        #: rows b_i with b_i . L_j = delta_ij (reciprocal vectors without the 2 pi)
+        self.reciprocal = np.linalg.inv(self.vectors).T
+        self.volume = float(lx * ly * lz)
+
+    def wrap(self, positions):
+        """Map positions into the primary (sheared) cell, fractional coords in [0, 1)."""
+        frac = positions @ self.reciprocal.T
+        frac -= np.floor(frac)
+        return frac @ self.vectors
+
+    def image_shifts(self, reach):
+        """Lattice translations n . L with |n_i| <= ceil(reach |b_i|) + 1: every image of a
+        point of the primary cell that can lie within `reach` of another point of it."""
+        counts = np.ceil(reach * np.linalg.norm(self.reciprocal, axis=1)).astype(int) + 1
+        ranges = [np.arange(-c, c + 1) for c in counts]
+        n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
+        return n @ self.vectors
+
+    def wave_vectors(self, kmax):
+        """Reciprocal lattice vectors k = 2 pi n . b with 0 < |k| <= kmax, one of each
+        +-k pair (the sums below use that the terms at -k are complex conjugates)."""
+        counts = np.ceil(kmax * np.linalg.norm(self.vectors, axis=1) / (2 * np.pi)).astype(int)
+        ranges = [np.arange(-c, c + 1) for c in counts]
+        n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
+        # keep the half space: first non-zero integer component positive
+        first = np.where(n[:, 0] != 0, n[:, 0], np.where(n[:, 1] != 0, n[:, 1], n[:, 2]))
+        n = n[first > 0]
+        k = 2 * np.pi * n @ self.reciprocal
+        return k[np.einsum("ij,ij->i", k, k) <= kmax * kmax]
