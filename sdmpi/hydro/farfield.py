@@ -113,12 +113,27 @@ _LEVI[0, 2, 1] = _LEVI[2, 1, 0] = _LEVI[1, 0, 2] = -1.0
 
 
 @numba.njit(cache=True)
-def _radial_values(table, xi, r, out):
-    """out[p, m] = d^m phi_p / dr^m at r."""
+def _power_bounds(table):
+    """[lo, hi) index range of the non-zero powers of each (p, m) entry of the table."""
+    bounds = np.zeros((4, 5, 2), dtype=np.int64)
+    for p in range(4):
+        for m in range(5):
+            lo, hi = table.shape[3], 0
+            for n in range(table.shape[3]):
+                if table[p, m, 0, n] != 0.0 or table[p, m, 1, n] != 0.0:
+                    lo = min(lo, n)
+                    hi = n + 1
+            bounds[p, m, 0], bounds[p, m, 1] = lo, max(hi, lo)
+    return bounds
+
+
+@numba.njit(cache=True)
+def _radial_values(table, bounds, xi, r, pw, out):
+    """out[p, m] = d^m phi_p / dr^m at r (bounds from _power_bounds(table); pw is a
+    work array of length NPOW)."""
     erfc = math.erfc(xi * r)
     gauss = math.exp(-xi * xi * r * r)
     npow = table.shape[3]
-    pw = np.empty(npow)
     pw[_P0] = 1.0
     for n in range(_P0 + 1, npow):
         pw[n] = pw[n - 1] * r
@@ -129,20 +144,22 @@ def _radial_values(table, xi, r, out):
         for m in range(5):
             sc = 0.0
             sd = 0.0
-            for n in range(npow):
+            for n in range(bounds[p, m, 0], bounds[p, m, 1]):
                 sc += table[p, m, 0, n] * pw[n]
                 sd += table[p, m, 1, n] * pw[n]
             out[p, m] = erfc * sc + gauss * sd
 
 
 @numba.njit(cache=True)
-def _pair_block(rvec, ai, aj, table, xi, basis, levi, out):
+def _pair_block(rvec, ai, aj, table, bounds, xi, basis, levi, work, out):
     """11x11 real-space block coupling receiver sphere i to source sphere j at
-    rvec = x_i - x_j (plus a lattice translation); adds into out."""
+    rvec = x_i - x_j (plus a lattice translation); adds into out. work: (80,) scratch."""
     r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
-    e = rvec / r
-    v = np.empty((4, 5))
-    _radial_values(table, xi, r, v)
+    e = work[0:3]
+    for c in range(3):
+        e[c] = rvec[c] / r
+    v = work[3:23].reshape((4, 5))
+    _radial_values(table, bounds, xi, r, work[23:23 + _NPOW], v)
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
     be_i, be_j = ai * ai / 10.0, aj * aj / 10.0
     ir = 1.0 / r
@@ -177,8 +194,10 @@ def _pair_block(rvec, ai, aj, table, xi, basis, levi, out):
         out[3 + m, 3 + m] += 0.25 * (b2 - v[2, 0])
 
     # B^n . e and e . B^n . e
-    be = np.zeros((5, 3))
-    q = np.zeros(5)
+    be = work[51:66].reshape((5, 3))
+    q = work[66:71]
+    be[:, :] = 0.0
+    q[:] = 0.0
     for n in range(5):
         for k in range(3):
             for l in range(3):
@@ -250,6 +269,8 @@ def _real_space_sum(pos, radii, shifts, rcut, table, xi, basis, levi, mob):
     pair couplings) into the (11N, 11N) matrix mob. Pairs i < j are computed once and
     mirrored with the reciprocal symmetry M_ji = M_ij^T."""
     n = pos.shape[0]
+    bounds = _power_bounds(table)
+    work = np.empty(80)
     block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
     rc2 = rcut * rcut
@@ -263,7 +284,7 @@ def _real_space_sum(pos, radii, shifts, rcut, table, xi, basis, levi, mob):
                 r2 = rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2
                 if r2 > rc2 or r2 == 0.0:
                     continue
-                _pair_block(rvec, radii[i], radii[j], table, xi, basis, levi, block)
+                _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, levi, work, block)
                 hit = True
             if not hit:
                 continue

@@ -1,0 +1,1 @@
+"""Time stepping of one SD realisation: shear protocol, forces, Brownian terms, media."""

@@ -1,0 +1,135 @@
+"""Near-field (lubrication) correction R_2B - R_2B,inf of Stokesian dynamics.
+
+Durlofsky, Brady & Bossis (1987); Brady & Bossis, Annu. Rev. Fluid Mech. 20 (1988):
+for every close pair the exact two-sphere resistance R_2B (`two_sphere`, Jeffrey &
+Onishi 1984, Jeffrey 1992) is added and the part already present in the inverted far
+field, the inverse of the two-sphere far-field mobility R_2B,inf = (M_2B,inf)^-1
+(`farfield`, unbounded form), is removed, so that two isolated spheres are exact.
+
+Pairs: all (i, j, image) with centre distance r < a_i + a_j + cutoff (a_i + a_j)/2,
+including a particle and its own periodic images; the correction decays like r^-4..r^-7
+beyond it. Gap regularisation: a pair closer than a_i + a_j + min_gap (a_i + a_j)/2
+(touching or overlapping) is evaluated at that minimum gap (default epsilon = 1e-4 of
+the mean radius, as in seed 001's minimum-separation rule), so R stays finite and
+positive definite; such pairs are counted.
+"""
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .basis import BASIS
+from .farfield import _LEVI, NDOF, _pair_block, _power_bounds, radial_table, self_mobility
+from .two_sphere import pair_resistance
+
+#: default lubrication cut-off: gap in units of the pair's mean radius
+DEFAULT_CUTOFF = 2.0
+#: default minimum gap (regularisation), in units of the pair's mean radius
+DEFAULT_MIN_GAP = 1e-4
+
+
+@dataclass
+class PairList:
+    """Close pairs: particle indices i, j, separation vectors x_j + shift - x_i, and the
+    number of pairs closer than the minimum gap (touching or overlapping)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    dx: np.ndarray
+    n_regularised: int
+    min_gap: float  # smallest surface gap found (negative for overlaps), inf if none
+
+
+@numba.njit(cache=True)
+def _find_pairs(pos, radii, shifts, cutoff):
+    n = pos.shape[0]
+    ii, jj, dd = [], [], []
+    for i in range(n):
+        for j in range(i, n):
+            for s in range(shifts.shape[0]):
+                dx = pos[j] + shifts[s] - pos[i]
+                r2 = dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2
+                if i == j and s <= shifts.shape[0] // 2:
+                    continue  # self-images: one of each +-n pair (all 4 blocks add to i)
+                asum = radii[i] + radii[j]
+                reach = asum + 0.5 * cutoff * asum
+                if r2 < reach * reach:
+                    ii.append(i)
+                    jj.append(j)
+                    dd.append(dx)
+    return ii, jj, dd
+
+
+def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP):
+    """All pairs (with periodic images when a lattice is given) within the cut-off.
+    Separations are regularised to the minimum gap and counted."""
+    if lattice is None:
+        shifts = np.zeros((1, 3))
+    else:
+        shifts = lattice.image_shifts(2 * radii.max() * (1 + 0.5 * cutoff))
+    ii, jj, dd = _find_pairs(positions, radii, shifts, float(cutoff))
+    i = np.array(ii, dtype=np.int64)
+    j = np.array(jj, dtype=np.int64)
+    dx = np.array(dd, dtype=float).reshape(-1, 3)
+    if len(i) == 0:
+        return PairList(i, j, dx, 0, np.inf)
+    r = np.linalg.norm(dx, axis=1)
+    asum = radii[i] + radii[j]
+    gap = r - asum
+    floor = 0.5 * min_gap * asum
+    short = gap < floor
+    dx[short] *= ((asum[short] + floor[short]) / r[short])[:, None]
+    return PairList(i, j, dx, int(short.sum()), float(gap.min()))
+
+
+@numba.njit(cache=True)
+def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, levi, res):
+    """res[p] -= inverse of the 22x22 unbounded two-sphere far-field mobility."""
+    mob = np.zeros((2 * NDOF, 2 * NDOF))
+    bounds = _power_bounds(table)
+    work = np.empty(80)
+    block = np.zeros((NDOF, NDOF))
+    rvec = np.empty(3)
+    for p in range(dx.shape[0]):
+        mob[:, :] = 0.0
+        block[:, :] = 0.0
+        for c in range(3):
+            rvec[c] = -dx[p, c]  # receiver 1 minus source 2
+        _pair_block(rvec, a1[p], a2[p], table, bounds, 0.0, basis, levi, work, block)
+        mob[:NDOF, :NDOF] = self1[p]
+        mob[NDOF:, NDOF:] = self2[p]
+        mob[:NDOF, NDOF:] = block
+        mob[NDOF:, :NDOF] = block.T
+        res[p] -= np.linalg.inv(mob)
+
+
+def lubrication_matrix(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP):
+    """The (11N, 11N) near-field correction sum over close pairs of R_2B - R_2B,inf,
+    and the PairList it was built from."""
+    n = positions.shape[0]
+    pairs = close_pairs(positions, radii, lattice, cutoff, min_gap)
+    out = np.zeros((NDOF * n, NDOF * n))
+    if len(pairs.i) == 0:
+        return out, pairs
+    a1, a2 = radii[pairs.i], radii[pairs.j]
+    res = pair_resistance(pairs.dx, a1, a2)
+    selfs = {a: self_mobility(a) for a in np.unique(radii)}
+    self1 = np.stack([selfs[a] for a in a1])
+    self2 = np.stack([selfs[a] for a in a2])
+    _subtract_far_field(pairs.dx, a1, a2, self1, self2, radial_table(0.0), BASIS, _LEVI, res)
+    _scatter_pairs(pairs.i, pairs.j, res, out)
+    return out, pairs
+
+
+@numba.njit(cache=True)
+def _scatter_pairs(pi, pj, res, out):
+    """Adds each pair's 22x22 matrix into the blocks (i,i), (i,j), (j,i), (j,j)."""
+    for p in range(pi.shape[0]):
+        idx = (pi[p], pj[p])
+        for u in range(2):
+            for v in range(2):
+                r0, c0 = NDOF * idx[u], NDOF * idx[v]
+                for a in range(NDOF):
+                    for b in range(NDOF):
+                        out[r0 + a, c0 + b] += res[p, NDOF * u + a, NDOF * v + b]

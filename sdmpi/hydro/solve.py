@@ -1,0 +1,74 @@
+"""The public hydrodynamics entry point `solve_mobility` (DESIGN.md contract 1)."""
+
+import numpy as np
+
+from .basis import from_five, to_five
+from .geometry import check_box
+from .resistance import DEFAULT_EWALD_TOL, grand_resistance
+from .solvers import make_solver
+
+#: overlaps deeper than this fraction of the pair's mean radius are rejected
+MAX_OVERLAP = 0.05
+
+
+def _array(name, value, shape, n):
+    arr = np.asarray(value, dtype=float)
+    want = tuple(n if s is None else s for s in shape)
+    if arr.shape != want:
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return arr
+
+
+def check_inputs(positions, box, radii, strain, forces, torques, rate_of_strain):
+    """Validate and normalise the arguments of `solve_mobility` (ValueError naming the
+    argument on any problem)."""
+    pos = np.asarray(positions, dtype=float)
+    if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] == 0:
+        raise ValueError(f"positions must have shape (N, 3) with N >= 1, got {pos.shape}")
+    n = pos.shape[0]
+    pos = _array("positions", pos, (None, 3), n)
+    box = check_box(box)
+    radii = np.ones(n) if radii is None else _array("radii", radii, (None,), n)
+    if np.any(radii <= 0):
+        raise ValueError("radii must be > 0")
+    if not np.isfinite(strain):
+        raise ValueError(f"strain must be finite, got {strain}")
+    forces = np.zeros((n, 3)) if forces is None else _array("forces", forces, (None, 3), n)
+    torques = np.zeros((n, 3)) if torques is None else _array("torques", torques, (None, 3), n)
+    if rate_of_strain is None:
+        einf = np.zeros((3, 3))
+    else:
+        einf = _array("rate_of_strain", rate_of_strain, (3, 3), n)
+        scale = max(np.abs(einf).max(), 1e-300)
+        if np.abs(einf - einf.T).max() > 1e-12 * scale or abs(np.trace(einf)) > 1e-12 * scale:
+            raise ValueError("rate_of_strain must be symmetric and traceless")
+    return pos, box, radii, float(strain), forces, torques, einf
+
+
+def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torques=None,
+                   rate_of_strain=None, lubrication=True, solver="dense",
+                   ewald_tol=DEFAULT_EWALD_TOL):
+    """Velocities and stresslets of N rigid spheres (Stokes units: viscosity 1).
+
+    positions (N, 3); box (3,) periodic Lees-Edwards box at `strain`, or None for
+    unbounded fluid; radii (N,) (default 1); forces, torques (N, 3) exerted on the
+    particles (default 0); rate_of_strain: symmetric traceless E_inf (3, 3) (default 0).
+    Returns U, Omega (N, 3) relative to the imposed linear flow at each centre, and the
+    stresslets S (N, 3, 3). Zero-volume-flux frame. An isolated sphere gives
+    U = F/(6 pi a), Omega = T/(8 pi a^3), S = (20/3) pi a^3 E_inf.
+    Overlaps deeper than MAX_OVERLAP mean radii raise ValueError; shallower ones and
+    touching pairs are regularised (see `lubrication`)."""
+    pos, box, radii, strain, forces, torques, einf = check_inputs(
+        positions, box, radii, strain, forces, torques, rate_of_strain)
+    res = grand_resistance(pos, radii, box, strain, lubrication, ewald_tol)
+    if res.pairs.min_gap < -MAX_OVERLAP * radii.min():
+        raise ValueError(f"positions: spheres overlap by {-res.pairs.min_gap:.3g} "
+                         f"(more than {MAX_OVERLAP} of a radius)")
+    backend = make_solver(solver, res)
+    n = pos.shape[0]
+    e5 = np.broadcast_to(to_five(einf), (n, 5))
+    vel = backend.velocities(np.hstack([forces, torques]), e5)
+    stress = backend.stresslets(vel, e5)
+    return vel[:, :3], vel[:, 3:], from_five(stress)
