@@ -33,7 +33,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 run: setup
-	$(VENV)/bin/sdmpi demo
+	$(VPY) postprocess/hydro_demo.py
 
 test: setup
 	$(VPY) -m pytest -q tests

@@ -176,14 +176,18 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, levi, work, out):
             out[a, b] += -a2 * e[a] * e[b]
         out[a, a] += psi1 - b2
 
-    # UL and Omega-F: (1/2) eps grad (lap chi_r + al lap^2 chi_r)
-    f_ul = v[1, 1] + al_i * v[2, 1]
-    f_of = v[1, 1] + al_j * v[2, 1]
-    for a in range(3):
-        for m in range(3):
-            for c in range(3):
-                out[a, 3 + m] += 0.5 * levi[m, a, c] * f_ul * e[c]
-                out[3 + m, a] += 0.5 * levi[m, c, a] * f_of * e[c]
+    # UL and Omega-F: (1/2) eps grad (lap chi_r + al lap^2 chi_r) = (1/2) f' [e]x
+    f_ul = 0.5 * (v[1, 1] + al_i * v[2, 1])
+    f_of = 0.5 * (v[1, 1] + al_j * v[2, 1])
+    for side in range(2):
+        f = f_ul if side == 0 else f_of
+        r0, c0 = (0, 3) if side == 0 else (3, 0)
+        out[r0 + 0, c0 + 1] -= f * e[2]
+        out[r0 + 0, c0 + 2] += f * e[1]
+        out[r0 + 1, c0 + 0] += f * e[2]
+        out[r0 + 1, c0 + 2] -= f * e[0]
+        out[r0 + 2, c0 + 0] -= f * e[1]
+        out[r0 + 2, c0 + 1] += f * e[0]
 
     # Omega-L: (1/4)(grad grad lap chi_r - I lap^2 chi_r)
     a2 = v[1, 2] - v[1, 1] * ir
@@ -234,14 +238,12 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, levi, work, out):
         a2 = f2 - f1 * ir
         for n in range(5):
             for m in range(3):
-                cross = 0.0
-                for b in range(3):
-                    for k in range(3):
-                        cross += levi[m, b, k] * e[b] * be[n, k]
+                m1, m2 = (m + 1) % 3, (m + 2) % 3
+                cross = e[m1] * be[n, m2] - e[m2] * be[n, m1]  # (e x B e)_m
                 if side == 0:
-                    out[3 + m, 6 + n] += -0.5 * a2 * cross
+                    out[3 + m, 6 + n] -= 0.5 * a2 * cross
                 else:
-                    out[6 + n, 3 + m] += -0.5 * a2 * cross
+                    out[6 + n, 3 + m] -= 0.5 * a2 * cross
 
     # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I
     u1, u2 = be_i + be_j, be_i * be_j

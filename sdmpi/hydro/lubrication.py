@@ -31,14 +31,20 @@ DEFAULT_MIN_GAP = 1e-4
 
 @dataclass
 class PairList:
-    """Close pairs: particle indices i, j, separation vectors x_j + shift - x_i, and the
-    number of pairs closer than the minimum gap (touching or overlapping)."""
+    """Close pairs: particle indices i, j, separation vectors x_j + shift - x_i (after
+    regularisation), true surface gaps (negative for overlaps), and the number of pairs
+    closer than the minimum gap (touching or overlapping)."""
 
     i: np.ndarray
     j: np.ndarray
     dx: np.ndarray
+    gap: np.ndarray
     n_regularised: int
-    min_gap: float  # smallest surface gap found (negative for overlaps), inf if none
+
+    @property
+    def min_gap(self):
+        """Smallest surface gap (negative for an overlap), inf without pairs."""
+        return float(self.gap.min()) if len(self.gap) else np.inf
 
 
 @numba.njit(cache=True)
@@ -73,14 +79,14 @@ def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=D
     j = np.array(jj, dtype=np.int64)
     dx = np.array(dd, dtype=float).reshape(-1, 3)
     if len(i) == 0:
-        return PairList(i, j, dx, 0, np.inf)
+        return PairList(i, j, dx, np.zeros(0), 0)
     r = np.linalg.norm(dx, axis=1)
     asum = radii[i] + radii[j]
     gap = r - asum
     floor = 0.5 * min_gap * asum
     short = gap < floor
     dx[short] *= ((asum[short] + floor[short]) / r[short])[:, None]
-    return PairList(i, j, dx, int(short.sum()), float(gap.min()))
+    return PairList(i, j, dx, gap, int(short.sum()))
 
 
 @numba.njit(cache=True)

@@ -1,0 +1,1 @@
+"""Reduction of run files to moduli and viscosities, and the analytic models."""

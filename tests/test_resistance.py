@@ -1,0 +1,135 @@
+"""Full SD grand resistance and solve_mobility: exact limits, two spheres, SPD, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sdmpi.dynamics.initial import compress, hard_sphere_fluid
+from sdmpi.hydro import solve_mobility
+from sdmpi.hydro.farfield import NDOF
+from sdmpi.hydro.resistance import grand_resistance
+from sdmpi.hydro.two_sphere import pair_resistance
+
+SHEAR = np.array([[0.0, 0.5, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])  # gamma_dot = 1
+
+
+@pytest.mark.parametrize("a", [0.5, 1.0, 2.0])
+def test_isolated_sphere(a):
+    f, t = np.array([[1.0, -2.0, 0.5]]), np.array([[0.3, 0.2, -1.0]])
+    e = np.array([[0.1, 0.2, -0.3], [0.2, 0.4, 0.05], [-0.3, 0.05, -0.5]])
+    u, w, s = solve_mobility(np.zeros((1, 3)), None, radii=[a], forces=f, torques=t, rate_of_strain=e)
+    assert np.allclose(u, f / (6 * math.pi * a), rtol=1e-12, atol=0)
+    assert np.allclose(w, t / (8 * math.pi * a ** 3), rtol=1e-12, atol=0)
+    assert np.allclose(s, 20 / 3 * math.pi * a ** 3 * e, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("lam", [0.25, 1.0, 4.0])
+@pytest.mark.parametrize("gap", [1e-4, 1e-2, 0.3, 2.0, 10.0])
+def test_two_spheres_equal_exact_pair_resistance(lam, gap):
+    """Two spheres alone: SD's R = M^-1 + R_2B - (M_2B)^-1 reduces to R_2B exactly."""
+    a1, a2 = 1.0, lam
+    mean = 0.5 * (a1 + a2)
+    d = np.array([0.3, -0.5, 0.8])
+    d /= np.linalg.norm(d)
+    r = a1 + a2 + gap * mean
+    pos = np.array([[0.1, 0.2, 0.3], [0.1, 0.2, 0.3] + r * d])
+    res = grand_resistance(pos, np.array([a1, a2]), cutoff=25.0)
+    exact = pair_resistance((pos[1] - pos[0])[None, :], np.array([a1]), np.array([a2]))[0]
+    # the only differences are round-off in M^-1 - (M_2B)^-1, relative to R's scale
+    assert np.abs(res.matrix - exact).max() < 1e-6 * np.abs(exact).max()
+    # and the mobility solve agrees with solving the exact pair resistance
+    forces = np.array([[1.0, 0.5, -0.2], [-0.3, 0.2, 0.9]])
+    u, w, s = solve_mobility(pos, None, radii=[a1, a2], forces=forces, rate_of_strain=SHEAR)
+    assert np.isfinite(u).all() and np.isfinite(s).all()
+
+
+def _dense_random(n, phi, seed, strain=0.0):
+    """Equilibrium hard spheres in a cube with Lees-Edwards images at the given strain."""
+    rng = np.random.default_rng(seed)
+    pos, side = hard_sphere_fluid(n, min(phi, 0.45), rng, strain=strain)
+    if phi > 0.45:
+        pos, side = compress(pos, side, phi, rng, strain=strain)
+    return pos, side
+
+
+@pytest.mark.parametrize("phi", [0.3, 0.45, 0.6])
+@pytest.mark.parametrize("strain", [0.0, -0.37])
+def test_resistance_spd_dense_random(phi, strain):
+    pos, side = _dense_random(27, phi, seed=int(phi * 100), strain=strain)
+    res = grand_resistance(pos, np.ones(27), [side] * 3, strain)
+    m = res.matrix
+    assert np.abs(m - m.T).max() < 1e-10 * np.abs(m).max()
+    assert np.linalg.eigvalsh(m).min() > 0
+
+
+def test_touching_and_overlapping_pairs_are_regularised():
+    pos = np.array([[0.0, 0, 0], [2.0, 0, 0], [4.0 - 1e-3, 0, 0], [0.0, 2.0, 0]])
+    res = grand_resistance(pos, np.ones(4))
+    assert res.pairs.n_regularised == 3
+    assert res.pairs.min_gap == pytest.approx(-1e-3)
+    assert np.linalg.eigvalsh(res.matrix).min() > 0
+    u, w, s = solve_mobility(pos, None, forces=np.ones((4, 3)), rate_of_strain=SHEAR)
+    assert np.isfinite(u).all()
+
+
+def test_energy_dissipation_positive():
+    """Power F.U + L.Omega + S:E_inf > 0 for force-torque-loaded particles in shear."""
+    pos, side = _dense_random(27, 0.45, seed=5)
+    rng = np.random.default_rng(2)
+    f, t = rng.normal(size=(27, 3)), rng.normal(size=(27, 3))
+    u, w, s = solve_mobility(pos, [side] * 3, forces=f, torques=t, rate_of_strain=SHEAR)
+    assert np.sum(f * u) + np.sum(t * w) > 0
+    assert np.einsum("nij,ij->", s, SHEAR) > 0
+
+
+def test_periodic_invariances_with_lubrication():
+    pos, side = _dense_random(8, 0.4, seed=9)
+    box = [side] * 3
+    ref = grand_resistance(pos, np.ones(8), box, 0.2).matrix
+    scale = np.abs(ref).max()
+    moved = pos + np.array([0.2 * side, side, 0.0]) - np.array([0, 0, side])
+    assert np.abs(grand_resistance(moved, np.ones(8), box, 0.2).matrix - ref).max() < 1e-10 * scale
+    assert np.abs(grand_resistance(pos, np.ones(8), box, 1.2).matrix - ref).max() < 1e-10 * scale
+    perm = np.random.default_rng(0).permutation(8)
+    idx = (NDOF * perm[:, None] + np.arange(NDOF)).ravel()
+    got = grand_resistance(pos[perm], np.ones(8), box, 0.2).matrix
+    assert np.abs(got - ref[np.ix_(idx, idx)]).max() < 1e-10 * scale
+
+
+def test_particle_with_its_own_image_in_small_box():
+    """A sphere in a box of side 2.5 is within lubrication range of its own images: the
+    resistance must still be SPD and larger than without lubrication."""
+    box = [2.5, 2.5, 2.5]
+    with_lub = grand_resistance(np.zeros((1, 3)), np.ones(1), box)
+    without = grand_resistance(np.zeros((1, 3)), np.ones(1), box, lubrication=False)
+    # images at 2.5 (6 faces) and 2.5 sqrt2 (12 edges) are within a gap of 2; the
+    # pair list holds one entry per +-n pair: 3 + 6
+    assert len(with_lub.pairs.i) == 9
+    assert np.linalg.eigvalsh(with_lub.matrix).min() > 0
+    assert with_lub.matrix[0, 0] > without.matrix[0, 0]
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(positions=np.zeros((2, 2))), "positions"),
+        (dict(positions=np.array([[0, 0, 0], [np.nan, 0, 0]])), "positions"),
+        (dict(radii=[1.0, -1.0]), "radii"),
+        (dict(radii=[1.0]), "radii"),
+        (dict(box=[10.0, 0.0, 10.0]), "box"),
+        (dict(box=[10.0, 10.0]), "box"),
+        (dict(forces=np.zeros((3, 3))), "forces"),
+        (dict(torques=np.full((2, 3), np.inf)), "torques"),
+        (dict(rate_of_strain=np.eye(3)), "rate_of_strain"),
+        (dict(strain=np.nan), "strain"),
+        (dict(positions=np.array([[0, 0, 0], [1.5, 0, 0]])), "overlap"),
+        (dict(solver="magic"), "solver"),
+    ],
+)
+def test_bad_input_raises_value_error_naming_argument(kwargs, match):
+    args = dict(positions=np.array([[0.0, 0, 0], [3.0, 0, 0]]), box=None)
+    args.update(kwargs)
+    positions, box = args.pop("positions"), args.pop("box")
+    with pytest.raises(ValueError, match=match):
+        solve_mobility(positions, box, **args)
