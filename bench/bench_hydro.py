@@ -23,23 +23,22 @@ def one_solve(pos, side, timings):
     radii = np.ones(n)
     lattice = Lattice([side] * 3, 0.0)
     t0 = time.perf_counter()
-    par = farfield.EwaldParameters.choose(lattice, n, tol=resistance.DEFAULT_EWALD_TOL)
-    table = farfield.radial_table(par.xi)
+    plan = farfield.plan_far_field(pos, radii, lattice, tol=resistance.DEFAULT_EWALD_TOL)
     mob = np.zeros((farfield.NDOF * n, farfield.NDOF * n))
-    farfield._real_space_sum(pos, radii, lattice.image_shifts(par.rcut), par.rcut, table, par.xi,
-                             farfield.BASIS, farfield._LEVI, mob)
+    farfield._real_space_sum(pos, radii, *plan.images, plan.table, plan.params.xi, farfield.BASIS,
+                             farfield._LEVI, mob)
     t1 = time.perf_counter()
-    mob += farfield._reciprocal_matrix(pos, radii, lattice.wave_vectors(par.kcut), par.xi, lattice.volume)
+    mob += farfield._reciprocal_matrix(pos, radii, plan.kvec, plan.params.xi, plan.volume)
     for i in range(n):
         s = slice(farfield.NDOF * i, farfield.NDOF * (i + 1))
-        mob[s, s] += farfield.self_mobility(1.0, par.xi)
+        mob[s, s] += plan.self_blocks[1.0]
     t2 = time.perf_counter()
     rmat = resistance.spd_inverse(mob)
     t3 = time.perf_counter()
-    near, pairs = lubrication.lubrication_matrix(pos, radii, lattice)
-    rmat += near
+    pairs = lubrication.close_pairs(pos, radii, lattice)
+    rmat += lubrication.lubrication_matrix(pos, radii, pairs)
     t4 = time.perf_counter()
-    solver = solvers.DenseSolver(resistance.GrandResistance(rmat, pairs))
+    solver = solvers.DenseSolver(resistance.GrandResistance(rmat, pairs, None, pos))
     e5 = np.broadcast_to(to_five(np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])), (n, 5))
     vel = solver.velocities(np.zeros((n, 6)), e5)
     solver.stresslets(vel, e5)
@@ -48,7 +47,7 @@ def one_solve(pos, side, timings):
                        [t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4]):
         timings.setdefault(key, []).append(dt)
     timings.setdefault("total", []).append(t5 - t0)
-    return par
+    return plan.params
 
 
 def main():

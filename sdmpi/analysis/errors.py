@@ -9,7 +9,14 @@ biased variance of the n_b block means. The level is chosen from the data with
 Jonsson's test (Phys. Rev. E 98, 043304 (2018)): the first level j at which
 M_j = sum_{k >= j} n_k rho_k^2 < chi2_{0.99}(number of levels >= j), rho_k the lag-1
 autocorrelation of the level-k block means, i.e. the first level whose blocks (and all
-coarser ones) look uncorrelated at the 1% level.
+coarser ones) look uncorrelated at the 1% level. Blocks that pass this test still
+correlate with their neighbours (rho ~ tau/B for block size B >> tau), which biases the
+plain estimate low (coverage 0.57 instead of 0.68 for AR(1) with tau = 4, n = 1024), so
+the chosen level's estimate is corrected for that lag-1 (MA(1)) correlation:
+var(mean) = c0/(n_b - 1) * max(1, 1 + 2 rho_j). Measured coverage of +-err is then
+within 1-3% of P(|t_(n_b - 1)| < 1) once a run spans >~ 100 correlation times (AR(1),
+tau = 1-10 periods); shorter runs still under-cover (n = 128, tau = 4: 0.59), which no
+single-run estimate can fix: use several realisations.
 
 Across realisations (independent by construction) ``combine`` forms the
 period-weighted mean  mu = sum_r n_r m_r / sum_r n_r  (the mean over all periods; the
@@ -18,9 +25,11 @@ plain mean of realisation means when runs are complete) with the standard error
     R >= 2:  err^2 = sum_r n_r (m_r - mu)^2 / ((R - 1) sum_r n_r),   dof = R - 1,
     R == 1:  err = the blocking error of that realisation,          dof = n_blocks - 1,
 
-the first being the (Hartung-Knapp) spread of realisation means, unbiased for var(mu)
-whatever the within-realisation correlations and any extra spread between realisations
-(e.g. slowly relaxing structure), and exactly s/sqrt(R) for equal n_r. The propagated
+the first being the (Hartung-Knapp) spread of realisation means: for equal n_r it is
+exactly s/sqrt(R), unbiased for var(mu) whatever the within-realisation correlations
+and any extra spread between realisations (e.g. slowly relaxing structure); for
+unequal n_r (partial runs) it is unbiased without extra spread and a few % low with
+it (measured: err^2 6% low, coverage 0.663 instead of 0.674 for R = 30). The propagated
 within-realisation blocking error err_within = sqrt(sum n_r^2 e_r^2)/sum n_r and the
 between-realisation error are returned as diagnostics: err_between >> err_within
 means correlations longer than a run or structure that differs between realisations.
@@ -87,12 +96,14 @@ def blocking(x):
     sizes = np.array([lv[0] for lv in levels])
     nbs = np.array([lv[1] for lv in levels])
     var = np.stack([lv[2] for lv in levels])                       # (L, ...)
-    stat = np.stack([lv[1] * lv[3] ** 2 for lv in levels])         # n_k rho_k^2
+    rho = np.stack([lv[3] for lv in levels])
+    stat = nbs.reshape((-1,) + (1,) * len(lead)) * rho ** 2       # n_k rho_k^2
     m = np.cumsum(stat[::-1], axis=0)[::-1]                        # M_j
     q = chi2.ppf(0.99, len(levels) - np.arange(len(levels)))
-    ok = m < q.reshape((-1,) + (1,) * len(lead))
+    ok = m < q.reshape(stat.shape[:1] + (1,) * len(lead))
     j = np.argmax(ok, axis=0)          # first accepted level (the last always passes)
-    err = np.sqrt(np.take_along_axis(var, j[None], axis=0)[0])
+    pick = lambda a: np.take_along_axis(a, j[None], axis=0)[0]
+    err = np.sqrt(pick(var) * np.maximum(1.0, 1.0 + 2.0 * pick(rho)))
     return Blocking(mean, err, np.full(lead, n), sizes[j], nbs[j])
 
 
@@ -124,5 +135,7 @@ def ensemble_average(values):
     array (..., R, n_periods). Returns combine(blocking(...)) as an Ensemble."""
     if isinstance(values, np.ndarray):
         return combine(blocking(values))
+    if len(values) == 0:
+        raise ValueError("ensemble_average needs at least one realisation")
     parts = [blocking(np.asarray(v, dtype=float)) for v in values]
     return combine(Blocking(*(np.array(f) for f in zip(*parts))))

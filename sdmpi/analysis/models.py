@@ -1,5 +1,7 @@
 """Analytic models for overlays and checks. Viscosities are relative to the medium's."""
 
+import numpy as np
+
 
 def einstein(phi):
     """eta/eta_m = 1 + 2.5 phi (Einstein 1906/1911); dilute limit, phi -> 0."""
@@ -17,3 +19,66 @@ def schaink_eta_h(phi):
     polynomial fit to SD hydrodynamic viscosities (N = 27, Brownian, omega = 2 pi),
     stated within 1% for 0 <= phi <= 0.45. The high-frequency viscosity is 1 + eta_H."""
     return 2.5 * phi + 5.2 * phi ** 2 + 3.01 * phi ** 3 + 47.71 * phi ** 4
+
+
+def _modes(eta, lam):
+    """Mode arrays (K,) for broadcasting against omega (..., 1)."""
+    eta, lam = np.atleast_1d(np.asarray(eta, float)), np.atleast_1d(np.asarray(lam, float))
+    if eta.shape != lam.shape or eta.ndim != 1:
+        raise ValueError("eta and lam must be matching 1-D sequences, one entry per mode")
+    return eta, lam
+
+
+def maxwell_viscosity(omega, eta, lam):
+    """Complex viscosity eta* = eta' - i eta'' of a multi-mode Maxwell medium (seed 000
+    eq. 36, summed over modes; each mode obeys lam_k dS/dt + S = eta_k gamma_dot, eq. 2):
+        eta'  = sum_k eta_k / (1 + (lam_k w)^2),
+        eta'' = sum_k eta_k lam_k w / (1 + (lam_k w)^2).
+    omega: angular frequency (any shape, 1/t_D); eta, lam: per-mode viscosities
+    (relative to eta_m; sum_k eta_k is the zero-shear viscosity) and relaxation times
+    (t_D). Exact linear viscoelasticity for all w; the medium stress is linear only for
+    small Weissenberg numbers (seed eq. 20). Returns (eta', eta'') shaped like omega."""
+    eta, lam = _modes(eta, lam)
+    w = np.asarray(omega, float)[..., None]
+    d = 1.0 + (lam * w) ** 2
+    return (eta / d).sum(axis=-1), (eta * lam * w / d).sum(axis=-1)
+
+
+def maxwell_moduli(omega, eta, lam):
+    """Storage and loss moduli of a multi-mode Maxwell medium (seed 000 eq. 36 with
+    eq. 19, G' = w eta'', G'' = w eta'; standard Maxwell model, e.g. Ferry 1980):
+        G'  = sum_k eta_k lam_k w^2 / (1 + (lam_k w)^2),
+        G'' = sum_k eta_k w / (1 + (lam_k w)^2).
+    Limits: w -> 0: G'' -> w sum eta_k, G' -> w^2 sum eta_k lam_k; w -> inf:
+    G' -> sum eta_k/lam_k, G'' -> 0. Units: eta_m/t_D. Returns (G', G'')."""
+    eta1, eta2 = maxwell_viscosity(omega, eta, lam)
+    w = np.asarray(omega, float)
+    return w * eta2, w * eta1
+
+
+def maxwell_eta_h(omega, eta_h0, eta, lam):
+    """Hydrodynamic contribution to eta* of spheres in a multi-mode Maxwell medium
+    (seed 000 eqs. 41-42, correspondence principle):
+        eta*_H(w) = (eta_H(0)/eta_0m) eta*_m(w),   eta_0m = sum_k eta_k,
+    i.e. eta'_H = eta_h0 sum_k eta_k/(1 + (lam_k w)^2) and
+    eta''_H = eta_h0 sum_k eta_k lam_k w/(1 + (lam_k w)^2).
+    eta_h0 = eta_H(0)/eta_0m: the hydrodynamic viscosity increment of the same spheres
+    in a Newtonian medium (e.g. schaink_eta_h(phi), or an SD result), assumed
+    independent of w (seed Fig. 7). Validity: particle dynamics unaffected by the
+    medium's elasticity, t_B << t <= lambda, low Re and Wi (seed eqs. 20, 32); the
+    Brownian contribution is not included. Returns (eta'_H, eta''_H), units of eta."""
+    eta1, eta2 = maxwell_viscosity(omega, eta, lam)
+    f = np.asarray(eta_h0, float)
+    return f * eta1, f * eta2
+
+
+def krieger_dougherty(phi, phi_max=0.64, intrinsic=2.5):
+    """eta/eta_m = (1 - phi/phi_max)^(-[eta] phi_max) (Krieger & Dougherty, Trans. Soc.
+    Rheol. 3, 137 (1959)); [eta] = 2.5 for spheres gives Einstein's 1 + 2.5 phi as
+    phi -> 0. Empirical, 0 <= phi < phi_max; phi_max is a fit parameter (about 0.64,
+    random close packing, for the high-frequency/hydrodynamic viscosity; about
+    0.58-0.63 for the zero-shear viscosity of Brownian hard spheres)."""
+    phi = np.asarray(phi, float)
+    if np.any((phi < 0) | (phi >= phi_max)):
+        raise ValueError(f"need 0 <= phi < phi_max = {phi_max}")
+    return (1.0 - phi / phi_max) ** (-intrinsic * phi_max)

@@ -28,6 +28,7 @@ minus the k-space field at r = 0. Truncation errors fall like exp(-(xi r_c)^2) a
 exp(-(k_c/2xi)^2); `EwaldParameters.choose` picks xi, r_c, k_c for a requested accuracy.
 """
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -36,7 +37,7 @@ import numpy as np
 from scipy.special import gamma as gamma_function
 
 from .basis import BASIS
-from .geometry import Lattice
+from .geometry import Lattice, find_pairs
 
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
 
@@ -266,35 +267,25 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, levi, work, out):
 
 
 @numba.njit(cache=True)
-def _real_space_sum(pos, radii, shifts, rcut, table, xi, basis, levi, mob):
-    """Adds the real-space Ewald sum (or, with xi = 0 and one zero shift, the unbounded
-    pair couplings) into the (11N, 11N) matrix mob. Pairs i < j are computed once and
-    mirrored with the reciprocal symmetry M_ji = M_ij^T."""
-    n = pos.shape[0]
+def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, levi, mob):
+    """Adds the real-space Ewald sum over the pair images (pi, pj, shift) (or, with
+    xi = 0 and zero shifts, the unbounded pair couplings) into the (11N, 11N) matrix mob.
+    Each image pair is stored once: M_ji = M_ij^T (reciprocity) fills the other
+    triangle, and for a self-image (i == j) adds the -n image."""
     bounds = _power_bounds(table)
     work = np.empty(80)
     block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
-    rc2 = rcut * rcut
-    for i in range(n):
-        for j in range(i, n):
-            block[:, :] = 0.0
-            hit = False
-            for s in range(shifts.shape[0]):
-                for c in range(3):
-                    rvec[c] = pos[i, c] - pos[j, c] + shifts[s, c]
-                r2 = rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2
-                if r2 > rc2 or r2 == 0.0:
-                    continue
-                _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, levi, work, block)
-                hit = True
-            if not hit:
-                continue
-            for a in range(NDOF):
-                for b in range(NDOF):
-                    mob[NDOF * i + a, NDOF * j + b] += block[a, b]
-                    if i != j:
-                        mob[NDOF * j + b, NDOF * i + a] += block[a, b]
+    for p in range(pi.shape[0]):
+        i, j = pi[p], pj[p]
+        for c in range(3):
+            rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
+        block[:, :] = 0.0
+        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, levi, work, block)
+        for a in range(NDOF):
+            for b in range(NDOF):
+                mob[NDOF * i + a, NDOF * j + b] += block[a, b]
+                mob[NDOF * j + b, NDOF * i + a] += block[a, b]
 
 
 # ---------------------------------------------------------------------------------
@@ -308,37 +299,69 @@ def _hasimoto(k2, xi):
     return (1 + u + 2 * u * u) * np.exp(-u)
 
 
-def _reciprocal_matrix(pos, radii, kvec, xi, volume):
-    """(2/V) sum over half-space k of Re[Z Z^H], Z_i = R_i(k) Q sqrt(h)/k exp(i k.x_i)."""
-    n = pos.shape[0]
+@numba.njit(cache=True)
+def _reciprocal_rows(pos, radii, kvec, xi, basis, z):
+    """Rows of Z for the reciprocal sum: for wave vector k and each of the two unit
+    vectors q normal to it, Z_i = R_i(k) q sqrt(h(k))/k exp(i k.x_i), real parts in rows
+    [0, 2 nk), imaginary parts in rows [2 nk, 4 nk). R_i(k): U rows (1 - a^2 k^2/6) q,
+    Omega rows (i/2) k x q, E rows i (1 - a^2 k^2/10) k.B^m.q."""
     nk = kvec.shape[0]
-    if nk == 0:
-        return np.zeros((NDOF * n, NDOF * n))
-    k2 = np.einsum("ij,ij->i", kvec, kvec)
-    kmag = np.sqrt(k2)
-    khat = kvec / kmag[:, None]
-    trial = np.where(np.abs(khat[:, [2]]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    q1 = np.cross(khat, trial)
-    q1 /= np.linalg.norm(q1, axis=1)[:, None]
-    q2 = np.cross(khat, q1)
-    q = np.stack([q1, q2], axis=1)  # (nk, 2, 3)
-    q = q * (np.sqrt(_hasimoto(k2, xi)) / kmag)[:, None, None]
-    kq = np.einsum("mab,ka,kqb->kqm", BASIS, kvec, q)  # k . B^m . q   (nk, 2, 5)
-    kxq = np.cross(kvec[:, None, :], q)  # (nk, 2, 3)
-    a2 = radii * radii
-    fu = 1 - np.outer(k2, a2) / 6  # (nk, n)
-    fe = 1 - np.outer(k2, a2) / 10
-    re = np.zeros((nk, 2, n, NDOF))  # real part of R_i(k) Q: U rows
-    im = np.zeros((nk, 2, n, NDOF))  # imaginary part: Omega, E rows
-    re[..., 0:3] = fu[:, None, :, None] * q[:, :, None, :]
-    im[..., 3:6] = 0.5 * kxq[:, :, None, :]
-    im[..., 6:11] = fe[:, None, :, None] * kq[:, :, None, :]
-    phase = kvec @ pos.T  # (nk, n)
-    cos = np.cos(phase)[:, None, :, None]
-    sin = np.sin(phase)[:, None, :, None]
-    zr = (re * cos - im * sin).reshape(2 * nk, n * NDOF)
-    zi = (re * sin + im * cos).reshape(2 * nk, n * NDOF)
-    z = np.concatenate([zr, zi], axis=0)
+    n = pos.shape[0]
+    q = np.empty((2, 3))
+    kq = np.empty((2, 5))
+    kxq = np.empty((2, 3))
+    for kk in range(nk):
+        k0, k1, k2 = kvec[kk, 0], kvec[kk, 1], kvec[kk, 2]
+        ksq = k0 * k0 + k1 * k1 + k2 * k2
+        kmag = math.sqrt(ksq)
+        u = ksq / (4 * xi * xi)
+        scale = math.sqrt((1 + u + 2 * u * u) * math.exp(-u)) / kmag
+        # q1 = k x t / |k x t| for a trial axis t not parallel to k, q2 = khat x q1
+        if abs(k2) < 0.9 * kmag:
+            a0, a1, a2 = k1, -k0, 0.0  # k x e_z
+        else:
+            a0, a1, a2 = 0.0, k2, -k1  # k x e_x
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        q[0, 0], q[0, 1], q[0, 2] = a0 / norm, a1 / norm, a2 / norm
+        q[1, 0] = (k1 * q[0, 2] - k2 * q[0, 1]) / kmag
+        q[1, 1] = (k2 * q[0, 0] - k0 * q[0, 2]) / kmag
+        q[1, 2] = (k0 * q[0, 1] - k1 * q[0, 0]) / kmag
+        for t in range(2):
+            for c in range(3):
+                q[t, c] *= scale
+            kxq[t, 0] = 0.5 * (k1 * q[t, 2] - k2 * q[t, 1])
+            kxq[t, 1] = 0.5 * (k2 * q[t, 0] - k0 * q[t, 2])
+            kxq[t, 2] = 0.5 * (k0 * q[t, 1] - k1 * q[t, 0])
+            for m in range(5):
+                acc = 0.0
+                for a in range(3):
+                    for b in range(3):
+                        acc += kvec[kk, a] * basis[m, a, b] * q[t, b]
+                kq[t, m] = acc
+        for i in range(n):
+            ph = k0 * pos[i, 0] + k1 * pos[i, 1] + k2 * pos[i, 2]
+            cs, sn = math.cos(ph), math.sin(ph)
+            a2i = radii[i] * radii[i] * ksq
+            fu, fe = 1 - a2i / 6, 1 - a2i / 10
+            col = NDOF * i
+            for t in range(2):
+                rr, ri = 2 * kk + t, 2 * nk + 2 * kk + t
+                for c in range(3):  # U rows: real
+                    z[rr, col + c] = fu * q[t, c] * cs
+                    z[ri, col + c] = fu * q[t, c] * sn
+                for c in range(3):  # Omega rows: imaginary
+                    z[rr, col + 3 + c] = -kxq[t, c] * sn
+                    z[ri, col + 3 + c] = kxq[t, c] * cs
+                for m in range(5):  # E rows: imaginary
+                    z[rr, col + 6 + m] = -fe * kq[t, m] * sn
+                    z[ri, col + 6 + m] = fe * kq[t, m] * cs
+
+
+def _reciprocal_matrix(pos, radii, kvec, xi, volume):
+    """(2/V) sum over half-space k of Re[Z Z^H] (see _reciprocal_rows)."""
+    n = pos.shape[0]
+    z = np.empty((4 * kvec.shape[0], NDOF * n))
+    _reciprocal_rows(pos, radii, kvec, xi, BASIS, z)
     return (2.0 / volume) * (z.T @ z)
 
 
@@ -408,29 +431,59 @@ class EwaldParameters:
         return cls(xi=float(xi), rcut=s / xi, kcut=2 * xi * s)
 
 
-def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None):
-    """The (11N, 11N) far-field grand mobility M_inf, symmetric positive definite.
+@dataclass
+class FarFieldPlan:
+    """What the far-field sums need besides the positions, fixed for a configuration and
+    its small displacements (random finite differences must not see pairs cross the
+    cut-off): Ewald parameters (None: unbounded), real-space pair images (i, j, shift),
+    wave vectors, radial coefficient table, the self blocks per radius and the volume."""
+
+    params: EwaldParameters | None
+    images: tuple
+    kvec: np.ndarray
+    table: np.ndarray
+    self_blocks: dict
+    volume: float
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_radial_table(xi):
+    return radial_table(xi)
+
+
+def plan_far_field(positions, radii, lattice=None, tol=1e-8, xi=None):
+    """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid)."""
+    if lattice is None:
+        images = find_pairs(positions, radii, None, np.inf, 0.0)
+        return FarFieldPlan(None, images, np.zeros((0, 3)), _cached_radial_table(0.0),
+                            {a: self_mobility(a) for a in np.unique(radii)}, np.inf)
+    par = EwaldParameters.choose(lattice, len(positions), tol=tol, xi=xi)
+    images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
+    return FarFieldPlan(par, images, lattice.wave_vectors(par.kcut), _cached_radial_table(par.xi),
+                        {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
+
+
+def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None, plan=None):
+    """The (11N, 11N) far-field grand mobility M_inf, symmetric positive definite for
+    non-overlapping spheres.
 
     positions (N, 3), radii (N,); box (3,) for a periodic Lees-Edwards box at the given
     strain, or None for unbounded fluid (DBB 1987). Periodic sums are converged to
-    relative accuracy ~tol; xi overrides the Ewald splitting parameter."""
+    relative accuracy ~tol; xi overrides the Ewald splitting parameter. With a plan
+    (from `plan_far_field`), positions are used as given (not wrapped) with its pairs."""
     pos = np.ascontiguousarray(positions, dtype=float)
     radii = np.ascontiguousarray(radii, dtype=float)
+    if plan is None:
+        lattice = None if box is None else Lattice(box, strain)
+        if lattice is not None:
+            pos = lattice.wrap(pos)
+        plan = plan_far_field(pos, radii, lattice, tol, xi)
     n = pos.shape[0]
     mob = np.zeros((NDOF * n, NDOF * n))
-    if box is None:
-        table = radial_table(0.0)
-        _real_space_sum(pos, radii, np.zeros((1, 3)), np.inf, table, 0.0, BASIS, _LEVI, mob)
-        blocks = {a: self_mobility(a) for a in np.unique(radii)}
-    else:
-        lattice = Lattice(box, strain)
-        pos = lattice.wrap(pos)
-        par = EwaldParameters.choose(lattice, n, tol=tol, xi=xi)
-        table = radial_table(par.xi)
-        shifts = lattice.image_shifts(par.rcut)
-        _real_space_sum(pos, radii, shifts, par.rcut, table, par.xi, BASIS, _LEVI, mob)
-        mob += _reciprocal_matrix(pos, radii, lattice.wave_vectors(par.kcut), par.xi, lattice.volume)
-        blocks = {a: self_mobility(a, par.xi) for a in np.unique(radii)}
+    xi_used = 0.0 if plan.params is None else plan.params.xi
+    _real_space_sum(pos, radii, *plan.images, plan.table, xi_used, BASIS, _LEVI, mob)
+    if plan.params is not None:
+        mob += _reciprocal_matrix(pos, radii, plan.kvec, xi_used, plan.volume)
     for i, a in enumerate(radii):
-        mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += blocks[a]
+        mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob

@@ -7,6 +7,7 @@ gamma -> gamma + Lx/Ly, so the strain is reduced to |gamma| <= Lx/(2 Ly) before 
 this keeps the lattice vectors short and makes every result periodic in the strain.
 """
 
+import numba
 import numpy as np
 
 
@@ -64,3 +65,45 @@ class Lattice:
         n = n[first > 0]
         k = 2 * np.pi * n @ self.reciprocal
         return k[np.einsum("ij,ij->i", k, k) <= kmax * kmax]
+
+
+@numba.njit(cache=True)
+def _scan_pairs(pos, radii, shifts, reach_abs, reach_rel, out_i, out_j, out_s):
+    """Fills (up to their length) the pairs (i <= j, image s) with
+    |x_j + shift_s - x_i| < reach_abs + reach_rel (a_i + a_j); returns how many there are.
+    Self-images (i == j) keep one of each +-n pair: shifts must be symmetric about their
+    middle entry, the zero shift."""
+    n = pos.shape[0]
+    count = 0
+    half = shifts.shape[0] // 2
+    for i in range(n):
+        for j in range(i, n):
+            reach = reach_abs + reach_rel * (radii[i] + radii[j])
+            reach2 = reach * reach
+            for s in range(half + 1 if i == j else 0, shifts.shape[0]):
+                d0 = pos[j, 0] + shifts[s, 0] - pos[i, 0]
+                d1 = pos[j, 1] + shifts[s, 1] - pos[i, 1]
+                d2 = pos[j, 2] + shifts[s, 2] - pos[i, 2]
+                if d0 * d0 + d1 * d1 + d2 * d2 < reach2:
+                    if count < out_i.shape[0]:
+                        out_i[count], out_j[count], out_s[count] = i, j, s
+                    count += 1
+    return count
+
+
+def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
+    """Pairs (i <= j) and lattice images within reach_abs + reach_rel (a_i + a_j):
+    arrays i, j and shift vectors (so that the separation is x_j + shift - x_i). With
+    lattice None (unbounded fluid) only the zero shift is used. Self-images appear once
+    per +-n pair."""
+    if lattice is None:
+        shifts = np.zeros((1, 3))
+    else:
+        shifts = lattice.image_shifts(reach_abs + 2 * reach_rel * radii.max())
+    size = 16 * len(positions)
+    while True:
+        i, j, s = (np.empty(size, dtype=np.int64) for _ in range(3))
+        count = _scan_pairs(positions, radii, shifts, float(reach_abs), float(reach_rel), i, j, s)
+        if count <= size:
+            return i[:count], j[:count], shifts[s[:count]]
+        size = count

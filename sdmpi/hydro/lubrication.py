@@ -21,6 +21,7 @@ import numpy as np
 
 from .basis import BASIS
 from .farfield import _LEVI, NDOF, _pair_block, _power_bounds, radial_table, self_mobility
+from .geometry import find_pairs
 from .two_sphere import pair_resistance
 
 #: default lubrication cut-off: gap in units of the pair's mean radius
@@ -32,12 +33,13 @@ DEFAULT_MIN_GAP = 1e-4
 @dataclass
 class PairList:
     """Close pairs: particle indices i, j, separation vectors x_j + shift - x_i (after
-    regularisation), true surface gaps (negative for overlaps), and the number of pairs
+    regularisation), the shifts, true surface gaps (negative for overlaps), and the number of pairs
     closer than the minimum gap (touching or overlapping)."""
 
     i: np.ndarray
     j: np.ndarray
     dx: np.ndarray
+    shift: np.ndarray  # lattice translation of j's image
     gap: np.ndarray
     n_regularised: int
 
@@ -47,46 +49,24 @@ class PairList:
         return float(self.gap.min()) if len(self.gap) else np.inf
 
 
-@numba.njit(cache=True)
-def _find_pairs(pos, radii, shifts, cutoff):
-    n = pos.shape[0]
-    ii, jj, dd = [], [], []
-    for i in range(n):
-        for j in range(i, n):
-            for s in range(shifts.shape[0]):
-                dx = pos[j] + shifts[s] - pos[i]
-                r2 = dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2
-                if i == j and s <= shifts.shape[0] // 2:
-                    continue  # self-images: one of each +-n pair (all 4 blocks add to i)
-                asum = radii[i] + radii[j]
-                reach = asum + 0.5 * cutoff * asum
-                if r2 < reach * reach:
-                    ii.append(i)
-                    jj.append(j)
-                    dd.append(dx)
-    return ii, jj, dd
-
-
-def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP):
-    """All pairs (with periodic images when a lattice is given) within the cut-off.
-    Separations are regularised to the minimum gap and counted."""
-    if lattice is None:
-        shifts = np.zeros((1, 3))
-    else:
-        shifts = lattice.image_shifts(2 * radii.max() * (1 + 0.5 * cutoff))
-    ii, jj, dd = _find_pairs(positions, radii, shifts, float(cutoff))
-    i = np.array(ii, dtype=np.int64)
-    j = np.array(jj, dtype=np.int64)
-    dx = np.array(dd, dtype=float).reshape(-1, 3)
+def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP, images=None):
+    """All pairs (with periodic images when a lattice is given) within the cut-off, or
+    the given images (i, j, shift) re-evaluated at these positions (so that a slightly
+    displaced configuration keeps the same pair set). Separations are regularised to the
+    minimum gap and counted."""
+    if images is None:
+        images = find_pairs(positions, radii, lattice, 0.0, 1.0 + 0.5 * cutoff)
+    i, j, shift = images
+    dx = positions[j] + shift - positions[i]
     if len(i) == 0:
-        return PairList(i, j, dx, np.zeros(0), 0)
+        return PairList(i, j, dx, shift, np.zeros(0), 0)
     r = np.linalg.norm(dx, axis=1)
     asum = radii[i] + radii[j]
     gap = r - asum
     floor = 0.5 * min_gap * asum
     short = gap < floor
     dx[short] *= ((asum[short] + floor[short]) / r[short])[:, None]
-    return PairList(i, j, dx, gap, int(short.sum()))
+    return PairList(i, j, dx, shift, gap, int(short.sum()))
 
 
 @numba.njit(cache=True)
@@ -110,14 +90,13 @@ def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, levi, res):
         res[p] -= np.linalg.inv(mob)
 
 
-def lubrication_matrix(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP):
-    """The (11N, 11N) near-field correction sum over close pairs of R_2B - R_2B,inf,
-    and the PairList it was built from."""
+def lubrication_matrix(positions, radii, pairs):
+    """The (11N, 11N) near-field correction: the sum over the close pairs (a PairList
+    from `close_pairs`) of R_2B - R_2B,inf."""
     n = positions.shape[0]
-    pairs = close_pairs(positions, radii, lattice, cutoff, min_gap)
     out = np.zeros((NDOF * n, NDOF * n))
     if len(pairs.i) == 0:
-        return out, pairs
+        return out
     a1, a2 = radii[pairs.i], radii[pairs.j]
     res = pair_resistance(pairs.dx, a1, a2)
     selfs = {a: self_mobility(a) for a in np.unique(radii)}
@@ -125,7 +104,7 @@ def lubrication_matrix(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, mi
     self2 = np.stack([selfs[a] for a in a2])
     _subtract_far_field(pairs.dx, a1, a2, self1, self2, radial_table(0.0), BASIS, _LEVI, res)
     _scatter_pairs(pairs.i, pairs.j, res, out)
-    return out, pairs
+    return out
 
 
 @numba.njit(cache=True)

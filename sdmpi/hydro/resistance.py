@@ -12,20 +12,31 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack
 
-from .farfield import NDOF, far_field_mobility
-from .geometry import Lattice
+from .farfield import NDOF, FarFieldPlan, far_field_mobility, plan_far_field
+from .geometry import Lattice, find_pairs
 from .lubrication import DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_matrix
 
 #: default relative accuracy of the Ewald sums
-DEFAULT_EWALD_TOL = 1e-8
+DEFAULT_EWALD_TOL = 1e-6
+
+
+@dataclass
+class HydroPlan:
+    """Pair sets of one configuration, reused for its small displacements."""
+
+    far: FarFieldPlan | None  # built on first use
+    near_images: tuple | None  # (i, j, shift) of the lubrication pairs, None: no lubrication
 
 
 @dataclass
 class GrandResistance:
-    """R (11N x 11N, dofs ordered per particle: 3 U, 3 Omega, 5 E) and its pair list."""
+    """R (11N x 11N, dofs ordered per particle: 3 U, 3 Omega, 5 E), its close pairs,
+    the plan it was built with and the (wrapped) positions it was built at."""
 
     matrix: np.ndarray
     pairs: PairList
+    plan: HydroPlan
+    positions: np.ndarray
 
     @property
     def n_particles(self):
@@ -54,15 +65,41 @@ def spd_inverse(matrix):
     return upper + np.triu(inv, 1).T
 
 
+def check_overlaps(pairs, radii, max_overlap):
+    """ValueError if a pair overlaps by more than max_overlap of its mean radius."""
+    if len(pairs.gap) == 0:
+        return
+    depth = -pairs.gap / (0.5 * (radii[pairs.i] + radii[pairs.j]))
+    p = int(np.argmax(depth))
+    if depth[p] > max_overlap:
+        raise ValueError(f"positions: spheres {pairs.i[p]} and {pairs.j[p]} overlap by "
+                         f"{depth[p]:.3g} mean radii (allowed: up to {max_overlap})")
+
+
 def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
-                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP):
-    """Assemble R for validated inputs (see `solve.solve_mobility` for the checks)."""
+                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
+                     max_overlap=None, plan=None):
+    """Assemble R. Positions are wrapped into the sheared cell, unless a plan from an
+    earlier call is given: then they are used as given with the plan's pair sets (for
+    random finite differences about that configuration). max_overlap (mean radii):
+    raise ValueError for deeper overlaps before the expensive work."""
+    radii = np.asarray(radii, dtype=float)
     lattice = None if box is None else Lattice(box, strain)
-    pos = positions if lattice is None else lattice.wrap(positions)
-    matrix = spd_inverse(far_field_mobility(pos, radii, box, strain, tol=ewald_tol))
-    if lubrication:
-        near, pairs = lubrication_matrix(pos, radii, lattice, cutoff, min_gap)
-        matrix += near
+    if plan is None:
+        pos = positions if lattice is None else lattice.wrap(positions)
+        near = find_pairs(pos, radii, lattice, 0.0, 1.0 + 0.5 * cutoff) if lubrication else None
+        plan = HydroPlan(None, near)
     else:
+        pos = positions
+    if plan.near_images is None:  # without lubrication: overlapping pairs only
         pairs = close_pairs(pos, radii, lattice, 0.0, min_gap)
-    return GrandResistance(matrix, pairs)
+    else:
+        pairs = close_pairs(pos, radii, None, cutoff, min_gap, images=plan.near_images)
+    if max_overlap is not None:
+        check_overlaps(pairs, radii, max_overlap)
+    if plan.far is None:
+        plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
+    matrix = spd_inverse(far_field_mobility(pos, radii, plan=plan.far))
+    if plan.near_images is not None:
+        matrix += lubrication_matrix(pos, radii, pairs)
+    return GrandResistance(matrix, pairs, plan, pos)

@@ -3,8 +3,7 @@
 import numpy as np
 
 from .basis import from_five, to_five
-from .geometry import Lattice, check_box
-from .lubrication import close_pairs
+from .geometry import check_box
 from .resistance import DEFAULT_EWALD_TOL, grand_resistance
 from .solvers import make_solver
 
@@ -48,19 +47,6 @@ def check_inputs(positions, box, radii, strain, forces, torques, rate_of_strain)
     return pos, box, radii, float(strain), forces, torques, einf
 
 
-def check_overlaps(positions, radii, box, strain):
-    """ValueError if two spheres (or a sphere and an image) overlap by more than
-    MAX_OVERLAP of their mean radius."""
-    lattice = None if box is None else Lattice(box, strain)
-    pos = positions if lattice is None else lattice.wrap(positions)
-    pairs = close_pairs(pos, radii, lattice, cutoff=0.0)
-    depth = -pairs.gap / (0.5 * (radii[pairs.i] + radii[pairs.j]))
-    if len(depth) and depth.max() > MAX_OVERLAP:
-        p = int(np.argmax(depth))
-        raise ValueError(f"positions: spheres {pairs.i[p]} and {pairs.j[p]} overlap by "
-                         f"{depth[p]:.3g} mean radii (allowed: up to {MAX_OVERLAP})")
-
-
 def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torques=None,
                    rate_of_strain=None, lubrication=True, solver="dense",
                    ewald_tol=DEFAULT_EWALD_TOL):
@@ -76,8 +62,7 @@ def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torqu
     touching pairs are regularised (see `lubrication`)."""
     pos, box, radii, strain, forces, torques, einf = check_inputs(
         positions, box, radii, strain, forces, torques, rate_of_strain)
-    check_overlaps(pos, radii, box, strain)
-    res = grand_resistance(pos, radii, box, strain, lubrication, ewald_tol)
+    res = grand_resistance(pos, radii, box, strain, lubrication, ewald_tol, max_overlap=MAX_OVERLAP)
     backend = make_solver(solver, res)
     n = pos.shape[0]
     e5 = np.broadcast_to(to_five(einf), (n, 5))

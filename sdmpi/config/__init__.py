@@ -1,0 +1,26 @@
+"""Job files: TOML -> a frozen, validated :class:`Job` (every problem reported up front).
+
+Usage::
+
+    from sdmpi.config import load_job, enumerate_tasks, canonical_text, JobError
+    job = load_job("jobs/demo.toml", overrides=["shear.gamma0=0.05"])  # raises JobError
+    for task in enumerate_tasks(job): ...
+
+The schema (sections, keys, defaults, allowed values, units) lives in :mod:`.schema`;
+``schema_text()`` prints it. Units: sphere radius 1, medium zero-shear viscosity 1, time
+in t_D = a^2/D0 (1/gamma_dot for non-Brownian steady shear); ``Job.time_unit`` says which.
+This package uses only the standard library, so validating a job is fast.
+"""
+
+from .canonical import LAYOUT_KEYS, canonical_text, job_hash, resume_hash, toml_literal
+from .loader import JobError, Problem, load_job, parse_job
+from .schema import (Brownian, Ensemble, Hydrodynamics, Integration, Job, JobSection,
+                     Medium, Mode, Output, Shear, Solver, System, schema_text)
+from .tasks import Task, enumerate_tasks
+
+__all__ = [
+    "Brownian", "Ensemble", "Hydrodynamics", "Integration", "Job", "JobError", "JobSection",
+    "LAYOUT_KEYS", "Medium", "Mode", "Output", "Problem", "Shear", "Solver", "System", "Task",
+    "canonical_text", "enumerate_tasks", "job_hash", "load_job", "parse_job", "resume_hash",
+    "schema_text", "toml_literal",
+]

@@ -1,0 +1,467 @@
+"""Job file (TOML) + ``--set`` overrides -> validated :class:`Job`, or every problem at once.
+
+Order of work: read and parse the file, parse the overrides, merge them (an override
+wins), then check each section and key against the schema (unknown keys with a
+did-you-mean, types, ranges, keys that do not apply), then the checks that involve
+several keys. A cross-key check is skipped when one of its keys already failed, so each
+mistake is reported once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import difflib
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .canonical import toml_literal
+from .schema import SECTIONS, Choice, Job, Text, toml_name
+
+_MISSING = object()
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a job: where (``section.key``, ``medium.modes[0].lambda``, or
+    the file name), the offending value, why, and what is allowed."""
+
+    path: str
+    why: str
+    value: object = _MISSING
+    allowed: str = ""
+    origin: str = ""  # "--set" when the offending key came from an override
+
+    def __str__(self) -> str:
+        head = self.path
+        if self.value is not _MISSING:
+            shown = toml_literal(self.value)
+            head += f" = {shown if len(shown) <= 60 else shown[:57] + '...'}"
+        text = f"{head}: {self.why}"
+        if self.allowed:
+            text += f"; allowed: {self.allowed}"
+        return text + (f" [from {self.origin}]" if self.origin else "")
+
+
+class JobError(ValueError):
+    """A job that cannot be used; ``problems`` lists everything that is wrong with it."""
+
+    def __init__(self, problems, source: str = "job"):
+        self.problems = tuple(problems)
+        self.source = source
+        n = len(self.problems)
+        lines = [f"{source}: {n} problem{'s' if n != 1 else ''}"]
+        lines += [f"  - {p}" for p in self.problems]
+        super().__init__("\n".join(lines))
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def load_job(path, overrides=()) -> Job:
+    """Read, override and validate the job file at ``path``; raise :class:`JobError`."""
+    source = str(path)
+    try:
+        data = Path(path).read_bytes()
+    except OSError as err:
+        reason = err.strerror or str(err)
+        raise JobError([Problem(source, f"cannot read the job file: {reason}")], source) from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        why = f"not UTF-8 text (bad byte at offset {err.start}); TOML files are UTF-8"
+        raise JobError([Problem(source, why)], source) from None
+    return parse_job(text, overrides, source=source)
+
+
+def parse_job(text: str, overrides=(), *, source: str = "job") -> Job:
+    """Validate the TOML ``text`` with ``overrides`` (strings 'section.key=LITERAL')."""
+    problems = []
+    settings = parse_overrides(overrides, problems)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        problems.insert(0, _syntax_problem(err, text, source))
+        raise JobError(problems, source) from None
+    for section, name, value in settings:
+        table = raw.setdefault(section, {})
+        if isinstance(table, dict):
+            table[name] = value
+        else:
+            problems.append(Problem(section, "is not a table in the file, so "
+                                    f"{section}.{name} cannot be set", table, origin="--set"))
+    set_paths = frozenset(f"{s}.{k}" for s, k, _ in settings)
+    job = _resolve(raw, problems, set_paths)
+    if problems:
+        problems = [_mark_origin(p, set_paths) for p in problems]
+        raise JobError(problems, source)
+    return job
+
+
+def parse_overrides(items, problems: list) -> list[tuple[str, str, object]]:
+    """``['shear.gamma0=0.05', ...]`` -> [(section, key, value)]; bad items go to problems."""
+    out = []
+    for item in items:
+        path, sep, literal = item.partition("=")
+        path = path.strip()
+        parts = path.split(".")
+        if not sep or len(parts) != 2 or not all(parts):
+            problems.append(Problem(item, "not an override", allowed="SECTION.KEY=VALUE, "
+                                    "e.g. shear.gamma0=0.05", origin="--set"))
+            continue
+        try:
+            parsed = tomllib.loads(f"value = {literal}")
+            if set(parsed) != {"value"}:
+                raise tomllib.TOMLDecodeError("more than one value")
+        except tomllib.TOMLDecodeError:
+            hint = ""
+            if re.fullmatch(r"\s*[A-Za-z][\w.+-]*\s*", literal):
+                hint = f"; strings need quotes: --set '{path}=\"{literal.strip()}\"'"
+            problems.append(Problem(path, f"{literal!r} is not a TOML literal{hint}",
+                                    allowed='a TOML value such as 0.3, 7, true, "text", '
+                                    "[1.0, 2.0]", origin="--set"))
+            continue
+        out.append((parts[0], parts[1], parsed["value"]))
+    return out
+
+
+# --------------------------------------------------------------------------- per key
+
+
+@dataclass
+class _Pass:
+    """State of one validation pass."""
+
+    problems: list                   # every problem found so far
+    set_paths: frozenset             # "section.key" given by --set
+    invalid: set = field(default_factory=set)      # keys / sections that failed
+    context: dict = field(default_factory=dict)    # section -> {attribute: value} so far
+
+
+def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
+    """Check every section and key of ``raw``; return a provisional Job (failed keys at
+    their defaults) after running the cross-key checks."""
+    st = _Pass(problems, set_paths)
+    sections = dict(SECTIONS)
+    for name, value in raw.items():
+        if name not in sections:
+            problems.append(_unknown(name, value, sections, None))
+    for section, cls in SECTIONS:
+        table = raw.get(section, {})
+        if not isinstance(table, dict):
+            problems.append(Problem(section, "must be a table", table,
+                                    allowed=f"a [{section}] section"))
+            st.invalid.add(section)
+            table = {}
+        st.context[section] = {}  # filled key by key: later keys may depend on earlier ones
+        _resolve_table(table, cls, section, st, st.context[section])
+    job = Job(**{s: cls(**st.context[s]) for s, cls in SECTIONS})
+    for deps, check in CROSS_CHECKS:
+        if not any(d in st.invalid or d.split(".")[0] in st.invalid for d in deps):
+            problems.extend(check(job))
+    return job
+
+
+def _resolve_table(table, cls, prefix, st: _Pass, out: dict) -> dict:
+    """Validated values of one table (a section or a mode) into ``out``, {attribute: value}.
+
+    A key that does not apply (shear.omega under steady shear, say) is an error, unless
+    its controlling key came from --set and it did not: switching the protocol or the
+    medium on the command line drops the file's keys for the other protocol or medium.
+    """
+    fields = dataclasses.fields(cls)
+    names = [toml_name(f) for f in fields]
+    misspelt = set()  # known keys that an unknown key probably meant
+    for name, value in table.items():
+        if name not in names:
+            st.problems.append(_unknown(f"{prefix}.{name}", value, names, prefix))
+            misspelt.update(_close(name, names))
+    for f in fields:
+        name, meta = toml_name(f), f.metadata
+        path = f"{prefix}.{name}"
+        applies, controller, condition, fix = _applies(meta["only_if"], st)
+        if applies is False:
+            switched = controller in st.set_paths and path not in st.set_paths
+            if name in table and not switched:
+                st.problems.append(Problem(path, f"does not apply: used only when "
+                                           f"{condition}", table[name],
+                                           allowed=f"remove it, or set {fix}"))
+            out[f.name] = None
+        elif name not in table:
+            if meta["default"] is None and applies and name not in misspelt:
+                when = f" when {condition}" if condition else ""
+                example = toml_literal(meta["example"])
+                st.problems.append(Problem(path, f"is required{when}",
+                                           allowed=f"e.g. {name} = {example}"))
+                st.invalid.add(path)
+            out[f.name] = meta["default"]
+        else:
+            before = len(st.problems)
+            value = _convert(table[name], f, path, st)
+            if len(st.problems) > before:
+                st.invalid.add(path)
+                value = meta["default"]
+            out[f.name] = value
+    return out
+
+
+def _applies(only_if, st: _Pass):
+    """Whether a key applies (None when its controlling key is itself invalid), the
+    controlling key, the condition in words, and the setting that makes the key apply."""
+    if only_if is None:
+        return True, "", "", ""
+    section, name, values = only_if
+    controller = f"{section}.{name}"
+    condition = f"{controller} is " + " or ".join(f'"{v}"' for v in values)
+    fix = f'{controller} = "{values[0]}"'
+    if controller in st.invalid or section in st.invalid:
+        return None, controller, condition, fix
+    return st.context[section][name] in values, controller, condition, fix
+
+
+def _convert(value, f, path, st: _Pass):
+    """The checked value of one key (tuples for arrays); problems appended on failure."""
+    meta, problems = f.metadata, st.problems
+    kind, name = meta["kind"], toml_name(f)
+    if kind in ("floats", "tables"):
+        if kind == "floats" and _is_number(value):
+            value = [value]
+        if not isinstance(value, list):
+            what = "numbers" if kind == "floats" else "tables {...}"
+            problems.append(Problem(path, f"expected an array of {what}, got {_type(value)}",
+                                    value, allowed=_allowed(meta, name)))
+            return None
+        if not value:
+            problems.append(Problem(path, "must not be empty", value,
+                                    allowed=_allowed(meta, name)))
+            return None
+        if kind == "floats":
+            each = _allowed(meta, name, element=True)
+            items = [_scalar(v, "float", meta, f"{path}[{i}]", each, problems)
+                     for i, v in enumerate(value)]
+            for i, v in enumerate(items):
+                if v is not None and v in items[:i]:
+                    problems.append(Problem(f"{path}[{i}]", "appears twice", v,
+                                            allowed="distinct values"))
+            return tuple(items)
+        cls, items = meta["table"], []
+        for i, v in enumerate(value):
+            if isinstance(v, dict):
+                items.append(cls(**_resolve_table(v, cls, f"{path}[{i}]", st, {})))
+            else:
+                problems.append(Problem(f"{path}[{i}]", f"expected a table, got {_type(v)}",
+                                        v, allowed=f"e.g. {toml_literal(meta['example'][0])}"))
+        return tuple(items)
+    return _scalar(value, kind, meta, path, _allowed(meta, name), problems)
+
+
+def _scalar(value, kind, meta, path, allowed_text, problems):
+    """One int / float / bool / str value, type- and range-checked."""
+    allowed = meta["allowed"]
+    if kind == "int":
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        expected = "an integer" + (f" (write {int(value)}, not {value!r})"
+                                   if isinstance(value, float) and value.is_integer() else "")
+    elif kind == "float":
+        ok = _is_number(value)
+        expected = "a number"
+    elif kind == "bool":
+        ok = isinstance(value, bool)
+        expected = "true or false"
+    else:
+        ok = isinstance(value, str)
+        expected = "a string"
+    if not ok:
+        problems.append(Problem(path, f"expected {expected}, got {_type(value)}", value,
+                                allowed=allowed_text))
+        return None
+    if kind == "float":
+        value = float(value)
+        if math.isnan(value):
+            problems.append(Problem(path, "is not a number (nan)", value,
+                                    allowed=allowed_text))
+            return None
+    if allowed is not None and not allowed.contains(value):
+        why = "out of range"
+        if isinstance(allowed, Choice):
+            close = difflib.get_close_matches(value, allowed.values, n=1, cutoff=0.5)
+            why = "not a valid choice" + (f'; did you mean "{close[0]}"?' if close else "")
+        elif not isinstance(value, (int, float)):
+            why = "not allowed"  # Text
+        problems.append(Problem(path, why, value, allowed=allowed_text))
+        return None
+    return value
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _allowed(meta, name, element=False) -> str:
+    """What a key (or, with ``element``, one element of an array key) may hold."""
+    allowed = meta["allowed"]
+    text = allowed.describe(name) if allowed is not None else ""
+    text += f" [{meta['unit']}]" if meta["unit"] else ""
+    if meta["kind"] == "floats":
+        return text if element else f"a non-empty array of distinct numbers, each {text}"
+    if meta["kind"] == "tables":
+        return f"a non-empty array such as {toml_literal(meta['example'])}"
+    if isinstance(allowed, (Choice, Text)):
+        return text
+    kind = {"int": "an integer", "float": "a number", "bool": "true or false",
+            "str": "a string"}[meta["kind"]]
+    return f"{kind}, {text}" if text else kind
+
+
+def _type(value) -> str:
+    for types, name in ((bool, "a boolean"), (int, "an integer"), (float, "a float"),
+                        (str, "a string"), (list, "an array"), (dict, "a table"),
+                        ((datetime.date, datetime.time), "a date/time")):
+        if isinstance(value, types):
+            return name
+    return type(value).__name__
+
+
+def _unknown(path, value, candidates, section) -> Problem:
+    """Problem for an unknown key (``section`` given) or section (``section`` None)."""
+    name = path.rsplit(".", 1)[-1] if section else path
+    hints = [f'"{c}"' for c in _close(name, candidates)]
+    hints += [f"{s}.{name}" for s, cls in SECTIONS if s != section
+              and name in (toml_name(f) for f in dataclasses.fields(cls))]
+    what = f"unknown key in [{section}]" if section else "unknown section"
+    if section and "[" in section:  # inside an inline table such as medium.modes[0]
+        what = "unknown key"
+    why = what + (f"; did you mean {' or '.join(hints)}?" if hints else "")
+    kinds = "keys" if section else "sections"
+    return Problem(path, why, value, allowed=f"{kinds}: " + ", ".join(candidates))
+
+
+def _close(name, candidates) -> list[str]:
+    """Candidates that ``name`` may be a misspelling or abbreviation of."""
+    close = difflib.get_close_matches(name, candidates, n=3, cutoff=0.6)
+    return close + [c for c in candidates if c not in close and len(name) >= 3
+                    and (c.startswith(name) or name.startswith(c))]
+
+
+def _syntax_problem(err, text, source) -> Problem:
+    why = f"invalid TOML: {err}"
+    match = re.search(r"line (\d+)", str(err))
+    lines = text.splitlines()
+    if match and 0 < int(match[1]) <= len(lines):
+        why += f"\n      line {match[1]}: {lines[int(match[1]) - 1].strip()}"
+    return Problem(source, why)
+
+
+def _mark_origin(problem: Problem, set_paths) -> Problem:
+    """Tag problems whose offending key was given by --set."""
+    p = problem.path
+    if problem.origin or not any(p == s or p.startswith(s + "[") or s.startswith(p + ".")
+                                 for s in set_paths):
+        return problem
+    return dataclasses.replace(problem, origin="--set")
+
+
+# --------------------------------------------------------------------------- cross-key checks
+
+
+def _discard_periods(job):
+    i = job.integration
+    if job.shear.protocol == "oscillatory" and i.discard_periods >= i.periods:
+        return [Problem("integration.discard_periods",
+                        f"must be smaller than integration.periods (= {i.periods})",
+                        i.discard_periods, allowed=f"0 <= discard_periods < {i.periods}")]
+    return []
+
+
+def _discard_steps(job):
+    i = job.integration
+    if job.shear.protocol != "oscillatory" and i.discard_steps >= i.n_steps:
+        return [Problem("integration.discard_steps",
+                        f"must be smaller than integration.n_steps (= {i.n_steps})",
+                        i.discard_steps, allowed=f"0 <= discard_steps < {i.n_steps}")]
+    return []
+
+
+def _maxwell_sum(job):
+    if job.medium.kind != "maxwell":
+        return []
+    total = math.fsum(m.eta for m in job.medium.modes)
+    if abs(total - 1.0) > 1e-9:
+        return [Problem("medium.modes", f"the mode viscosities eta sum to {total:g}, but "
+                        "their sum is the medium's zero-shear viscosity eta_m, the unit of "
+                        "viscosity", job.medium.modes, allowed="modes whose eta sum to 1")]
+    return []
+
+
+def _gaps(job):
+    h = job.hydrodynamics
+    if h.min_gap >= h.lubrication_cutoff:
+        return [Problem("hydrodynamics.min_gap", "must be smaller than "
+                        f"hydrodynamics.lubrication_cutoff (= {h.lubrication_cutoff:g})",
+                        h.min_gap, allowed=f"0 < min_gap < {h.lubrication_cutoff:g}")]
+    return []
+
+
+def _ranks(job):
+    if job.ensemble.ranks_per_task > 1 and job.solver.backend == "dense":
+        return [Problem("ensemble.ranks_per_task", 'the "dense" backend runs a task on '
+                        "one rank", job.ensemble.ranks_per_task,
+                        allowed='1, or solver.backend = "petsc-dense" or "petsc-krylov"')]
+    return []
+
+
+def _protocol_units(job):
+    shear, brownian = job.shear, job.brownian.enabled
+    if shear.protocol == "steady" and not brownian and shear.rate != 1.0:
+        return [Problem("shear.rate", "non-Brownian steady shear measures time in "
+                        "1/gamma_dot, so the rate is 1 by definition", shear.rate,
+                        allowed="1.0, or brownian.enabled = true (rate = Peclet number)")]
+    if shear.protocol == "none" and not brownian:
+        return [Problem("shear.protocol", "without shear and without Brownian motion "
+                        "nothing moves", "none",
+                        allowed='"oscillatory" or "steady", or brownian.enabled = true')]
+    return []
+
+
+def _time_step(job):
+    """Seed eq. 14a (dt < t_D = 1, Brownian jobs) and dt < lambda (Maxwell media)."""
+    limits = []
+    if job.brownian.enabled:
+        limits.append((1.0, "the diffusion time t_D = 1 (seed eq. 14a)"))
+    if job.medium.kind == "maxwell":
+        lam = min(m.lam for m in job.medium.modes)
+        limits.append((lam, f"the shortest Maxwell relaxation time ({lam:g})"))
+    problems = []
+    for limit, what in limits:
+        omega = max(job.frequencies, key=lambda w: job.time_step(w), default=None)
+        dt = job.time_step(omega)
+        if dt < limit:
+            continue
+        if omega is None:
+            problems.append(Problem("integration.dt", f"must be smaller than {what}", dt,
+                                    allowed=f"0 < dt < {limit:g}"))
+        else:
+            problems.append(Problem(
+                "integration.steps_per_period", f"gives dt = {dt:.3g} at omega = {omega:g}, "
+                f"not smaller than {what}", job.integration.steps_per_period,
+                allowed=f"more steps per period, or integration.dt_max < {limit:g}"))
+    return problems
+
+
+_INTEGRATION = tuple(f"integration.{f.name}" for f in dataclasses.fields(Job().integration))
+
+# (keys a check reads, check): skipped when one of those keys failed its own checks.
+CROSS_CHECKS = (
+    (("shear.protocol", "integration.periods", "integration.discard_periods"),
+     _discard_periods),
+    (("shear.protocol", "integration.n_steps", "integration.discard_steps"), _discard_steps),
+    (("medium.kind", "medium.modes"), _maxwell_sum),
+    (("hydrodynamics.min_gap", "hydrodynamics.lubrication_cutoff"), _gaps),
+    (("ensemble.ranks_per_task", "solver.backend"), _ranks),
+    (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),
+    (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes")
+     + _INTEGRATION, _time_step),
+)

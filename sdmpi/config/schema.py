@@ -1,0 +1,366 @@
+"""The job-file schema: one frozen dataclass per TOML section, one field per key.
+
+Each field carries its TOML spelling, kind, allowed values, unit and a one-line doc in
+``dataclasses.field(metadata=...)``; the loader, the canonical writer and
+:func:`schema_text` all read the schema from there, so a key is declared exactly once.
+
+Units are the seed's reduced units: sphere radius a = 1, medium zero-shear viscosity
+eta_m = 1, time in t_D = a^2/D0 with D0 = kT/(6 pi eta_m a). The one exception is
+non-Brownian steady shear, whose time unit is 1/gamma_dot (so ``shear.rate`` is 1 there).
+Non-Brownian oscillatory jobs keep t_D as the time unit, so omega and the Maxwell
+relaxation times mean the same with and without Brownian motion.
+
+Jobs are made by :func:`sdmpi.config.load_job` / :func:`sdmpi.config.parse_job`, which
+validate everything; building the dataclasses by hand skips all checks. Keys that do not
+apply (for example ``shear.omega`` under steady shear) hold ``None``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+TWO_PI = 2.0 * math.pi
+
+
+# --------------------------------------------------------------------------- allowed values
+
+
+@dataclass(frozen=True)
+class Range:
+    """A numeric interval; ``None`` ends are unbounded. Infinity only if ``allow_inf``."""
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    allow_inf: bool = False
+
+    def contains(self, x) -> bool:
+        if math.isinf(x):
+            return self.allow_inf and x > 0 and self.hi is None
+        if self.lo is not None and (x < self.lo or (self.lo_open and x == self.lo)):
+            return False
+        if self.hi is not None and (x > self.hi or (self.hi_open and x == self.hi)):
+            return False
+        return True
+
+    def describe(self, name: str) -> str:
+        lo = "" if self.lo is None else f"{_num(self.lo)} {'<' if self.lo_open else '<='} "
+        hi = "" if self.hi is None else f" {'<' if self.hi_open else '<='} {_num(self.hi)}"
+        if self.lo is not None and self.hi is None:
+            text = f"{name} {'>' if self.lo_open else '>='} {_num(self.lo)}"
+        else:
+            text = f"{lo}{name}{hi}"
+        return text + (" (inf allowed)" if self.allow_inf else "")
+
+
+def _num(x) -> str:
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One of a fixed set of strings."""
+
+    values: tuple[str, ...]
+
+    def contains(self, x) -> bool:
+        return x in self.values
+
+    def describe(self, name: str) -> str:
+        return "one of " + ", ".join(f'"{v}"' for v in self.values)
+
+
+@dataclass(frozen=True)
+class Text:
+    """A non-empty, printable, single-line string of bounded length."""
+
+    max_len: int = 200
+
+    def contains(self, x) -> bool:
+        return 0 < len(x) <= self.max_len and x.isprintable()
+
+    def describe(self, name: str) -> str:
+        return f"a non-empty printable one-line string of at most {self.max_len} characters"
+
+
+# Field kinds: "int", "float", "bool", "str", "floats" (non-empty array of distinct floats;
+# a bare number is taken as a one-element array) and "tables" (non-empty array of inline
+# tables, each validated against the dataclass in metadata["table"]).
+KINDS = ("int", "float", "bool", "str", "floats", "tables")
+
+
+_CONTROLLER_DEFAULTS: dict[str, str] = {}  # "section.key" -> default of keys named in only_if
+
+
+def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, table=None,
+        example=None, controls=None):
+    """Declare one job-file key.
+
+    default  the value when the key is absent (None together with ``only_if`` means the key
+             is required whenever it applies);
+    allowed  a Range (for numbers; per element for "floats"), a Choice or a Text;
+    only_if  (section, key, values): the key applies only when that other key has one of
+             these values; otherwise giving it is an error and it resolves to None;
+    toml     the TOML spelling when it differs from the attribute name;
+    table    the dataclass of each element of a "tables" key;
+    example  a value shown in messages about a required key;
+    controls "section.key" of this key when other keys' only_if refer to it.
+
+    The dataclass default is None for a key that does not apply under the defaults of
+    its controlling key, so that ``Job()`` equals the job of an empty file.
+    """
+    assert kind in KINDS
+    if controls:
+        _CONTROLLER_DEFAULTS[controls] = default
+    applies = only_if is None or _CONTROLLER_DEFAULTS[f"{only_if[0]}.{only_if[1]}"] in only_if[2]
+    meta = dict(kind=kind, doc=doc, unit=unit, allowed=allowed, only_if=only_if,
+                toml=toml, table=table, default=default, example=example)
+    return field(default=default if applies else None, metadata=meta)
+
+
+def toml_name(f: dataclasses.Field) -> str:
+    return f.metadata.get("toml") or f.name
+
+
+# --------------------------------------------------------------------------- sections
+
+OSCILLATORY = ("shear", "protocol", ("oscillatory",))
+STEADY = ("shear", "protocol", ("steady",))
+STEADY_OR_NONE = ("shear", "protocol", ("steady", "none"))
+MAXWELL = ("medium", "kind", ("maxwell",))
+
+
+@dataclass(frozen=True)
+class JobSection:
+    """[job]: identification and the master random seed."""
+
+    name: str = key("unnamed", "str", "job name, stored with the results",
+                    allowed=Text())
+    seed: int = key(0, "int", "master seed; task streams are SeedSequence(seed).spawn(...) "
+                    "keyed by task id", allowed=Range(0, 2**63 - 1))
+
+
+@dataclass(frozen=True)
+class System:
+    """[system]: the particles. Monodisperse spheres of radius 1 in a cubic periodic box
+    of side L = (4 pi N / (3 phi))^(1/3); one task group per volume fraction."""
+
+    n_particles: int = key(27, "int", "number of spheres N per realisation",
+                           allowed=Range(2, None))
+    phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions, one task group each",
+                                 allowed=Range(0.0, 0.64, lo_open=True, hi_open=True))
+    box: str = key("cubic", "str", "box shape", allowed=Choice(("cubic",)))
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One Maxwell mode: partial viscosity eta (relative to eta_m) and relaxation time."""
+
+    eta: float = key(None, "float", "partial zero-shear viscosity; the modes sum to 1",
+                     unit="eta_m", allowed=Range(0.0, None, lo_open=True), example=1.0)
+    lam: float = key(None, "float", "relaxation time", unit="time unit",
+                     allowed=Range(0.0, None, lo_open=True), toml="lambda", example=0.5)
+
+
+@dataclass(frozen=True)
+class Medium:
+    """[medium]: the suspending fluid, Newtonian or multi-mode Maxwell (seed eqs. 2, 26)."""
+
+    kind: str = key("newtonian", "str", "suspending medium",
+                    allowed=Choice(("newtonian", "maxwell")), controls="medium.kind")
+    modes: tuple[Mode, ...] | None = key(
+        None, "tables", "Maxwell modes [{eta = ..., lambda = ...}, ...]; required for "
+        "maxwell, forbidden for newtonian", only_if=MAXWELL, table=Mode,
+        example=({"eta": 1.0, "lambda": 0.5},))
+
+
+@dataclass(frozen=True)
+class Shear:
+    """[shear]: the imposed flow u = gamma_dot(t) y e_x.
+
+    oscillatory: gamma(t) = gamma0 sin(omega t), one task group per omega;
+    steady: gamma_dot = rate; none: quiescent (needs Brownian motion)."""
+
+    protocol: str = key("oscillatory", "str", "shear protocol",
+                        allowed=Choice(("oscillatory", "steady", "none")),
+                        controls="shear.protocol")
+    gamma0: float | None = key(0.02, "float", "strain amplitude (seed: linear regime)",
+                               allowed=Range(0.0, 1.0, lo_open=True), only_if=OSCILLATORY)
+    omega: tuple[float, ...] | None = key(
+        (TWO_PI,), "floats", "angular frequencies, one task group each", unit="rad / time unit",
+        allowed=Range(0.0, None, lo_open=True), only_if=OSCILLATORY)
+    rate: float | None = key(1.0, "float", "shear rate (the Peclet number for Brownian jobs; "
+                             "1 for non-Brownian jobs, whose time unit is 1/gamma_dot)",
+                             unit="1 / time unit", allowed=Range(0.0, None, lo_open=True),
+                             only_if=STEADY)
+
+
+@dataclass(frozen=True)
+class Brownian:
+    """[brownian]: thermal motion (Brownian forces and the Brownian stress, seed eq. 16)."""
+
+    enabled: bool = key(True, "bool", "include Brownian motion")
+
+
+@dataclass(frozen=True)
+class Integration:
+    """[integration]: time stepping.
+
+    oscillatory: dt = (2 pi / omega) / n with n = max(steps_per_period,
+    ceil(2 pi / (omega dt_max))) steps per period; ``periods`` periods are run and the
+    first ``discard_periods`` are not used for the moduli.
+    steady / none: ``n_steps`` steps of ``dt``, the first ``discard_steps`` not averaged.
+    """
+
+    steps_per_period: int | None = key(500, "int", "minimum time steps per period "
+                                       "(seed: at least 500)", allowed=Range(8, None),
+                                       only_if=OSCILLATORY)
+    periods: int | None = key(20, "int", "periods run per task", allowed=Range(1, None),
+                              only_if=OSCILLATORY)
+    discard_periods: int | None = key(5, "int", "leading periods left out of the moduli; "
+                                      "< periods", allowed=Range(0, None),
+                                      only_if=OSCILLATORY)
+    dt_max: float | None = key(math.inf, "float", "largest time step; adds steps per period "
+                               "at low frequency (seed: 5e-4)", unit="time unit",
+                               allowed=Range(0.0, None, lo_open=True, allow_inf=True),
+                               only_if=OSCILLATORY)
+    dt: float | None = key(1e-3, "float", "time step", unit="time unit",
+                           allowed=Range(0.0, None, lo_open=True), only_if=STEADY_OR_NONE)
+    n_steps: int | None = key(10000, "int", "time steps per task", allowed=Range(1, None),
+                              only_if=STEADY_OR_NONE)
+    discard_steps: int | None = key(1000, "int", "leading steps left out of averages; "
+                                    "< n_steps", allowed=Range(0, None),
+                                    only_if=STEADY_OR_NONE)
+
+
+@dataclass(frozen=True)
+class Ensemble:
+    """[ensemble]: independent realisations and how many MPI ranks share one task."""
+
+    realisations: int = key(7, "int", "independent realisations per (phi, omega) "
+                            "(seed: at least 7)", allowed=Range(1, None))
+    ranks_per_task: int = key(1, "int", "MPI ranks per task (> 1 needs a petsc backend)",
+                              allowed=Range(1, None))
+
+
+@dataclass(frozen=True)
+class Solver:
+    """[solver]: the linear-algebra backend for the resistance problem."""
+
+    backend: str = key("dense", "str", "dense = LAPACK Cholesky on one rank",
+                       allowed=Choice(("dense", "petsc-dense", "petsc-krylov")))
+    tolerance: float = key(1e-8, "float", "relative residual of iterative solves "
+                           "(petsc-krylov; direct backends ignore it)",
+                           allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))
+
+
+@dataclass(frozen=True)
+class Hydrodynamics:
+    """[hydrodynamics]: accuracy knobs of the hydrodynamic interactions. Gaps are
+    surface-to-surface distances in units of the pair's mean radius."""
+
+    ewald_tolerance: float = key(1e-6, "float", "relative accuracy of the Ewald sums",
+                                 allowed=Range(0.0, 1e-2, lo_open=True))
+    lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
+    lubrication_cutoff: float = key(2.0, "float", "gap below which lubrication is added",
+                                    unit="mean radii", allowed=Range(0.0, 10.0, lo_open=True))
+    min_gap: float = key(1e-4, "float", "gaps are clamped to at least this in lubrication; "
+                         "< lubrication_cutoff", unit="mean radii",
+                         allowed=Range(0.0, 0.1, lo_open=True))
+
+
+@dataclass(frozen=True)
+class Output:
+    """[output]: what is stored and how often the run state is committed."""
+
+    per_particle: bool = key(False, "bool", "also store per-particle stresslets")
+    checkpoint_every: int = key(1000, "int", "time steps between checkpoints",
+                                allowed=Range(1, None))
+
+
+@dataclass(frozen=True)
+class Job:
+    """A validated job: one attribute per TOML section (same names as in the file)."""
+
+    job: JobSection = field(default_factory=JobSection)
+    system: System = field(default_factory=System)
+    medium: Medium = field(default_factory=Medium)
+    shear: Shear = field(default_factory=Shear)
+    brownian: Brownian = field(default_factory=Brownian)
+    integration: Integration = field(default_factory=Integration)
+    ensemble: Ensemble = field(default_factory=Ensemble)
+    solver: Solver = field(default_factory=Solver)
+    hydrodynamics: Hydrodynamics = field(default_factory=Hydrodynamics)
+    output: Output = field(default_factory=Output)
+
+    # ---- derived quantities (one place for the time-step arithmetic)
+
+    @property
+    def time_unit(self) -> str:
+        """'1/gamma_dot' for non-Brownian steady shear, else 't_D' (= a^2/D0)."""
+        steady = self.shear.protocol == "steady"
+        return "1/gamma_dot" if steady and not self.brownian.enabled else "t_D"
+
+    @property
+    def frequencies(self) -> tuple[float | None, ...]:
+        """The omega of each task group; (None,) unless the shear is oscillatory."""
+        return self.shear.omega if self.shear.protocol == "oscillatory" else (None,)
+
+    def steps_per_period(self, omega: float) -> int:
+        """Time steps per period at this omega (oscillatory jobs), honouring dt_max."""
+        integ = self.integration
+        needed = TWO_PI / (omega * integ.dt_max)
+        return max(integ.steps_per_period, math.ceil(needed * (1.0 - 1e-12)))
+
+    def time_step(self, omega: float | None) -> float:
+        """The time step (time unit) of a task at this omega (None: steady / none)."""
+        if omega is None:
+            return self.integration.dt
+        return TWO_PI / omega / self.steps_per_period(omega)
+
+    def n_steps(self, omega: float | None) -> int:
+        """Total time steps of one task at this omega (None: steady / none)."""
+        if omega is None:
+            return self.integration.n_steps
+        return self.integration.periods * self.steps_per_period(omega)
+
+    def discard_steps(self, omega: float | None) -> int:
+        """Leading time steps left out of averages at this omega."""
+        if omega is None:
+            return self.integration.discard_steps
+        return self.integration.discard_periods * self.steps_per_period(omega)
+
+
+SECTIONS: tuple[tuple[str, type], ...] = tuple(
+    (f.name, f.default_factory) for f in dataclasses.fields(Job))
+
+
+def schema_text() -> str:
+    """A plain-text table of every key: default, allowed values, unit and meaning."""
+    from .canonical import toml_literal
+
+    lines = []
+    for section, cls in SECTIONS:
+        lines.append(" ".join(cls.__doc__.split("\n\n")[0].split()))
+        for f in dataclasses.fields(cls):
+            lines.extend(_key_line(f, toml_literal, "  "))
+            if f.metadata["table"] is not None:
+                for g in dataclasses.fields(f.metadata["table"]):
+                    lines.extend(_key_line(g, toml_literal, "    ", f"{toml_name(f)}[]."))
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _key_line(f, literal, indent, prefix=""):
+    m = f.metadata
+    name = prefix + toml_name(f)
+    default = "required" if m["default"] is None else literal(m["default"])
+    allowed = m["allowed"].describe(name) if m["allowed"] else m["kind"]
+    extra = f"; unit {m['unit']}" if m["unit"] else ""
+    if m["only_if"]:
+        s, k, vals = m["only_if"]
+        extra += f"; only when {s}.{k} is " + " or ".join(f'"{v}"' for v in vals)
+    return [f"{indent}{name} = {default}   ({allowed}{extra})", f"{indent}    {m['doc']}"]
