@@ -1,1 +1,6 @@
-"""Time stepping of one SD realisation: shear protocol, forces, Brownian terms, media."""
+"""Time stepping of one SD realisation: shear protocol, interparticle forces, Brownian
+terms, media. Knows nothing of MPI or files."""
+
+from .realisation import Realisation
+
+__all__ = ["Realisation"]

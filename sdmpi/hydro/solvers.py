@@ -7,14 +7,15 @@ and strain rates, the rigid-body velocities and the stresslets:
 
 (from (F, L, -S) = R (U', -e_inf), U' = velocities relative to the imposed flow,
 e_inf the 5-vector of E_inf at every particle), plus the Brownian factor:
-R_FU = C C^T, so C^-T z (z standard normal) has covariance R_FU^-1.
+R_FU = C C^T, so C z (z standard normal) has covariance R_FU, and the velocities it
+drives, R_FU^-1 C z = C^-T z, have covariance R_FU^-1 (fluctuation-dissipation).
 
 `dense` factorises R_FU by LAPACK Cholesky. PETSc backends (issue: large N) plug into
 BACKENDS with the same methods.
 """
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, solve_triangular
+from scipy.linalg import cho_factor, cho_solve
 
 
 class DenseSolver:
@@ -39,10 +40,10 @@ class DenseSolver:
         """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
         return (self.r_se @ einf.ravel() - self.r_su @ velocities.ravel()).reshape(self.n, 5)
 
-    def brownian_velocities(self, noise):
-        """C^-T z for z (N, 6): a sample with covariance R_FU^-1 (times z's variance)."""
-        chol = self._chol[0]
-        return solve_triangular(chol, noise.ravel(), lower=True, trans="T").reshape(self.n, 6)
+    def brownian_forces(self, noise):
+        """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
+        chol = np.tril(self._chol[0])
+        return (chol @ noise.ravel()).reshape(self.n, 6)
 
 
 BACKENDS = {"dense": DenseSolver}

@@ -1,0 +1,49 @@
+"""Suspending media: Newtonian, and multi-mode Maxwell via the correspondence principle.
+
+Seed 000 (Schaink et al. 2000) sec. II C: in a Maxwell medium the particle trajectories
+are those of the viscous medium of the same zero-shear viscosity eta_m (eq. 32), while
+each mode k filters the hydrodynamic stresslets (eqs. 33-34, 42):
+
+    lambda_k dS_k/dt + S_k = (eta_k / eta_m) S_0(t),    S_H = sum_k S_k,
+
+with S_0 the stresslet computed in the viscous medium. Over a step [t0, t0 + dt] with S_0
+linear in time, the update is exact (h = dt / lambda_k):
+
+    S_k(t0 + dt) = exp(-h) S_k(t0) + (eta_k/eta_m) [S_0(t0) (1 - exp(-h))
+                   + (S_0(t0 + dt) - S_0(t0)) (1 - (1 - exp(-h)) / h)].
+
+The medium's own stress obeys the same law with 2 eta_m E_inf as source; its moduli are
+analytic (seed eq. 36) and are added by the reducer, not computed here.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MaxwellFilter:
+    """The modes (eta_k/eta_m, lambda_k) and a fixed step dt: exact linear-source update."""
+
+    eta: tuple
+    lam: tuple
+    dt: float
+
+    def coefficients(self):
+        """Per mode (decay, weight_old, weight_new) so that
+        S_k <- decay S_k + weight_old S_0(t0) + weight_new S_0(t0 + dt)."""
+        out = []
+        for eta, lam in zip(self.eta, self.lam):
+            h = self.dt / lam
+            decay = math.exp(-h)
+            ramp = 1.0 - (-math.expm1(-h)) / h  # 1 - (1 - e^-h)/h, accurate for small h
+            out.append((decay, eta * (-math.expm1(-h) - ramp), eta * ramp))
+        return np.array(out)
+
+    def update(self, modes, source_old, source_new):
+        """Advance the mode stresslets (n_modes, ...) over one step, in place."""
+        for k, (decay, w_old, w_new) in enumerate(self.coefficients()):
+            modes[k] *= decay
+            modes[k] += w_old * source_old + w_new * source_new
+        return modes

@@ -1,0 +1,244 @@
+"""One SD realisation: Brownian hard spheres in a sheared periodic box, stepped in time.
+
+Overdamped Stokesian dynamics in configuration space (seed 000 eqs. 13, 32; Ito):
+
+    dx = [U_inf(x) + R_FU^-1 (F_P + R_FE e_inf) + kT div R_FU^-1] dt
+         + sqrt(2 kT dt) R_FU^-1/2 dW,
+
+integrated with Fixman's midpoint scheme as used for SD by Banchio & Brady, J. Chem.
+Phys. 118, 10323 (2003): a Brownian force F_B = sqrt(2 kT/dt) C z with R_FU = C C^T
+(Cholesky) and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt; a half step
+x* = x + (dt/2) R_FU^-1(x) F_B; then the Brownian velocity R_FU^-1(x*) F_B, whose mean
+over z is kT div R_FU^-1 to O(dt) (the drift) and whose covariance is 2 kT R_FU^-1/dt
+(fluctuation-dissipation). The same pair of evaluations gives the Brownian stresslet
+-kT div(R_SU R_FU^-1) (seed eq. 16) as -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B,
+whose mean is the divergence to O(dt). The midpoint rather than a random finite
+difference because its displacements stay bounded (a mobility times a force) for
+near-contact pairs, where an RFD divides large resistance differences by a small step.
+The mid configuration is evaluated with the pair sets of x (no pair crosses a cut-off
+between the two evaluations, so the difference is smooth) and at the same strain.
+
+Stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz, units eta_m/t_D = kT/(6 pi a^3)):
+hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf; Brownian
+(1/V) sum S_B; interparticle -(1/V) sum (x F_P + R_SU R_FU^-1 F_P). Maxwell media filter
+S_H by their modes (`media`). Units: a = 1, eta_m = 1, D0 = kT/(6 pi eta_m a) = 1, so
+kT = 6 pi and time is in t_D = a^2/D0; non-Brownian runs use the same code with kT = 0.
+
+Hard spheres: lubrication keeps overlaps rare; those produced by a finite step are
+counted and removed by the potential-free correction of `forces.remove_overlaps` before
+the step's hydrodynamics (seed 000 sec. III, Bossis & Brady 1984). An optional pair
+repulsion (`forces.Repulsion`, seed 001) adds F_P.
+"""
+
+import math
+
+import numpy as np
+
+from ..hydro.basis import from_five, to_five
+from ..hydro.geometry import Lattice
+from ..hydro.resistance import grand_resistance
+from ..hydro.solvers import make_solver
+from .forces import pair_forces, remove_overlaps
+from .initial import hard_sphere_fluid
+from .media import MaxwellFilter
+from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
+
+#: kT in sdmpi's reduced units (a = 1, eta_m = 1, D0 = 1)
+KT_REDUCED = 6 * math.pi
+#: stress component order of the 6-vectors
+COMPONENTS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def bulk_stress(tensors, volume):
+    """(1/V) sum of (N, 5) 5-basis tensors, as a 6-vector xx yy zz xy xz yz."""
+    total = from_five(tensors.sum(axis=0))
+    return np.array([total[a, b] for a, b in COMPONENTS]) / volume
+
+
+def symmetric_six(matrix):
+    """The symmetric part of a 3x3 matrix as a 6-vector xx yy zz xy xz yz."""
+    sym = 0.5 * (matrix + matrix.T)
+    return np.array([sym[a, b] for a, b in COMPONENTS])
+
+
+def protocol_of(job, task):
+    """The shear protocol of a task."""
+    if job.shear.protocol == "oscillatory":
+        return Oscillatory(job.shear.gamma0, task.omega)
+    if job.shear.protocol == "steady":
+        return Steady(job.shear.rate)
+    return NoShear()
+
+
+class Realisation:
+    """One task's SD realisation, a deterministic function of (job, task): its random
+    stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
+    (taken at the start of the step, t_k = k dt); exposes its full state."""
+
+    def __init__(self, job, task, force_law=None):
+        self.job, self.task = job, task
+        self.force_law = force_law
+        seq = np.random.SeedSequence(job.job.seed, spawn_key=(task.task_id,))
+        self.rng = np.random.Generator(np.random.PCG64(seq))
+        n = job.system.n_particles
+        self.protocol = protocol_of(job, task)
+        pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0))
+        self.n_particles = n
+        self.radii = np.ones(n)
+        self.box = np.full(3, side)
+        self.volume = float(np.prod(self.box))
+        self.positions = Lattice(self.box, self.protocol.strain(0.0)).wrap(pos)
+        self.kT = KT_REDUCED if job.brownian.enabled else 0.0
+        self.dt = task.dt
+        self.n_steps = task.n_steps
+        self.step = 0
+        hyd = job.hydrodynamics
+        self._hydro = dict(lubrication=hyd.lubrication, ewald_tol=hyd.ewald_tolerance,
+                           cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)
+        self.maxwell = None
+        if job.medium.kind == "maxwell":
+            modes = job.medium.modes
+            self.maxwell = MaxwellFilter(tuple(m.eta for m in modes), tuple(m.lam for m in modes), self.dt)
+            self.modes = np.zeros((len(modes), n, 5))
+            self.source_prev = np.zeros((n, 5))
+
+    # ------------------------------------------------------------------ interface
+
+    def sample_fields(self):
+        """name -> (shape per sample, dtype, unit, description) of the sample stream."""
+        su = "eta_m/t_D" if self.job.time_unit == "t_D" else "eta_m gamma_dot"
+        fields = {
+            "time": ((), "f8", self.job.time_unit, "t_k = k dt"),
+            "strain": ((), "f8", "1", "gamma(t_k)"),
+            "rate": ((), "f8", "1/" + self.job.time_unit, "gamma_dot(t_k)"),
+            "stress_hydrodynamic": ((6,), "f8", su, "(1/V) sum S_H, viscous medium"),
+            "stress_brownian": ((6,), "f8", su, "-(kT/V) sum div(R_SU R_FU^-1)"),
+            "stress_interparticle": ((6,), "f8", su, "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
+            "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
+            "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
+        }
+        if self.maxwell is not None:
+            fields["stress_hydrodynamic_maxwell"] = ((6,), "f8", su, "hydrodynamic stress filtered by the Maxwell modes")
+        if self.job.output.per_particle:
+            fields["stresslets"] = ((self.n_particles, 5), "f8", "eta_m a^3/t_D", "S_H in the 5-basis")
+        return fields
+
+    def state_fields(self):
+        """name -> (shape, dtype) of the state (fixed for the realisation)."""
+        n = self.n_particles
+        fields = {"positions": ((n, 3), "f8"), "step": ((1,), "i8"), "rng": ((6,), "u8")}
+        if self.maxwell is not None:
+            fields["modes"] = (self.modes.shape, "f8")
+            fields["source_prev"] = ((n, 5), "f8")
+        return fields
+
+    def get_state(self):
+        """The full state as arrays (see state_fields)."""
+        state = {"positions": self.positions.copy(), "step": np.array([self.step], dtype=np.int64),
+                 "rng": _encode_rng(self.rng)}
+        if self.maxwell is not None:
+            state["modes"] = self.modes.copy()
+            state["source_prev"] = self.source_prev.copy()
+        return state
+
+    def set_state(self, state):
+        """Restore a state from get_state()."""
+        self.positions = np.array(state["positions"], dtype=float)
+        self.step = int(state["step"][0])
+        _decode_rng(self.rng, state["rng"])
+        if self.maxwell is not None:
+            self.modes = np.array(state["modes"], dtype=float)
+            self.source_prev = np.array(state["source_prev"], dtype=float)
+
+    def advance(self, n):
+        """The next n samples (dict of arrays with leading axis n); steps n times."""
+        n = min(n, self.n_steps - self.step)
+        fields = self.sample_fields()
+        out = {k: np.empty((n, *shape), dtype=dt) for k, (shape, dt, _, _) in fields.items()}
+        for s in range(n):
+            for key, value in self._one_step().items():
+                out[key][s] = value
+        return out
+
+    # ------------------------------------------------------------------ physics
+
+    def _resistance(self, positions, strain, plan=None):
+        return grand_resistance(positions, self.radii, self.box, strain, plan=plan, **self._hydro)
+
+    def _one_step(self):
+        k = self.step
+        t0, t1 = k * self.dt, (k + 1) * self.dt
+        strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
+        res = self._resistance(self.positions, strain)
+        n_overlaps, min_gap = int(np.sum(res.pairs.gap < 0)), res.pairs.min_gap
+        if n_overlaps:
+            fixed = remove_overlaps(res.positions, self.radii, res.pairs, self._hydro["min_gap"])
+            res = self._resistance(fixed, strain)
+        pos = res.positions
+        n = self.n_particles
+        solver = make_solver(self.job.solver.backend, res)
+        e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
+
+        u_flow = solver.velocities(np.zeros((n, 6)), e5)
+        s_h = solver.stresslets(u_flow, e5)
+        velocity = u_flow
+        forces, virial = pair_forces(self.force_law, res.pairs, n)
+        stress_p = np.zeros(6)
+        if self.force_law is not None:
+            f6 = np.hstack([forces, np.zeros((n, 3))])
+            u_force = solver.velocities(f6, np.zeros((n, 5)))
+            velocity = velocity + u_force
+            stress_p = bulk_stress(solver.stresslets(u_force, np.zeros((n, 5))), self.volume) \
+                - symmetric_six(virial) / self.volume
+        stress_b = np.zeros(6)
+        if self.kT > 0:
+            u_b, s_b = self._brownian(res, solver, strain)
+            velocity = velocity + u_b
+            stress_b = bulk_stress(s_b, self.volume)
+
+        sample = {"time": t0, "strain": strain, "rate": rate,
+                  "stress_hydrodynamic": bulk_stress(s_h, self.volume),
+                  "stress_brownian": stress_b, "stress_interparticle": stress_p,
+                  "n_overlaps": n_overlaps, "min_gap": min_gap}
+        if self.maxwell is not None:
+            if k > 0:
+                self.maxwell.update(self.modes, self.source_prev, s_h)
+            self.source_prev = s_h.copy()
+            sample["stress_hydrodynamic_maxwell"] = bulk_stress(self.modes.sum(axis=0), self.volume)
+        if self.job.output.per_particle:
+            sample["stresslets"] = s_h
+
+        strain1 = self.protocol.strain(t1)
+        new = pos + self.dt * velocity[:, :3] + affine_displacement(pos, strain, strain1)
+        self.positions = Lattice(self.box, strain1).wrap(new)
+        self.step += 1
+        return sample
+
+    def _brownian(self, res, solver, strain):
+        """Fixman midpoint (see module docstring): the Brownian velocities R_FU^-1(x*) F_B
+        (N, 6) and the Brownian stresslets (N, 5)."""
+        n = self.n_particles
+        zero = np.zeros((n, 5))
+        force = math.sqrt(2 * self.kT / self.dt) * solver.brownian_forces(self.rng.standard_normal((n, 6)))
+        u_start = solver.velocities(force, zero)
+        mid = self._resistance(res.positions + 0.5 * self.dt * u_start[:, :3], strain, plan=res.plan)
+        solver_mid = make_solver(self.job.solver.backend, mid)
+        u_mid = solver_mid.velocities(force, zero)
+        stresslets = solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
+        return u_mid, stresslets
+
+
+def _encode_rng(rng):
+    """PCG64 state -> 6 uint64: state (hi, lo), inc (hi, lo), has_uint32, uinteger."""
+    st = rng.bit_generator.state
+    mask = (1 << 64) - 1
+    s, inc = st["state"]["state"], st["state"]["inc"]
+    return np.array([s >> 64, s & mask, inc >> 64, inc & mask, st["has_uint32"], st["uinteger"]],
+                    dtype=np.uint64)
+
+
+def _decode_rng(rng, arr):
+    arr = [int(x) for x in arr]
+    rng.bit_generator.state = {"bit_generator": "PCG64",
+                               "state": {"state": (arr[0] << 64) | arr[1], "inc": (arr[2] << 64) | arr[3]},
+                               "has_uint32": arr[4], "uinteger": arr[5]}
