@@ -149,7 +149,7 @@ class System:
     of side L = (4 pi N / (3 phi))^(1/3); one task group per volume fraction."""
 
     n_particles: int = key(27, "int", "number of spheres N per realisation",
-                           allowed=Range(2, None))
+                           allowed=Range(1, None))
     phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions, one task group each",
                                  allowed=Range(0.0, 0.64, lo_open=True, hi_open=True))
     box: str = key("cubic", "str", "box shape", allowed=Choice(("cubic",)))

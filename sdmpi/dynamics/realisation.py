@@ -215,17 +215,25 @@ class Realisation:
         return sample
 
     def _brownian(self, res, solver, strain):
-        """Fixman midpoint (see module docstring): the Brownian velocities R_FU^-1(x*) F_B
-        (N, 6) and the Brownian stresslets (N, 5)."""
-        n = self.n_particles
-        zero = np.zeros((n, 5))
-        force = math.sqrt(2 * self.kT / self.dt) * solver.brownian_forces(self.rng.standard_normal((n, 6)))
-        u_start = solver.velocities(force, zero)
-        mid = self._resistance(res.positions + 0.5 * self.dt * u_start[:, :3], strain, plan=res.plan)
-        solver_mid = make_solver(self.job.solver.backend, mid)
-        u_mid = solver_mid.velocities(force, zero)
-        stresslets = solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
-        return u_mid, stresslets
+        """Brownian velocities and stresslets of this step (see `midpoint_brownian`)."""
+        z = self.rng.standard_normal((self.n_particles, 6))
+        return midpoint_brownian(res, solver, z, self.kT, self.dt,
+                                 lambda pos, plan: self._resistance(pos, strain, plan=plan),
+                                 self.job.solver.backend)
+
+
+def midpoint_brownian(res, solver, z, kT, dt, resistance_at, backend="dense"):
+    """Fixman midpoint step (module docstring) for the noise z (N, 6): returns the
+    Brownian velocities R_FU^-1(x*) F_B (N, 6), whose mean is kT div R_FU^-1, and the
+    Brownian stresslets (N, 5), whose mean is -kT div(R_SU R_FU^-1); F_B = sqrt(2 kT/dt) C z.
+    resistance_at(positions, plan) assembles R at the mid configuration."""
+    zero = np.zeros((len(z), 5))
+    force = math.sqrt(2 * kT / dt) * solver.brownian_forces(z)
+    u_start = solver.velocities(force, zero)
+    mid = resistance_at(res.positions + 0.5 * dt * u_start[:, :3], res.plan)
+    solver_mid = make_solver(backend, mid)
+    u_mid = solver_mid.velocities(force, zero)
+    return u_mid, solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
 
 
 def _encode_rng(rng):
