@@ -136,7 +136,7 @@ def test_schema_text_documents_every_key():
     ('name = "x"\n', ["name", "job.name"]),
     # wrong types
     ("[system]\nn_particles = 8.0\n", ["system.n_particles = 8.0", "expected an integer",
-                                       "write 8", "n_particles >= 2"]),
+                                       "write 8", "n_particles >= 1"]),
     ("[ensemble]\nrealisations = true\n", ["ensemble.realisations = true",
                                            "got a boolean", "realisations >= 1"]),
     ('[shear]\ngamma0 = "0.02"\n', ["shear.gamma0", "expected a number", "0 < gamma0 <= 1"]),
@@ -203,7 +203,7 @@ def test_every_problem_is_reported_at_once():
 [job]
 seed = 1.5
 [system]
-n_particles = 1
+n_particles = 0
 phi = [0.9]
 color = "red"
 [medium]

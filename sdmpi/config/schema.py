@@ -131,6 +131,7 @@ OSCILLATORY = ("shear", "protocol", ("oscillatory",))
 STEADY = ("shear", "protocol", ("steady",))
 STEADY_OR_NONE = ("shear", "protocol", ("steady", "none"))
 MAXWELL = ("medium", "kind", ("maxwell",))
+REPULSION = ("interparticle", "kind", ("repulsion",))
 
 
 @dataclass(frozen=True)
@@ -237,6 +238,25 @@ class Integration:
 
 
 @dataclass(frozen=True)
+class Interparticle:
+    """[interparticle]: forces between sphere surfaces besides hydrodynamics.
+
+    none: hard spheres (lubrication, plus the potential-free overlap correction);
+    repulsion: F(h) = f0 tau exp(-tau h)/(1 + exp(-tau h)) along the line of centres
+    (seed 001), with h the surface gap; forces in kT/a (Brownian) or
+    6 pi eta_m a^2 gamma_dot (non-Brownian)."""
+
+    kind: str = key("none", "str", "interparticle force", allowed=Choice(("none", "repulsion")),
+                    controls="interparticle.kind")
+    f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2)",
+                           unit="force unit x a", allowed=Range(0.0, None, lo_open=True),
+                           only_if=REPULSION, example=1.0)
+    tau: float | None = key(None, "float", "inverse range tau of the repulsion; 1/tau must "
+                            "be below the lubrication cut-off / 12", unit="1/a",
+                            allowed=Range(0.0, None, lo_open=True), only_if=REPULSION, example=1000.0)
+
+
+@dataclass(frozen=True)
 class Ensemble:
     """[ensemble]: independent realisations and how many MPI ranks share one task."""
 
@@ -291,6 +311,7 @@ class Job:
     shear: Shear = field(default_factory=Shear)
     brownian: Brownian = field(default_factory=Brownian)
     integration: Integration = field(default_factory=Integration)
+    interparticle: Interparticle = field(default_factory=Interparticle)
     ensemble: Ensemble = field(default_factory=Ensemble)
     solver: Solver = field(default_factory=Solver)
     hydrodynamics: Hydrodynamics = field(default_factory=Hydrodynamics)

@@ -43,17 +43,16 @@ def pair_forces(force_law, pairs, n):
     virial = np.zeros((3, 3))
     if force_law is None or len(pairs.i) == 0:
         return forces, virial
-    dist = np.linalg.norm(pairs.dx, axis=1)
-    unit = pairs.dx / dist[:, None]
+    unit = pairs.dx / np.linalg.norm(pairs.dx, axis=1)[:, None]
     f_on_j = force_law.magnitude(pairs.gap)[:, None] * unit
     np.add.at(forces, pairs.j, f_on_j)
     np.add.at(forces, pairs.i, -f_on_j)
-    # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j
-    virial = pairs.dx.T @ f_on_j
+    # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j (true separations)
+    virial = (pairs.distance[:, None] * unit).T @ f_on_j
     return forces, virial
 
 
-def remove_overlaps(positions, radii, pairs, min_gap, sweeps=10):
+def remove_overlaps(positions, radii, pairs, min_gap, sweeps=100):
     """Potential-free overlap correction (Bossis & Brady 1984; Heyes & Melrose 1993):
     each overlapping pair of the list is moved apart symmetrically along its line of
     centres to a gap of min_gap mean radii. Repeated (up to `sweeps` times) while a

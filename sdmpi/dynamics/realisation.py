@@ -38,7 +38,7 @@ from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
 from ..hydro.resistance import grand_resistance
 from ..hydro.solvers import make_solver
-from .forces import pair_forces, remove_overlaps
+from .forces import Repulsion, pair_forces, remove_overlaps
 from .initial import hard_sphere_fluid
 from .media import MaxwellFilter
 from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
@@ -75,9 +75,10 @@ class Realisation:
     stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
     (taken at the start of the step, t_k = k dt); exposes its full state."""
 
-    def __init__(self, job, task, force_law=None):
+    def __init__(self, job, task):
         self.job, self.task = job, task
-        self.force_law = force_law
+        inter = job.interparticle
+        self.force_law = Repulsion(inter.f0, inter.tau) if inter.kind == "repulsion" else None
         seq = np.random.SeedSequence(job.job.seed, spawn_key=(task.task_id,))
         self.rng = np.random.Generator(np.random.PCG64(seq))
         n = job.system.n_particles

@@ -42,6 +42,12 @@ class PairList:
     shift: np.ndarray  # lattice translation of j's image
     gap: np.ndarray
     n_regularised: int
+    radii_sum: np.ndarray
+
+    @property
+    def distance(self):
+        """True centre distances (before regularisation)."""
+        return self.gap + self.radii_sum
 
     @property
     def min_gap(self):
@@ -59,14 +65,14 @@ def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=D
     i, j, shift = images
     dx = positions[j] + shift - positions[i]
     if len(i) == 0:
-        return PairList(i, j, dx, shift, np.zeros(0), 0)
+        return PairList(i, j, dx, shift, np.zeros(0), 0, np.zeros(0))
     r = np.linalg.norm(dx, axis=1)
     asum = radii[i] + radii[j]
     gap = r - asum
     floor = 0.5 * min_gap * asum
     short = gap < floor
     dx[short] *= ((asum[short] + floor[short]) / r[short])[:, None]
-    return PairList(i, j, dx, shift, gap, int(short.sum()))
+    return PairList(i, j, dx, shift, gap, int(short.sum()), asum)
 
 
 @numba.njit(cache=True)
