@@ -357,7 +357,18 @@ def test_canonical_text_ignores_layout_comments_and_order():
     assert len(job_hash(a)) == 64
 
 
-def test_hash_changes_with_any_value():
+@pytest.fixture
+def all_backends(monkeypatch):
+    """Hashing does not depend on which backends this version implements."""
+    monkeypatch.setattr("sdmpi.config.loader.IMPLEMENTED_BACKENDS", ("dense", "petsc-dense", "petsc-krylov"))
+
+
+def test_unimplemented_backend_is_refused():
+    with pytest.raises(JobError, match="solver.backend.*not implemented"):
+        parse_job('[solver]\nbackend = "petsc-krylov"\n')
+
+
+def test_hash_changes_with_any_value(all_backends):
     base = parse_job("")
     for override in ["job.seed=1", "shear.gamma0=0.03", "solver.backend=\"petsc-dense\"",
                      "ensemble.ranks_per_task=2", "output.checkpoint_every=7"]:
@@ -366,7 +377,7 @@ def test_hash_changes_with_any_value():
         assert job_hash(other) != job_hash(base), override
 
 
-def test_resume_hash_ignores_only_layout_keys():
+def test_resume_hash_ignores_only_layout_keys(all_backends):
     assert LAYOUT_KEYS == {"ensemble.ranks_per_task", "output.checkpoint_every"}
     base = parse_job('[solver]\nbackend = "petsc-dense"\n')
     layout = parse_job('[solver]\nbackend = "petsc-dense"\n',
@@ -438,3 +449,13 @@ def test_cli_subprocess_exit_code_and_writes_nothing(tmp_path, content, code):
     assert result.returncode == code, result.stderr
     assert (result.stdout if code == 0 else result.stderr).strip()
     assert _tree(tmp_path) == before
+
+
+def test_initial_configuration_and_repulsion_range_checked():
+    with pytest.raises(JobError) as err:
+        parse_job("[system]\nn_particles = 30\nphi = [0.3, 0.55]\n")
+    text = str(err.value)
+    assert "system.n_particles = 30" in text and "perfect cube" in text and "27" in text
+    assert "system.phi[1] = 0.55" in text and "0.5236" in text
+    with pytest.raises(JobError, match=r"interparticle.tau = 5.*tau >= 13.8"):
+        parse_job('[interparticle]\nkind = "repulsion"\nf0 = 1.0\ntau = 5.0\n')

@@ -451,6 +451,43 @@ def _time_step(job):
     return problems
 
 
+def _initial_configuration(job):
+    """The hard-sphere generator starts from a simple cubic lattice (sdmpi.dynamics.initial)."""
+    n = job.system.n_particles
+    problems = []
+    if round(n ** (1 / 3)) ** 3 != n:
+        cubes = ", ".join(str(m ** 3) for m in range(1, 8))
+        problems.append(Problem("system.n_particles", "the initial configuration starts from a "
+                                "simple cubic lattice, so N must be a perfect cube", n,
+                                allowed=f"a cube: {cubes}, ..."))
+    for k, phi in enumerate(job.system.phi):
+        if phi >= math.pi / 6:
+            problems.append(Problem(f"system.phi[{k}]", "a simple cubic lattice start holds at "
+                                    "most pi/6", phi, allowed="0 < phi < 0.5236"))
+    return problems
+
+
+def _repulsion_range(job):
+    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
+    if inter.kind == "repulsion" and 12 * math.log(10) / inter.tau > cutoff:
+        need = 12 * math.log(10) / cutoff
+        return [Problem("interparticle.tau", "the repulsion must decay (to 1e-12) within the "
+                        f"lubrication cut-off (= {cutoff:g}), whose pairs it acts on", inter.tau,
+                        allowed=f"tau >= {need:.4g}, or a larger hydrodynamics.lubrication_cutoff")]
+    return []
+
+
+#: backends implemented in this version (the others are named by the job schema)
+IMPLEMENTED_BACKENDS = ("dense",)
+
+
+def _backend(job):
+    if job.solver.backend not in IMPLEMENTED_BACKENDS:
+        return [Problem("solver.backend", "is not implemented yet in this version",
+                        job.solver.backend, allowed=", ".join(f'"{b}"' for b in IMPLEMENTED_BACKENDS))]
+    return []
+
+
 _INTEGRATION = tuple(f"integration.{f.name}" for f in dataclasses.fields(Job().integration))
 
 # (keys a check reads, check): skipped when one of those keys failed its own checks.
@@ -464,4 +501,7 @@ CROSS_CHECKS = (
     (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),
     (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes")
      + _INTEGRATION, _time_step),
+    (("system.n_particles", "system.phi"), _initial_configuration),
+    (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
+    (("solver.backend",), _backend),
 )
