@@ -36,7 +36,7 @@ def one_solve(pos, side, timings):
     rmat = resistance.spd_inverse(mob)
     t3 = time.perf_counter()
     pairs = lubrication.close_pairs(pos, radii, lattice)
-    rmat += lubrication.lubrication_matrix(pos, radii, pairs)
+    lubrication.lubrication_matrix(pos, radii, pairs, out=rmat)
     t4 = time.perf_counter()
     solver = solvers.DenseSolver(resistance.GrandResistance(rmat, pairs, None, pos))
     e5 = np.broadcast_to(to_five(np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])), (n, 5))

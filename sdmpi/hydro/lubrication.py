@@ -12,8 +12,35 @@ beyond it. Gap regularisation: a pair closer than a_i + a_j + min_gap (a_i + a_j
 (touching or overlapping) is evaluated at that minimum gap (default epsilon = 1e-4 of
 the mean radius, as in seed 001's minimum-separation rule), so R stays finite and
 positive definite; such pairs are counted.
+
+Evaluation (tabulated, `lubrication_matrix`). R_2B and R_2B,inf are both invariant
+under rotations about, and reflections in planes containing, the line of centres d, and
+so is their difference: R_2B - R_2B,inf has exactly the tensor form of `two_sphere` (11
+scalar functions of the scaled separation s for each of the 4 particle blocks, times the
+tensors of d), with 44 scalars D(s; lam) in the Jeffrey-Onishi normalisation (scale
+invariant). Per distinct size ratio lam = a_small/a_big (<= 1; a pair is ordered small
+sphere second, i.e. its particles swapped and dx negated when a1 > a2) they are computed
+once by the exact path (pair_resistance minus the inverted 22x22 far-field pair mobility)
+at d = e_z and projected onto the 44 tensor patterns of `two_sphere._fill_pair_work`,
+on the uniform grid u_k = k h, h = 1/64, of u = log(xi), xi = s - 2, as
+xi/(1 + xi) D (the factor removes the 1/xi lubrication singularity; the log terms become
+smooth in u). Lookup: 8-point Lagrange interpolation in u. The table covers
+xi in [5e-5, 12] when built (gap cut-off up to 10 mean radii) and is extended on the same
+grid when a pair needs more (old rows unchanged, results deterministic). Interpolation
+error (measured, tests/test_lubrication_fast.py): < ~1e-9 of the largest entry of the
+pair's 22x22 correction for xi in [1e-4, 10] and lam in [1/8, 8]; at xi ~ 10 this is the
+round-off floor of the exact path itself (D ~ 1e-5 of R_2B there).
+The exact path is kept (`lubrication_matrix_exact`, `pair_corrections_exact`) and is
+used for pairs whose lam has no table: a table (~1000 exact evaluations, ~15 ms) is built
+for a lam only when a call has >= _MIN_PAIRS_FOR_TABLE pairs with it, and at most
+_MAX_TABLES tables are kept (continuous polydispersity then stays on the exact path);
+also for gaps outside [_XI_TABLE_MIN, _XI_TABLE_MAX]. The choice depends only on the
+pair set and on tables already built (never evicted), so displaced configurations with
+the same plan (random finite differences) use the same path.
 """
 
+import math
+import threading
 from dataclasses import dataclass
 
 import numba
@@ -22,7 +49,7 @@ import numpy as np
 from .basis import BASIS
 from .farfield import _LEVI, NDOF, _pair_block, _power_bounds, radial_table, self_mobility
 from .geometry import find_pairs
-from .two_sphere import pair_resistance
+from .two_sphere import _basis5, _fill_pair_work, pair_resistance
 
 #: default lubrication cut-off: gap in units of the pair's mean radius
 DEFAULT_CUTOFF = 2.0
@@ -96,21 +123,286 @@ def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, levi, res):
         res[p] -= np.linalg.inv(mob)
 
 
-def lubrication_matrix(positions, radii, pairs):
-    """The (11N, 11N) near-field correction: the sum over the close pairs (a PairList
-    from `close_pairs`) of R_2B - R_2B,inf."""
+def pair_corrections_exact(dx, a1, a2):
+    """R_2B - R_2B,inf per pair, shape (npairs, 22, 22), by the exact path:
+    `two_sphere.pair_resistance` minus the inverse of the 22x22 unbounded far-field pair
+    mobility. dx = x2 - x1 (npairs, 3), radii a1, a2 (npairs,)."""
+    dx = np.ascontiguousarray(dx, dtype=float).reshape(-1, 3)
+    a1 = np.broadcast_to(np.asarray(a1, dtype=float), (dx.shape[0],)).copy()
+    a2 = np.broadcast_to(np.asarray(a2, dtype=float), (dx.shape[0],)).copy()
+    if dx.shape[0] == 0:
+        return np.zeros((0, 2 * NDOF, 2 * NDOF))
+    res = pair_resistance(dx, a1, a2)
+    selfs = {a: self_mobility(a) for a in np.unique(np.concatenate([a1, a2]))}
+    self1 = np.stack([selfs[a] for a in a1])
+    self2 = np.stack([selfs[a] for a in a2])
+    _subtract_far_field(dx, a1, a2, self1, self2, _RADIAL_TABLE, BASIS, _LEVI, res)
+    return res
+
+
+def lubrication_matrix_exact(positions, radii, pairs):
+    """`lubrication_matrix` by the exact path for every pair (reference; ~14 us/pair)."""
     n = positions.shape[0]
     out = np.zeros((NDOF * n, NDOF * n))
     if len(pairs.i) == 0:
         return out
-    a1, a2 = radii[pairs.i], radii[pairs.j]
-    res = pair_resistance(pairs.dx, a1, a2)
-    selfs = {a: self_mobility(a) for a in np.unique(radii)}
-    self1 = np.stack([selfs[a] for a in a1])
-    self2 = np.stack([selfs[a] for a in a2])
-    _subtract_far_field(pairs.dx, a1, a2, self1, self2, radial_table(0.0), BASIS, _LEVI, res)
+    res = pair_corrections_exact(pairs.dx, radii[pairs.i], radii[pairs.j])
     _scatter_pairs(pairs.i, pairs.j, res, out)
     return out
+
+
+def lubrication_matrix(positions, radii, pairs, out=None):
+    """The (11N, 11N) near-field correction: the sum over the close pairs (a PairList
+    from `close_pairs`) of R_2B - R_2B,inf (tabulated, module docstring). With out (an
+    (11N, 11N) float64 C-contiguous array, e.g. the inverted far field), the correction
+    is added into it in place and out is returned (no (11N)^2 temporary)."""
+    n = positions.shape[0]
+    if out is None:
+        out = np.zeros((NDOF * n, NDOF * n))
+    elif out.shape != (NDOF * n, NDOF * n) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ValueError("lubrication_matrix: out must be a C-contiguous float64 (11N, 11N) array")
+    if len(pairs.i) == 0:
+        return out
+    radii = np.asarray(radii, dtype=float)
+    pi0, pj0 = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
+    dx0 = np.ascontiguousarray(pairs.dx, dtype=float)
+    a10, a20 = radii[pi0], radii[pj0]
+    # order every pair big sphere first (lam = a2/a1 <= 1): one table per unordered lam
+    swap = a10 < a20
+    if swap.any():
+        pi, pj = np.where(swap, pj0, pi0), np.where(swap, pi0, pj0)
+        a1, a2 = np.where(swap, a20, a10), np.where(swap, a10, a20)
+        dx = np.ascontiguousarray(np.where(swap[:, None], -dx0, dx0))
+    else:
+        pi, pj, a1, a2, dx = pi0, pj0, a10, a20, dx0
+    asum = a1 + a2
+    xi = 2.0 * (np.sqrt(np.einsum("ij,ij->i", dx, dx)) - asum) / asum
+    lam = a2 / a1
+    tab, tables = _STORE.lookup(lam, xi)
+    fast = tab >= 0
+    if fast.any():
+        if fast.all():
+            sel = slice(None)
+        else:
+            sel = np.flatnonzero(fast)
+        _tabulated_kernel(dx[sel], a1[sel], a2[sel], pi[sel], pj[sel], tab[sel], *tables, out)
+    if not fast.all():
+        slow = np.flatnonzero(~fast)  # as given (not reordered): same as lubrication_matrix_exact
+        res = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+        _scatter_pairs(pi0[slow], pj0[slow], res, out)
+    return out
+
+
+def pair_corrections(dx, a1, a2):
+    """R_2B - R_2B,inf per pair, (npairs, 22, 22), by the tabulated path where
+    `lubrication_matrix` would use it (else exact): for tests and diagnostics."""
+    dx = np.ascontiguousarray(dx, dtype=float).reshape(-1, 3)
+    npairs = dx.shape[0]
+    a1 = np.broadcast_to(np.asarray(a1, dtype=float), (npairs,))
+    a2 = np.broadcast_to(np.asarray(a2, dtype=float), (npairs,))
+    radii = np.concatenate([a1, a2])
+    idx = np.arange(npairs)
+    pairs = PairList(idx, idx + npairs, dx.copy(), np.zeros((npairs, 3)), np.zeros(npairs), 0, a1 + a2)
+    # each pair on its own two particles: read the four 11x11 blocks back
+    big = lubrication_matrix(np.zeros((2 * npairs, 3)), radii, pairs)
+    out = np.empty((npairs, 2 * NDOF, 2 * NDOF))
+    for u, pu in enumerate((idx, idx + npairs)):
+        for v, pv in enumerate((idx, idx + npairs)):
+            rows = (NDOF * pu)[:, None] + np.arange(NDOF)[None, :]
+            cols = (NDOF * pv)[:, None] + np.arange(NDOF)[None, :]
+            out[:, NDOF * u:NDOF * (u + 1), NDOF * v:NDOF * (v + 1)] = big[rows[:, :, None], cols[:, None, :]]
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# tabulated R_2B - R_2B,inf
+
+_RADIAL_TABLE = radial_table(0.0)
+#: grid step in u = log(xi) and number of Lagrange points (even)
+_TAB_H = 1.0 / 64.0
+_TAB_NPT = 8
+#: xi range built at first (covers min_gap 1e-4 .. cut-off 10 with margin)
+_XI_TABLE_INIT = (5e-5, 12.0)
+#: gaps outside this range always take the exact path
+_XI_TABLE_MIN, _XI_TABLE_MAX = 1e-9, 1e4
+#: a lam gets a table when a call has at least this many pairs with it ...
+_MIN_PAIRS_FOR_TABLE = 16
+#: ... and fewer than this many tables exist (never evicted)
+_MAX_TABLES = 64
+
+
+def _lagrange_denominators(npt):
+    nodes = np.arange(npt) - (npt // 2 - 1)
+    return np.array([np.prod([m - l for l in nodes if l != m]) for m in nodes], dtype=float)
+
+
+_TAB_DENOM = _lagrange_denominators(_TAB_NPT)
+
+
+def _tensor_patterns(lam):
+    """(44, 484): the 22x22 matrix of `_fill_pair_work` at d = e_z, a1 = 1, a2 = lam for
+    each unit scalar (block b, function f) -> row 11 b + f."""
+    bm = _basis5()
+    d = np.array([0.0, 0.0, 1.0])
+    pat = np.zeros((4 * NDOF, 2 * NDOF, 2 * NDOF))
+    work = np.empty((8, 5, 5))
+    for k in range(4 * NDOF):
+        sc = np.zeros((4, NDOF))
+        sc.flat[k] = 1.0
+        _fill_pair_work(d, 1.0, lam, sc, bm, pat[k], work)
+    return pat.reshape(4 * NDOF, -1)
+
+
+def canonical_scalars(xi, lam):
+    """The 44 scalars (npts, 4, 11) of R_2B - R_2B,inf (JO normalisation, `two_sphere`
+    layout) at scaled gaps xi and size ratio lam, from the exact path at d = e_z, and the
+    largest deviation of that matrix from the tensor form relative to its largest entry
+    (round-off: the projection is exact for an invariant matrix)."""
+    xi = np.atleast_1d(np.asarray(xi, dtype=float))
+    n = xi.shape[0]
+    dx = np.zeros((n, 3))
+    dx[:, 2] = 0.5 * (1.0 + lam) * (2.0 + xi)
+    res = pair_corrections_exact(dx, np.ones(n), np.full(n, float(lam))).reshape(n, -1)
+    pat = _tensor_patterns(float(lam))
+    # the patterns have disjoint supports: the projection is a weighted sum
+    coef = (res @ pat.T) / np.einsum("kq,kq->k", pat, pat)[None, :]
+    dev = np.abs(res - coef @ pat).max(axis=1) / np.maximum(np.abs(res).max(axis=1), 1e-300)
+    return coef.reshape(n, 4, NDOF), float(dev.max())
+
+
+class _Tables:
+    """All tables in one array (numba-friendly): rows offset[t] .. offset[t] + n_rows[t]
+    of data (rows, 44) hold xi/(1 + xi) D at u = (k_lo[t] + row) h for table t."""
+
+    def __init__(self):
+        self.lams = []
+        self.blocks = []  # (k_lo, rows (nk, 44))
+        self._pack()
+
+    def _pack(self):
+        nt = len(self.blocks)
+        self.k_lo = np.array([b[0] for b in self.blocks], dtype=np.int64)
+        self.n_rows = np.array([b[1].shape[0] for b in self.blocks], dtype=np.int64)
+        self.offset = np.concatenate([[0], np.cumsum(self.n_rows)])[:nt].astype(np.int64)
+        self.data = (np.ascontiguousarray(np.concatenate([b[1] for b in self.blocks]))
+                     if nt else np.zeros((1, 4 * NDOF)))
+
+    @staticmethod
+    def _rows(lam, k0, k1):
+        u = np.arange(k0, k1) * _TAB_H
+        xi = np.exp(u)
+        coef, _ = canonical_scalars(xi, lam)
+        return coef.reshape(len(u), 4 * NDOF) * (xi / (1.0 + xi))[:, None]
+
+    def ensure(self, lam, k0, k1):
+        """Table for lam covering grid rows k0 .. k1 - 1 (built or extended)."""
+        if lam in self.lams:
+            t = self.lams.index(lam)
+            k_lo, rows = self.blocks[t]
+            k_hi = k_lo + rows.shape[0]
+            if k0 >= k_lo and k1 <= k_hi:
+                return False
+            parts = []
+            if k0 < k_lo:
+                parts.append(self._rows(lam, k0, k_lo))
+            parts.append(rows)
+            if k1 > k_hi:
+                parts.append(self._rows(lam, k_hi, k1))
+            self.blocks[t] = (min(k0, k_lo), np.concatenate(parts))
+        else:
+            lo, hi = _XI_TABLE_INIT
+            k0 = min(k0, int(math.floor(math.log(lo) / _TAB_H)))
+            k1 = max(k1, int(math.ceil(math.log(hi) / _TAB_H)) + 1)
+            self.lams.append(lam)
+            self.blocks.append((k0, self._rows(lam, k0, k1)))
+        self._pack()
+        return True
+
+
+class _TableStore:
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._tables = _Tables()
+
+    def lookup(self, lam, xi):
+        """Per pair the table index (-1: exact path), building/extending tables as
+        needed, and a consistent snapshot (data, offset, k_lo, n_rows) of the tables."""
+        tab = np.full(lam.shape[0], -1, dtype=np.int64)
+        ok = (xi >= _XI_TABLE_MIN) & (xi <= _XI_TABLE_MAX)
+        if not ok.any():
+            return tab, None
+        ulam, inv, counts = np.unique(lam[ok], return_inverse=True, return_counts=True)
+        kk = np.floor(np.log(xi[ok]) / _TAB_H).astype(np.int64)
+        half = _TAB_NPT // 2
+        with self._lock:
+            tables = self._tables
+            for il, lv in enumerate(ulam):
+                lv = float(lv)
+                if lv not in tables.lams and (counts[il] < _MIN_PAIRS_FOR_TABLE
+                                              or len(tables.lams) >= _MAX_TABLES):
+                    continue
+                ks = kk[inv == il] if len(ulam) > 1 else kk
+                # one spare row each side: the kernel recomputes k from r
+                tables.ensure(lv, int(ks.min()) - half, int(ks.max()) + half + 2)
+            index = {lv: t for t, lv in enumerate(tables.lams)}
+            per = np.array([index.get(float(lv), -1) for lv in ulam], dtype=np.int64)
+            tab[ok] = per[inv]
+            snapshot = (tables.data, tables.offset, tables.k_lo, tables.n_rows)
+        return tab, snapshot
+
+
+_STORE = _TableStore()
+
+
+@numba.njit(cache=True)
+def _tabulated_kernel(dx, a1, a2, pi, pj, tab, data, offset, k_lo, n_rows, out):
+    """Adds R_2B - R_2B,inf of every pair (interpolated scalars, `_fill_pair_work`
+    tensors) into the blocks (i,i), (i,j), (j,i), (j,j) of out."""
+    npt = _TAB_NPT
+    half = npt // 2
+    denom = _TAB_DENOM
+    inv_h = 1.0 / _TAB_H
+    bm = _basis5()
+    R = np.empty((2 * NDOF, 2 * NDOF))
+    sc = np.empty((4, NDOF))
+    w = np.empty(npt)
+    d = np.empty(3)
+    work = np.empty((8, 5, 5))
+    for p in range(dx.shape[0]):
+        r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
+        for c in range(3):
+            d[c] = dx[p, c] / r
+        asum = a1[p] + a2[p]
+        xi = 2.0 * (r - asum) / asum
+        x = math.log(xi) * inv_h
+        k = int(math.floor(x))
+        t = tab[p]
+        # clamp (never active when the table covers the pair, see _TableStore.lookup)
+        k = min(max(k, k_lo[t] + half - 1), k_lo[t] + n_rows[t] - half - 1)
+        frac = x - k
+        for m in range(npt):
+            acc = 1.0
+            for l in range(npt):
+                if l != m:
+                    acc *= frac - (l - half + 1)
+            w[m] = acc / denom[m]
+        row = offset[t] + k - k_lo[t] - half + 1
+        unscale = (1.0 + xi) / xi
+        for b in range(4):
+            for f in range(NDOF):
+                col = NDOF * b + f
+                acc = 0.0
+                for m in range(npt):
+                    acc += w[m] * data[row + m, col]
+                sc[b, f] = acc * unscale
+        _fill_pair_work(d, a1[p], a2[p], sc, bm, R, work)
+        idx = (pi[p], pj[p])
+        for uu in range(2):
+            for vv in range(2):
+                r0, c0 = NDOF * idx[uu], NDOF * idx[vv]
+                for a in range(NDOF):
+                    for b2 in range(NDOF):
+                        out[r0 + a, c0 + b2] += R[NDOF * uu + a, NDOF * vv + b2]
 
 
 @numba.njit(cache=True)

@@ -61,8 +61,7 @@ def spd_inverse(matrix):
     inv, info = lapack.dpotri(chol, lower=False, overwrite_c=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed (info {info})")
-    upper = np.triu(inv)
-    return upper + np.triu(inv, 1).T
+    return np.ascontiguousarray(np.triu(inv) + np.triu(inv, 1).T)
 
 
 def check_overlaps(pairs, radii, max_overlap):
@@ -101,5 +100,5 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     matrix = spd_inverse(far_field_mobility(pos, radii, plan=plan.far))
     if plan.near_images is not None:
-        matrix += lubrication_matrix(pos, radii, pairs)
+        lubrication_matrix(pos, radii, pairs, out=matrix)
     return GrandResistance(matrix, pairs, plan, pos)

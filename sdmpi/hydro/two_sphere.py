@@ -612,10 +612,53 @@ def _cross(a, b, out):
 @nb.njit(cache=True)
 def _fill_pair(d, a1, a2, sc, bm, R):
     """Assemble the 22x22 dimensional pair matrix from the scalars sc (4, 11)."""
+    _fill_pair_work(d, a1, a2, sc, bm, R, np.empty((8, 5, 5)))
+
+
+@nb.njit(cache=True)
+def _fill_pair_work(d, a1, a2, sc, bm, R, pat):
+    """`_fill_pair` with caller-provided scratch pat (8, 5, 5) (no allocation; shared with
+    the tabulated near-field kernel of `lubrication`). The tensors of d are formed once
+    and combined with the scalars of the four blocks. Every entry of R is written (none
+    accumulated), so R needs no zeroing between pairs."""
+    # patterns of d: pat[0][k, i] = (e_k x d)_i; G: pat[1] (XG), pat[2] (YG), H: pat[3]
+    # (YH) as [m, k] in the 5-basis; M: pat[4..6][m, n] = B^m : d^(0,1,2) : B^n
+    bv = pat[0]
+    for k in range(3):
+        k1, k2 = (k + 1) % 3, (k + 2) % 3
+        bv[k, k] = 0.0
+        bv[k, k1] = -d[k2]   # (e_k x d)_{k+1} = -d_{k+2}
+        bv[k, k2] = d[k1]    # (e_k x d)_{k+2} = d_{k+1}
+    bd = pat[7]  # bd[m, :3] = B^m d, bd[m, 3] = d.B^m.d, bd[m, 4] = tr B^m
+    for m in range(5):
+        acc = 0.0
+        for i in range(3):
+            bd[m, i] = bm[m, i, 0] * d[0] + bm[m, i, 1] * d[1] + bm[m, i, 2] * d[2]
+            acc += d[i] * bd[m, i]
+        bd[m, 3] = acc
+        bd[m, 4] = bm[m, 0, 0] + bm[m, 1, 1] + bm[m, 2, 2]
+    for m in range(5):
+        dBd = bd[m, 3]
+        for k in range(3):
+            # sum_ij B^m_ij (d_i d_j - delta_ij/3) d_k ;  sum_ij B^m_ij (d_i e_kj + d_j e_ki - 2 d_i d_j d_k)
+            pat[1, m, k] = (dBd - bd[m, 4] / 3.0) * d[k]
+            pat[2, m, k] = 2.0 * bd[m, k] - 2.0 * dBd * d[k]
+            # sum_ij B^m_ij (v_i d_j + v_j d_i), v = e_k x d
+            pat[3, m, k] = 2.0 * (bv[k, 0] * bd[m, 0] + bv[k, 1] * bd[m, 1] + bv[k, 2] * bd[m, 2])
+        for n in range(5):
+            bb = 0.0
+            for i in range(3):
+                for j in range(3):
+                    bb += bm[m, i, j] * bm[n, i, j]
+            cross = bd[m, 0] * bd[n, 0] + bd[m, 1] * bd[n, 1] + bd[m, 2] * bd[n, 2]
+            dBdn = bd[n, 3]
+            # t0 = 1.5 (d_i d_j - delta_ij/3) dBd_n
+            pat[4, m, n] = 1.5 * (dBd - bd[m, 4] / 3.0) * dBdn
+            # t1 = d_i v_j + d_j v_i - 2 d_i d_j dBd_n, v = B^n d
+            pat[5, m, n] = 2.0 * cross - 2.0 * dBd * dBdn
+            # t2 = B^n_ij + 1/2 delta_ij dBd_n - d_i v_j - d_j v_i + 1/2 d_i d_j dBd_n
+            pat[6, m, n] = bb + 0.5 * bd[m, 4] * dBdn - 2.0 * cross + 0.5 * dBd * dBdn
     rad = (a1, a2)
-    e = np.zeros(3)
-    v = np.zeros(3)
-    S = np.zeros((3, 3))
     for ia in range(2):
         for ib in range(2):
             blk = 2 * ia + ib
@@ -647,62 +690,23 @@ def _fill_pair(d, a1, a2, sc, bm, R):
                     R[r0 + 3 + i, c0 + 3 + j] = XC * dd + YC * (dl - dd)  # C
             # B^{ab}: L_a = B U_b = YB (U x d); Bt^{ba} = (B^{ab})^T
             for k in range(3):
-                e[:] = 0.0
-                e[k] = 1.0
-                _cross(e, d, v)
                 for i in range(3):
-                    R[r0 + 3 + i, c0 + k] = YB * v[i]
-                    R[c0 + k, r0 + 3 + i] = YB * v[i]
+                    val = YB * bv[k, i]
+                    R[r0 + 3 + i, c0 + k] = val
+                    R[c0 + k, r0 + 3 + i] = val
             # G^{ab}: S_a = G U_b ; H^{ab}: S_a = H Omega_b ; transposes for Gt, Ht
             for k in range(3):
-                e[:] = 0.0
-                e[k] = 1.0
-                du = d[k]
-                for i in range(3):
-                    for j in range(3):
-                        dl = 1.0 if i == j else 0.0
-                        S[i, j] = (XG * (d[i] * d[j] - dl / 3.0) * du
-                                   + YG * (d[i] * e[j] + d[j] * e[i] - 2.0 * d[i] * d[j] * du))
                 for m in range(5):
-                    val = 0.0
-                    for i in range(3):
-                        for j in range(3):
-                            val += bm[m, i, j] * S[i, j]
+                    val = XG * pat[1, m, k] + YG * pat[2, m, k]
                     R[r0 + 6 + m, c0 + k] = val
                     R[c0 + k, r0 + 6 + m] = val
-                _cross(e, d, v)
-                for i in range(3):
-                    for j in range(3):
-                        S[i, j] = YH * (v[i] * d[j] + v[j] * d[i])
-                for m in range(5):
-                    val = 0.0
-                    for i in range(3):
-                        for j in range(3):
-                            val += bm[m, i, j] * S[i, j]
+                    val = YH * pat[3, m, k]
                     R[r0 + 6 + m, c0 + 3 + k] = val
                     R[c0 + 3 + k, r0 + 6 + m] = val
             # M^{ab}: S_a = M : E_b, in the 5-basis
-            for n in range(5):
-                dBd = 0.0
-                for i in range(3):
-                    v[i] = 0.0
-                    for j in range(3):
-                        v[i] += bm[n, i, j] * d[j]
-                    dBd += d[i] * v[i]
-                for i in range(3):
-                    for j in range(3):
-                        dl = 1.0 if i == j else 0.0
-                        t0 = 1.5 * (d[i] * d[j] - dl / 3.0) * dBd
-                        t1 = d[i] * v[j] + d[j] * v[i] - 2.0 * d[i] * d[j] * dBd
-                        t2 = (bm[n, i, j] + 0.5 * dl * dBd - d[i] * v[j] - d[j] * v[i]
-                              + 0.5 * d[i] * d[j] * dBd)
-                        S[i, j] = XM * t0 + YM * t1 + ZM * t2
-                for m in range(5):
-                    val = 0.0
-                    for i in range(3):
-                        for j in range(3):
-                            val += bm[m, i, j] * S[i, j]
-                    R[r0 + 6 + m, c0 + 6 + n] = val
+            for m in range(5):
+                for n in range(5):
+                    R[r0 + 6 + m, c0 + 6 + n] = XM * pat[4, m, n] + YM * pat[5, m, n] + ZM * pat[6, m, n]
 
 
 @nb.njit(cache=True)
