@@ -33,7 +33,9 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 run: setup
-	$(VPY) postprocess/hydro_demo.py
+	mkdir -p out
+	mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi run jobs/demo.toml -o out/demo.h5
+	$(VENV)/bin/sdmpi info out/demo.h5
 
 test: setup
 	$(VPY) -m pytest -q tests

@@ -53,8 +53,8 @@ def run(cmd, env):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--ranks", type=int, default=2)
-    ap.add_argument("--tasks", type=int, default=4, help="equal tasks (realisations)")
-    ap.add_argument("--periods", type=int, default=4, help="periods of 250 steps per task")
+    ap.add_argument("--tasks", type=int, default=8, help="equal tasks (realisations)")
+    ap.add_argument("--periods", type=int, default=8, help="periods of 250 steps per task")
     ap.add_argument("--n", type=int, default=8, help="particles per realisation")
     ap.add_argument("--out", default="bench/ensemble_results.json")
     args = ap.parse_args()

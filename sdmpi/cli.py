@@ -7,19 +7,33 @@ read a job file call :func:`add_job_arguments` and :func:`job_from_args`, so ``-
 behaves the same everywhere. Heavy imports (numpy, MPI, HDF5) belong inside handlers so
 that ``sdmpi validate`` and ``--help`` stay fast.
 
-Exit codes: 0 success, 2 bad input (job file, ``--set`` or command line).
+Exit codes: 0 success (``run``: every task complete), 1 internal error (``run``: the MPI
+job was aborted; committed data are intact and the same command resumes), 2 bad input
+(job file, ``--set``, command line, output path, or a run file that is foreign, damaged or
+holds another job; nothing is written), 3 ``run`` stopped by SIGTERM/SIGINT/SIGUSR1 after
+a clean checkpoint: resumable by running the same command again.
+
+One BLAS/OpenMP thread per process (one rank per core): the thread-count variables are set
+to 1 here, before numpy is imported, unless the user set them.
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
 
 from . import __version__
 from .config import JobError, enumerate_tasks, job_hash, load_job
 
 EXIT_OK = 0
+EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
+EXIT_RESUMABLE = 3
 
 
 def add_job_arguments(parser: argparse.ArgumentParser) -> None:
@@ -94,9 +108,165 @@ def summary(job) -> str:
     return "\n".join(lines)
 
 
+# --------------------------------------------------------------------------- run
+
+
+def _add_run(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "run", help="run or resume an ensemble (under mpirun for several ranks)",
+        description="Run the job's tasks on the MPI ranks ([mpirun -n P] sdmpi run ...) and "
+                    "stream their samples into the run file. If RUN.h5 exists and holds the "
+                    "same job (layout keys ensemble.ranks_per_task and "
+                    "output.checkpoint_every may differ), the run resumes from its last "
+                    "checkpoint, with any number of ranks. SIGTERM, SIGINT or SIGUSR1 stop "
+                    "the run cleanly after a checkpoint (under mpirun send SIGUSR1 to "
+                    "mpirun: it forwards it; on SIGTERM mpirun kills the ranks after 1 s). "
+                    "Per-rank logs go to RUN.h5.logs/.",
+        epilog="exit status: 0 complete, 1 internal error (the job was aborted; rerun to "
+               "resume), 2 bad input (nothing written), 3 stopped by a signal (rerun to "
+               "resume)")
+    add_job_arguments(parser)
+    parser.add_argument("-o", "--output", required=True, metavar="RUN.h5",
+                        help="the run file (HDF5): created, or resumed if it exists")
+    parser.add_argument("--new", action="store_true",
+                        help="start afresh, replacing RUN.h5 if it exists (its data are lost)")
+    parser.set_defaults(handler=_run, realisation_factory=None)
+
+
+def _run(args) -> int:
+    os.environ.setdefault("H5PY_ALWAYS_USE_MPI", "1")  # parallel h5py even without mpirun
+    from .ensemble.runner import BadInput, run
+
+    try:
+        complete = run(args.job, args.overrides, args.output, new=args.new,
+                       realisation_factory=args.realisation_factory)
+    except BadInput as err:
+        if err.args and err.args[0]:
+            print(err, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return EXIT_OK if complete else EXIT_RESUMABLE
+
+
+# --------------------------------------------------------------------------- info
+
+
+def _add_info(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "info", help="summarise a run file: job, progress per task, versions",
+        description="Check a run file written by 'sdmpi run' and print its job, the "
+                    "progress of every task and the versions that wrote it. Read-only; "
+                    "works while the run is going on.",
+        epilog="exit status: 0, or 2 if the file is not an intact sdmpi run file")
+    parser.add_argument("run", metavar="RUN.h5", help="the run file")
+    parser.add_argument("--job", action="store_true",
+                        help="print the stored job (canonical TOML) instead")
+    parser.set_defaults(handler=_info)
+
+
+def _info(args) -> int:
+    from .ensemble.progress import lock_holder
+    from .ensemble.store import StoreError, inspect
+
+    try:
+        run = inspect(args.run)
+    except StoreError as err:
+        print(err, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.job:
+        print(run.job_text, end="")
+    else:
+        print(info_text(run, lock_holder(args.run)))
+    return EXIT_OK
+
+
+def info_text(run, running=None) -> str:
+    """The ``sdmpi info`` report of an inspected run file (:class:`RunSummary`);
+    ``running``: who is writing it now (see sdmpi.ensemble.progress.lock_holder)."""
+    a, tasks = run.attrs, run.tasks
+    done = [int(p) for p in run.progress]
+    n_done = sum(p == t.n_steps for p, t in zip(done, tasks))
+    steps, total = sum(done), sum(t.n_steps for t in tasks)
+    if n_done == len(tasks):
+        state = "complete"
+    elif running:
+        state = f"running ({running}; counts are up to its last checkpoints)"
+    else:
+        state = "resumable (run the same command again)"
+    lines = [f"{run.path}: sdmpi run file, format {a['format_version']}, created {a['created']}",
+             f"job {run.job.job.name!r} (job_hash {a['job_hash'][:16]})",
+             summary(run.job).split("\n", 1)[1],
+             f"progress: {n_done}/{len(tasks)} tasks complete, {steps}/{total} steps "
+             f"({100.0 * steps / total:.1f}%); {state}",
+             f"  {'task':>6}  {'phi':>6}  {'omega':>10}  {'real.':>5}  {'steps':>17}  state"]
+    for task, p in zip(tasks, done):
+        omega = "-" if task.omega is None else f"{task.omega:.5g}"
+        mark = "done" if p == task.n_steps else ("not started" if p == 0
+                                                 else f"{100.0 * p / task.n_steps:.0f}%")
+        lines.append(f"  {task.task_id:>6}  {task.phi:>6.4g}  {omega:>10}  "
+                     f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
+    lines.append("versions: " + ", ".join(f"{k} {v}" for k, v in run.versions.items()))
+    lines.append(f"units: time {a['time_unit']}, stress {a['stress_unit']}, "
+                 f"stress components {a['component_order']}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- reduce
+
+
+def _add_reduce(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "reduce", help="ensemble-averaged moduli (or viscosities) with errors, and plots",
+        description="Reduce one or several run files of the same system (jobs differing "
+                    "only in seed and number of realisations) to G', G'', eta', eta'' per "
+                    "(phi, omega) and contribution (medium, hydrodynamic, brownian, "
+                    "interparticle, total), each with one standard error from the spread "
+                    "between realisations (blocking within one). Writes OUTDIR/moduli.csv, "
+                    "OUTDIR/moduli.h5 and PNG figures; steady-shear jobs give "
+                    "viscosity.csv/.h5 instead. Uses the committed samples only, so it works "
+                    "on a run that is unfinished or still going (and says so). Units: omega "
+                    "in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m.",
+        epilog="exit status: 0, or 2 if an input is not an intact sdmpi run file, the files "
+               "hold different systems, or the job cannot be reduced")
+    parser.add_argument("runs", nargs="+", metavar="RUN.h5", help="run file(s)")
+    parser.add_argument("-o", "--output", required=True, metavar="OUTDIR",
+                        help="output directory (created if needed)")
+    parser.add_argument("--task", type=int, default=None, metavar="ID",
+                        help="task (of the first file) for the Lissajous figure; default: "
+                             "the first (phi, omega) task with the most analysed periods")
+    parser.add_argument("--no-plots", action="store_true", help="write the tables only")
+    parser.set_defaults(handler=_reduce)
+
+
+def _reduce(args) -> int:
+    import warnings
+
+    from .analysis.reduce import PartialRunWarning, ReduceError, reduce_runs
+    from .analysis.report import format_table, write_all
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
+            red = reduce_runs(args.runs)
+        paths, notes = write_all(red, args.output, plots=not args.no_plots,
+                                 task_id=args.task)
+    except ReduceError as err:
+        print(f"sdmpi reduce: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(format_table(red))
+    if not red.complete:
+        print(f"PARTIAL RUN: {int((red.committed < red.n_steps).sum())} of "
+              f"{red.committed.size} tasks unfinished; reduced what is committed",
+              file=sys.stderr)
+    for note in red.notes + tuple(notes):
+        print(f"note: {note}", file=sys.stderr)
+    for path in paths:
+        print(f"wrote {path}")
+    return EXIT_OK
+
+
 # --------------------------------------------------------------------------- main
 
-COMMANDS = (_add_validate,)
+COMMANDS = (_add_validate, _add_run, _add_info, _add_reduce)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -112,8 +282,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    """Entry point of the ``sdmpi`` console script; returns the exit code."""
+def main(argv=None, *, realisation_factory=None) -> int:
+    """Entry point of the ``sdmpi`` console script; returns the exit code.
+    ``realisation_factory`` replaces sdmpi.dynamics.Realisation in ``run`` (tests)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -123,6 +294,8 @@ def main(argv=None) -> int:
         parser.print_usage(sys.stderr)
         print("sdmpi: error: a command is required (see sdmpi --help)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if realisation_factory is not None:
+        args.realisation_factory = realisation_factory
     return args.handler(args)
 
 

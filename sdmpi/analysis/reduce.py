@@ -1,0 +1,466 @@
+"""Gather and reduce: run files -> ensemble-averaged moduli with one standard error.
+
+Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
+
+1. Open each run file read-only and validate it (:func:`sdmpi.ensemble.store.inspect`:
+   format, version, stored job, progress, checkpoints). Several files are reduced
+   together only if they hold the same system: their jobs may differ in the seed, the
+   number of realisations, the job name and keys that never change results (run layout,
+   output, linear solver); any other difference is refused, key by key. Two files with
+   the same seed are refused too: task streams are keyed by (seed, task id), so they
+   would hold copies of the same realisations and shrink the error bars falsely.
+2. Per task, read only the committed samples (``/progress``, the "valid up to") of the
+   xy stress of each stored contribution, sampled at t_k = k dt (so t0 = 0):
+   hydrodynamic (``stress_hydrodynamic_maxwell`` for Maxwell media: the hydrodynamic
+   stresslets filtered by the medium's modes, seed eqs. 33-35, 42; the unfiltered
+   ``stress_hydrodynamic`` is the viscous-medium signal and is not used), Brownian
+   (eq. 16) and interparticle.
+3. Oscillatory jobs: project every whole period after the ``discard_periods`` start-up
+   periods on sin(w t) and cos(w t) (:func:`.projection.project_periods`, eq. 18):
+
+       G'  = w/(pi gamma0) int_period sigma_xy sin(w t) dt,
+       G'' = w/(pi gamma0) int_period sigma_xy cos(w t) dt,
+
+   in eta_m/t_D; partial periods are never used. The medium's own stress is analytic
+   and added here (:func:`medium_moduli`, eq. 36; exact, error 0). The total is formed
+   per period as medium + hydrodynamic + Brownian + interparticle and reduced like
+   the parts, so its mean is the sum of the parts' means (to round-off) and its error
+   includes the correlations between the parts.
+4. Per realisation: mean and blocking error of the per-period values; over the
+   ensemble: period-weighted mean and one standard error from the spread between
+   realisations (:mod:`.errors`, ``blocking`` then ``combine``). eta' = G''/w and
+   eta'' = G'/w, relative to eta_m (eq. 19; :func:`.projection.viscosities`).
+
+Steady-shear jobs are reduced to viscosities instead: eta = <sigma_xy>/gamma_dot per
+contribution over the samples after ``discard_steps`` (same blocking and ensemble
+errors; medium: its zero-shear viscosity, sum of the Maxwell modes' eta_k, or 1).
+Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
+
+Partial runs are reduced from what is committed; every incomplete task is named in
+:attr:`Reduction.notes`, and a task with no whole period (no sample) after the discarded
+start-up contributes nothing. Files that are not intact run files raise
+:class:`ReduceError` (the CLI exits with status 2).
+
+Units: radius a = 1, eta_m = 1, time t_D (1/gamma_dot for non-Brownian steady shear);
+omega in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Job
+from ..config.schema import toml_name
+from .errors import Blocking, Ensemble, blocking, combine
+from .models import maxwell_moduli
+from .projection import project_periods, viscosities
+
+#: rows of moduli.csv per (phi, omega), in this order
+COMPONENTS = ("medium", "hydrodynamic", "brownian", "interparticle", "total")
+#: moduli.csv columns (DESIGN.md contract 4)
+MODULI_COLUMNS = ("phi", "omega", "component", "n_realisations", "G_prime", "G_prime_err",
+                  "G_dprime", "G_dprime_err", "eta_prime", "eta_prime_err", "eta_dprime",
+                  "eta_dprime_err")
+#: viscosity.csv columns (steady shear)
+VISCOSITY_COLUMNS = ("phi", "rate", "component", "n_realisations", "eta", "eta_err")
+#: index of the xy component in the stored 6-vectors (component_order xx yy zz xy xz yz)
+XY = 3
+
+#: job keys that may differ between files reduced together: identification, the seed
+#: and the ensemble size, and keys that change how a job runs but not its results.
+FREE_KEYS = frozenset({"job.name", "job.seed", "ensemble.realisations",
+                       "ensemble.ranks_per_task", "output.per_particle",
+                       "output.checkpoint_every", "solver.backend", "solver.tolerance"})
+
+
+class ReduceError(Exception):
+    """Input that cannot be reduced (not a run file, damaged, incompatible files)."""
+
+
+class PartialRunWarning(UserWarning):
+    """Some tasks are not finished: the reduction uses what is committed."""
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class Reduction:
+    """The reduced ensemble of one system (one or several run files).
+
+    kind          "oscillatory" (quantities G', G'') or "steady" (quantity eta)
+    job, job_text the job of the first file (canonical TOML text)
+    files         input paths; seeds (per file)
+    phi, control  (G,) per task group: volume fraction and omega (1/t_D) or shear rate
+    quantities    names of the last axis Q: ("G_prime", "G_dprime") or ("eta",)
+    ensemble      :class:`.errors.Ensemble`, fields (G, C, Q), C = len(COMPONENTS)
+    per_realisation :class:`.errors.Blocking`, fields (G, C, Q, R), realisations R of all
+                  files (n == 0: nothing committed after the start-up, absent)
+    file_index, realisation  (R,): which file and which realisation of that file
+    task_id       (G, R): the task of group g, realisation r in its file
+    committed, n_steps  (G, R): samples committed and planned per task
+    notes         human-readable remarks (partial runs, single realisations, ...)
+    """
+
+    kind: str
+    job: Job
+    job_text: str
+    files: tuple
+    seeds: tuple
+    phi: np.ndarray
+    control: np.ndarray
+    quantities: tuple
+    ensemble: Ensemble
+    per_realisation: Blocking
+    file_index: np.ndarray
+    realisation: np.ndarray
+    task_id: np.ndarray
+    committed: np.ndarray
+    n_steps: np.ndarray
+    notes: tuple
+
+    @property
+    def complete(self) -> bool:
+        """True when every task of every file ran to its end."""
+        return bool(np.all(self.committed == self.n_steps))
+
+    @property
+    def columns(self) -> tuple:
+        return MODULI_COLUMNS if self.kind == "oscillatory" else VISCOSITY_COLUMNS
+
+    def rows(self) -> list[dict]:
+        """The table, one dict per (group, component) in the order of :attr:`columns`
+        (moduli.csv for oscillatory jobs, viscosity.csv for steady ones)."""
+        e = self.ensemble
+        out = []
+        for g in range(len(self.phi)):
+            for c, name in enumerate(COMPONENTS):
+                row = {"phi": float(self.phi[g]), self.columns[1]: float(self.control[g]),
+                       "component": name, "n_realisations": int(e.n_realisations[g, c, 0])}
+                if self.kind == "oscillatory":
+                    w = float(self.control[g])
+                    (g1, g2), (s1, s2) = e.mean[g, c], e.err[g, c]
+                    eta1, eta2 = viscosities(g1, g2, w)
+                    err1, err2 = viscosities(s1, s2, w)
+                    row.update(G_prime=float(g1), G_prime_err=float(s1), G_dprime=float(g2),
+                               G_dprime_err=float(s2), eta_prime=float(eta1),
+                               eta_prime_err=float(err1), eta_dprime=float(eta2),
+                               eta_dprime_err=float(err2))
+                else:
+                    row.update(eta=float(e.mean[g, c, 0]), eta_err=float(e.err[g, c, 0]))
+                out.append(row)
+        return out
+
+    def value(self, phi, control, component, column):
+        """One table entry, e.g. ``value(0.45, 2 * pi, "hydrodynamic", "eta_prime")``
+        (phi and omega/rate matched to 1e-9 relative)."""
+        for row in self.rows():
+            if (row["component"] == component and math.isclose(row["phi"], phi, rel_tol=1e-9)
+                    and math.isclose(row[self.columns[1]], control, rel_tol=1e-9)):
+                return row[column]
+        raise KeyError(f"no row phi={phi}, {self.columns[1]}={control}, {component}")
+
+
+# --------------------------------------------------------------------------- physics
+
+
+def medium_moduli(job: Job, omega):
+    """(G'_m, G''_m) of the suspending medium alone, in eta_m/t_D (seed eq. 36, 19).
+
+    Newtonian: sigma_xy = eta_m gamma_dot, so G' = 0 and G'' = eta_m w = w (eta_m = 1).
+    Maxwell, modes (eta_k, lambda_k): :func:`.models.maxwell_moduli`,
+    G' = sum_k eta_k lambda_k w^2/(1 + (lambda_k w)^2), G'' = sum_k eta_k w/(1 + (lambda_k w)^2).
+    Exact: the reducer reports them with zero error."""
+    if job.medium.kind == "maxwell":
+        modes = job.medium.modes
+        g1, g2 = maxwell_moduli(omega, [m.eta for m in modes], [m.lam for m in modes])
+        return float(g1), float(g2)
+    return 0.0, float(omega)
+
+
+def medium_viscosity(job: Job) -> float:
+    """Zero-shear (steady-state) viscosity of the medium, relative to eta_m."""
+    if job.medium.kind == "maxwell":
+        return float(sum(m.eta for m in job.medium.modes))
+    return 1.0
+
+
+def stress_datasets(job: Job) -> tuple:
+    """Sample datasets of the hydrodynamic, Brownian and interparticle xy stress (the
+    Maxwell-filtered hydrodynamic stress for Maxwell media; see the module docstring)."""
+    hydro = "stress_hydrodynamic_maxwell" if job.medium.kind == "maxwell" else "stress_hydrodynamic"
+    return (hydro, "stress_brownian", "stress_interparticle")
+
+
+# --------------------------------------------------------------------------- files
+
+
+def open_run(path):
+    """Validate one run file and return its :class:`sdmpi.ensemble.store.RunSummary`
+    (job, tasks, progress); :class:`ReduceError` if it is not an intact run file."""
+    from ..ensemble.store import StoreError, inspect
+    if not Path(path).is_file():
+        raise ReduceError(f"{path}: no such file")
+    try:
+        return inspect(path)
+    except StoreError as err:
+        raise ReduceError(str(err)) from None
+
+
+def job_items(job: Job) -> dict:
+    """``{"section.key": value}`` for every key of a resolved job (schema order)."""
+    items = {}
+    for section in dataclasses.fields(job):
+        values = getattr(job, section.name)
+        for f in dataclasses.fields(values):
+            items[f"{section.name}.{toml_name(f)}"] = getattr(values, f.name)
+    return items
+
+
+def check_same_system(summaries) -> None:
+    """Refuse (ReduceError) files whose jobs differ in anything but :data:`FREE_KEYS`,
+    or that share a seed (their realisations would be copies of each other)."""
+    first = summaries[0]
+    ref = job_items(first.job)
+    seen = {}
+    for s in summaries:
+        seed = s.job.job.seed
+        if seed in seen:
+            same = "is given twice" if Path(seen[seed]).resolve() == Path(s.path).resolve() \
+                else f"and {seen[seed]} have the same job.seed = {seed}"
+            raise ReduceError(
+                f"{s.path} {same}: realisations are keyed by (seed, task id), so the "
+                f"files would hold the same realisations and their spread would be "
+                f"counted twice; reduce each once, or run the extra realisations with "
+                f"another seed (--set job.seed=...)")
+        seen[seed] = s.path
+        items = job_items(s.job)
+        diff = [f"{k} = {items[k]!r} (in {first.path}: {ref[k]!r})"
+                for k in ref if k not in FREE_KEYS and items[k] != ref[k]]
+        if diff:
+            raise ReduceError(
+                f"{s.path} is not the same system as {first.path}; files are reduced "
+                f"together only if their jobs differ in {', '.join(sorted(FREE_KEYS))} "
+                f"alone. Differences:\n  " + "\n  ".join(diff))
+
+
+def _open_h5(path):
+    """The run file, read-only, for reading sample datasets."""
+    import h5py
+    try:  # read a file that a running job holds open (it writes no metadata while stepping)
+        return h5py.File(path, "r", locking=False)
+    except TypeError:  # h5py/HDF5 without the locking option
+        return h5py.File(path, "r")
+
+
+def _read_xy(f, task, committed, names):
+    """(len(names), committed) xy stress of one task, committed samples only; checks
+    that the samples are taken at t_k = k dt (the projection assumes t0 = 0)."""
+    from ..ensemble.store import task_key
+    group = f[f"tasks/{task_key(task.task_id)}/samples"]
+    missing = [n for n in names if n not in group]
+    if missing:
+        raise ReduceError(f"{f.filename}: task {task.task_id} has no sample dataset(s) "
+                          f"{', '.join(missing)}; this job's reduction needs them")
+    if committed:
+        k = np.unique([0, min(committed, 64) - 1, committed - 1])
+        t = group["time"][k.tolist()] if "time" in group else k * task.dt
+        if not np.allclose(t, k * task.dt, rtol=1e-9, atol=1e-12 * task.dt):
+            raise ReduceError(f"{f.filename}: task {task.task_id}: samples are not at "
+                              f"t_k = k dt (time[{k.tolist()}] = {t.tolist()})")
+    return np.stack([group[n][:committed, XY] for n in names])
+
+
+def task_series(job: Job, task, xy):
+    """Per-value series of one task, (C, Q, n): per whole period (G', G'') after the
+    start-up for oscillatory jobs, per sample sigma_xy/gamma_dot after discard_steps
+    for steady ones. ``xy``: (3, committed) hydrodynamic, Brownian, interparticle xy
+    stress. Rows follow COMPONENTS; the medium row is its exact value repeated and the
+    total row is medium + the three parts, value by value."""
+    if job.shear.protocol == "oscillatory":
+        n = job.steps_per_period(task.omega)
+        g1, g2 = project_periods(xy, job.shear.gamma0, task.omega, n, task.discard_steps // n)
+        parts = np.stack([g1, g2], axis=1)                         # (3, 2, P)
+        medium = np.array(medium_moduli(job, task.omega))
+    else:
+        parts = (xy[:, task.discard_steps:] / job.shear.rate)[:, None, :]   # (3, 1, M)
+        medium = np.array([medium_viscosity(job)])
+    med = np.broadcast_to(medium[:, None], parts.shape[1:])
+    return np.concatenate([med[None], parts, (med + parts.sum(axis=0))[None]])
+
+
+def periods_needed(job: Job, task) -> str:
+    """What a task needs before it contributes anything, for the notes."""
+    if job.shear.protocol == "oscillatory":
+        n = job.steps_per_period(task.omega)
+        return f"{task.discard_steps + n} steps (discarded start-up + one whole period)"
+    return f"more than {task.discard_steps} steps (the discarded start-up)"
+
+
+# --------------------------------------------------------------------------- reduce
+
+
+def reduce_runs(paths) -> Reduction:
+    """Reduce one or several run files of the same system (module docstring).
+
+    Raises ReduceError for unusable input; warns (:class:`PartialRunWarning`) when some
+    tasks are unfinished (details in ``Reduction.notes``)."""
+    paths = [str(p) for p in paths]
+    if not paths:
+        raise ReduceError("no run file given")
+    summaries = [open_run(p) for p in paths]
+    check_same_system(summaries)
+    job = summaries[0].job
+    if job.shear.protocol == "none":
+        raise ReduceError(
+            f"{paths[0]}: a quiescent job (shear.protocol = \"none\") imposes no "
+            f"deformation, so it has no moduli or viscosity; only oscillatory (moduli.csv) "
+            f"and steady-shear (viscosity.csv) jobs are reduced")
+    kind = "oscillatory" if job.shear.protocol == "oscillatory" else "steady"
+    names = stress_datasets(job)
+
+    groups = list(dict.fromkeys((t.phi, t.omega) for t in summaries[0].tasks))
+    file_index, realisation, columns, notes = [], [], [], []   # columns: per realisation
+    for i, s in enumerate(summaries):
+        by_group = {}
+        for t in s.tasks:
+            by_group.setdefault((t.phi, t.omega), []).append(t)
+        for r in range(s.job.ensemble.realisations):
+            file_index.append(i)
+            realisation.append(r)
+            columns.append([by_group[key][r] for key in groups])
+
+    n_groups, n_real = len(groups), len(columns)
+    series = [[None] * n_real for _ in range(n_groups)]
+    committed = np.zeros((n_groups, n_real), dtype=np.int64)
+    planned = np.zeros_like(committed)
+    task_id = np.zeros_like(committed)
+    partial = []
+    for i, s in enumerate(summaries):
+        with _open_h5(s.path) as f:
+            for col, (fi, tasks) in enumerate(zip(file_index, columns)):
+                if fi != i:
+                    continue
+                for g, task in enumerate(tasks):
+                    done = int(s.progress[task.task_id])
+                    x = task_series(job, task, _read_xy(f, task, done, names))
+                    series[g][col] = x
+                    committed[g, col], planned[g, col] = done, task.n_steps
+                    task_id[g, col] = task.task_id
+                    if done < task.n_steps:
+                        partial.append((i, task.task_id,
+                                        _partial_note(s.path, job, task, done, x.shape[-1])))
+    notes += [text for *_, text in sorted(partial)]
+
+    per_real = [[blocking(x) for x in row] for row in series]       # fields (C, Q)
+    stacked = _stack_blocking(per_real)                             # fields (G, C, Q, R)
+    ens = combine(stacked)                                          # fields (G, C, Q)
+    ens = _exact_medium(ens, job, groups, kind)
+
+    for g, (phi, control) in enumerate(groups):
+        r = int(ens.n_realisations[g, 0, 0])
+        where = f"phi = {phi:g}, " + (f"omega = {control:.6g}" if kind == "oscillatory"
+                                      else f"rate = {job.shear.rate:g}")
+        if r == 0:
+            notes.append(f"{where}: no realisation has data after the start-up yet; its "
+                         f"rows are NaN (the medium row is exact)")
+        elif r == 1:
+            notes.append(f"{where}: a single realisation; its error comes from blocking "
+                         f"within that run (dof {int(ens.dof[g, 1, 0])}) and may be too small")
+    if not np.all(committed == planned):
+        warnings.warn(f"partial run: {int(np.sum(committed < planned))} of {committed.size} "
+                      f"tasks unfinished; reducing what is committed", PartialRunWarning,
+                      stacklevel=2)
+    control = np.array([c if kind == "oscillatory" else job.shear.rate for _, c in groups])
+    return Reduction(kind, job, summaries[0].job_text, tuple(paths),
+                     tuple(s.job.job.seed for s in summaries),
+                     np.array([p for p, _ in groups]), control,
+                     ("G_prime", "G_dprime") if kind == "oscillatory" else ("eta",),
+                     ens, stacked, np.array(file_index), np.array(realisation), task_id,
+                     committed, planned, tuple(notes))
+
+
+def _stack_blocking(per_real):
+    """Blocking results per [group][realisation] with fields (C, Q) -> one Blocking with
+    fields (G, C, Q, R), the realisation axis last as :func:`.errors.combine` wants."""
+    return Blocking(*(np.stack([np.stack([b[k] for b in row], axis=-1) for row in per_real])
+                      for k in range(len(Blocking._fields))))
+
+
+def _exact_medium(ens: Ensemble, job: Job, groups, kind) -> Ensemble:
+    """Put the medium's exact values (seed eq. 36) into row 0 with zero errors, instead
+    of the average of identical numbers (equal to round-off) or NaN when no data."""
+    mean, err = ens.mean.copy(), ens.err.copy()
+    within, between = ens.err_within.copy(), ens.err_between.copy()
+    for g, (_, omega) in enumerate(groups):
+        mean[g, 0] = medium_moduli(job, omega) if kind == "oscillatory" else medium_viscosity(job)
+        err[g, 0] = within[g, 0] = between[g, 0] = 0.0
+    return ens._replace(mean=mean, err=err, err_within=within, err_between=between)
+
+
+def _partial_note(path, job: Job, task, done: int, n_values: int) -> str:
+    """One line on an unfinished task: how far it got and what of it is used."""
+    head = (f"{path}: task {task.task_id} (phi = {task.phi:g}"
+            + (f", omega = {task.omega:.6g}" if task.omega is not None else "")
+            + f", realisation {task.realisation}) unfinished: {done}/{task.n_steps} steps")
+    if job.shear.protocol == "oscillatory":
+        n = job.steps_per_period(task.omega)
+        used = f"{n_values} of {(task.n_steps - task.discard_steps) // n} periods used"
+    else:
+        used = f"{n_values} of {task.n_steps - task.discard_steps} samples used"
+    if n_values == 0:
+        return f"{head}; contributes nothing (needs {periods_needed(job, task)})"
+    return f"{head}; {used}"
+
+
+# --------------------------------------------------------------------------- one task
+
+
+def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
+    """Stress-strain loop of one task (oscillatory jobs), phase-averaged over the
+    whole periods it contributes: for each phase j = 0..n-1 of a period (w t = 2 pi j/n)
+    the mean over those periods of each contribution's xy stress.
+
+    task_id: a task of file ``file_index``; default the task of the first group with the
+    most analysed periods (file 0). Returns dict with ``task_id, file, phi, omega,
+    gamma0, n_periods``, ``strain`` (n,) = gamma(t_j), ``stress`` (C, n) per COMPONENTS
+    in eta_m/t_D (medium analytic: gamma0 (G'_m sin + G''_m cos)), and ``last`` (n,) the
+    total stress of the last analysed period, unaveraged."""
+    if red.kind != "oscillatory":
+        raise ReduceError("a Lissajous figure needs an oscillatory job")
+    job = red.job
+    if task_id is None:
+        cols = np.flatnonzero(red.file_index == file_index)
+        used = red.per_realisation.n[0, 1, 0, cols]
+        task_id = int(red.task_id[0, cols[int(np.argmax(used))]])
+    path = red.files[file_index]
+    tasks = {t.task_id: t for t in open_run(path).tasks}
+    if task_id not in tasks:
+        raise ReduceError(f"{path} has no task {task_id} (tasks 0..{len(tasks) - 1})")
+    task = tasks[task_id]
+    n = job.steps_per_period(task.omega)
+    first = task.discard_steps // n
+    cols = np.flatnonzero(red.file_index == file_index)
+    done = int(red.committed[:, cols][red.task_id[:, cols] == task_id][0])
+    with _open_h5(path) as f:
+        xy = _read_xy(f, task, done, stress_datasets(job))
+    n_periods = max(done // n - first, 0)
+    if n_periods == 0:
+        raise ReduceError(f"task {task_id} has no whole period after the start-up yet")
+    cycles = xy[:, first * n:(first + n_periods) * n].reshape(3, n_periods, n)
+    phase = 2.0 * np.pi * np.arange(n) / n
+    gamma0 = job.shear.gamma0
+    g1, g2 = medium_moduli(job, task.omega)
+    medium = gamma0 * (g1 * np.sin(phase) + g2 * np.cos(phase))
+    parts = cycles.mean(axis=1)
+    stress = np.concatenate([medium[None], parts, (medium + parts.sum(axis=0))[None]])
+    return {"task_id": task_id, "file": path, "phi": task.phi, "omega": task.omega,
+            "realisation": task.realisation, "gamma0": gamma0, "n_periods": n_periods,
+            "strain": gamma0 * np.sin(phase), "stress": stress,
+            "last": medium + cycles[:, -1].sum(axis=0)}

@@ -1,0 +1,147 @@
+"""Writing a :class:`.reduce.Reduction`: the CSV table, the HDF5 archive, a text table.
+
+``moduli.csv`` (oscillatory jobs; DESIGN.md contract 4): one row per (phi, omega,
+component), columns :data:`.reduce.MODULI_COLUMNS`; ``*_err`` is one standard error;
+floats in shortest round-trip form, ``nan`` where nothing is known yet. Steady-shear
+jobs give ``viscosity.csv`` (:data:`.reduce.VISCOSITY_COLUMNS`) instead.
+
+``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1):
+
+| path | contents |
+|---|---|
+| `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
+| `/table/<column>` | the CSV table, one dataset per column (component as UTF-8 strings) |
+| `/groups/phi`, `/groups/omega` or `/groups/rate` | (G,) the task groups |
+| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between` (:class:`.errors.Ensemble`) |
+| `/realisations/<field>` | (G, C, Q, R): per-realisation `mean`, `err`, `n` (periods or samples used), `block_size`, `n_blocks` (:class:`.errors.Blocking`) |
+| `/realisations/file_index`, `realisation` | (R,): input file (index into `input_files`) and realisation number in it |
+| `/realisations/task_id`, `committed`, `n_steps` | (G, R): task of each realisation, samples committed and planned |
+
+Axes: G task groups (phi-major, then omega), C = components in the order of
+:data:`.reduce.COMPONENTS`, Q = quantities (G', G'' or eta), R = realisations.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from .reduce import COMPONENTS
+
+UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/t_D",
+         "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m", "eta": "eta_m"}
+
+
+def _fmt(x) -> str:
+    if isinstance(x, str):
+        return x
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    return "nan" if math.isnan(x) else repr(float(x))
+
+
+def write_csv(red, path) -> Path:
+    """The table of ``red`` as CSV (header = ``red.columns``)."""
+    path = Path(path)
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(red.columns)
+        for row in red.rows():
+            out.writerow([_fmt(row[c]) for c in red.columns])
+    return path
+
+
+def write_h5(red, path) -> Path:
+    """The table plus per-realisation values, dof, block sizes, the job text and the
+    input file names (module docstring)."""
+    import h5py
+    path = Path(path)
+    rows = red.rows()
+    with h5py.File(path, "w") as f:
+        f.attrs.update({
+            "format": "sdmpi-moduli", "format_version": 1, "kind": red.kind,
+            "job_text": red.job_text, "input_files": json.dumps(list(red.files)),
+            "seeds": json.dumps(list(red.seeds)), "components": " ".join(COMPONENTS),
+            "quantities": " ".join(red.quantities),
+            "units": json.dumps({c: u for c, u in UNITS.items() if c in red.columns
+                                 or c in red.quantities}),
+            "notes": json.dumps(list(red.notes)), "sdmpi_version": __version__,
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")})
+        table = f.create_group("table")
+        for c in red.columns:
+            values = [row[c] for row in rows]
+            if c == "component":
+                table.create_dataset(c, data=np.array(values, dtype=object),
+                                     dtype=h5py.string_dtype())
+            else:
+                table.create_dataset(c, data=np.array(values))
+        groups = f.create_group("groups")
+        groups["phi"] = red.phi
+        groups[red.columns[1]] = red.control
+        ens = f.create_group("ensemble")
+        ens.attrs["axes"] = "group, component, quantity"
+        for name, value in red.ensemble._asdict().items():
+            ens[name] = np.asarray(value)
+        per = f.create_group("realisations")
+        per.attrs["axes"] = "group, component, quantity, realisation"
+        for name, value in red.per_realisation._asdict().items():
+            per[name] = np.asarray(value)
+        for name in ("file_index", "realisation", "task_id", "committed", "n_steps"):
+            per[name] = getattr(red, name)
+    return path
+
+
+def plus_minus(mean, err) -> str:
+    """'mean ± err' with the error to 2 significant digits and the mean to the same
+    decimal place; exact values (err 0) with 5 significant digits; 'nan' if unknown."""
+    if not math.isfinite(mean):
+        return "nan"
+    if err == 0 or not math.isfinite(err):
+        return f"{mean:.5g}" + ("" if err == 0 else " ± nan")
+    d = 1 - math.floor(math.log10(err))
+    return f"{mean:.{d}f} ± {err:.{d}f}" if 0 <= d <= 8 else f"{mean:.4g} ± {err:.2g}"
+
+
+def format_table(red) -> str:
+    """The table as aligned text, values as mean +- one standard error."""
+    pm = plus_minus
+    if red.kind == "oscillatory":
+        head = ["phi", "omega", "component", "n", "G'", "G''", "eta'", "eta''"]
+        pairs = [("G_prime", "G_prime_err"), ("G_dprime", "G_dprime_err"),
+                 ("eta_prime", "eta_prime_err"), ("eta_dprime", "eta_dprime_err")]
+        units = "omega in 1/t_D; G', G'' in eta_m/t_D; eta', eta'' relative to eta_m"
+    else:
+        head = ["phi", "rate", "component", "n", "eta"]
+        pairs = [("eta", "eta_err")]
+        units = f"rate in 1/{red.job.time_unit}; eta relative to eta_m"
+    lines = [[f"{r['phi']:g}", f"{r[red.columns[1]]:.5g}", r["component"],
+              str(r["n_realisations"])] + [pm(r[m], r[e]) for m, e in pairs]
+             for r in red.rows()]
+    widths = [max(len(x) for x in col) for col in zip(head, *lines)]
+    text = ["  ".join(x.ljust(w) for x, w in zip(row, widths)).rstrip()
+            for row in [head] + lines]
+    return "\n".join(text + [f"({units}; ± one standard error)"])
+
+
+def write_all(red, outdir, *, plots=True, task_id=None):
+    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear) and, for
+    oscillatory jobs, the figures (:func:`.plots.plot_all`) into ``outdir`` (created).
+    Returns (paths written, notes)."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    stem = "moduli" if red.kind == "oscillatory" else "viscosity"
+    paths = [write_csv(red, outdir / f"{stem}.csv"), write_h5(red, outdir / f"{stem}.h5")]
+    notes = []
+    if plots and red.kind == "oscillatory":
+        from .plots import plot_all
+        figures, notes = plot_all(red, outdir, task_id)
+        paths += figures
+    elif plots:
+        notes.append("steady shear: no figures (a table of viscosities only)")
+    return paths, notes

@@ -1,0 +1,12 @@
+"""The ensemble runner: tasks, rank assignment, the HDF5 run file, checkpoints, MPI driver.
+
+Modules (import the ones you need; only ``runner`` initialises MPI):
+
+``farm``      LPT assignment of tasks to rank groups; communicator split;
+``store``     the run file (layout: docs/store.md): create, write, inspect;
+``runner``    ``run(...)``, the MPI driver behind ``sdmpi run``;
+``progress``  aggregate progress on rank 0, per-rank logs;
+``faults``    fault injection for the crash tests.
+
+Knows nothing of physics beyond one realisation's interface (``sdmpi.dynamics``).
+"""

@@ -1,0 +1,397 @@
+"""The MPI driver of ``sdmpi run``: check, create or resume, farm out, step, checkpoint.
+
+Phases, in order (collective over MPI_COMM_WORLD unless said otherwise):
+
+1. Rank 0 alone checks everything (job, output path, an existing run file and whether
+   it holds the same job) and takes the run's lock; nothing is written if any check
+   fails (:class:`BadInput` on every rank; rank 0's carries the message).
+2. Groups of ``ensemble.ranks_per_task`` ranks; tasks still to run are assigned to
+   groups by :func:`sdmpi.ensemble.farm.assign`; each rank builds the realisations of
+   its group's tasks.
+3. A new run: the leaders' task layouts are gathered and the whole file is created into
+   ``RUN.h5.part`` and renamed to ``RUN.h5`` when complete (no half-created run files).
+4. The file is opened by all ranks; group leaders step their tasks and commit samples and
+   state every ``output.checkpoint_every`` steps (absolute step multiples) and when a
+   stop is requested (SIGTERM, SIGINT, SIGUSR1: finish the step, commit, stop).
+5. Rank 0 collects progress until every leader is done; the file is closed; the run is
+   complete or resumable.
+
+Any other exception on any rank aborts the whole MPI job (exit 1): committed data stay
+valid, and running the same command resumes.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import signal
+import socket
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+from mpi4py import MPI
+
+from .. import __version__
+from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
+                      parse_job, resume_hash)
+from . import store
+from .farm import assign, remaining_costs, split_groups
+from .faults import fault
+from .progress import Progress, RunLocked, logs_dir, rank_logger, take_lock
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
+
+
+class BadInput(Exception):
+    """The run was refused before any work. On world rank 0 the message says why; on the
+    other ranks it is None (rank 0 alone prints)."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What rank 0 decided, broadcast to all ranks."""
+
+    job_text: str      # canonical text of the job to run (this command's layout keys)
+    mode: str          # "new", "resume" or "complete"
+    progress: tuple    # committed steps per task
+    slots: tuple       # current checkpoint slot per task (-1: none)
+    versions: str      # JSON
+    created: str       # UTC ISO 8601
+
+
+def run(job_path, overrides, output, *, new=False, realisation_factory=None,
+        comm=None, stream=None) -> bool:
+    """Run or resume the job in ``job_path`` (with ``--set`` ``overrides``) into the run
+    file ``output``; ``new`` replaces an existing file. Collective over ``comm``
+    (default MPI_COMM_WORLD). Returns True when every task is complete, False when
+    stopped by a signal (resumable). Raises :class:`BadInput` (nothing written).
+
+    ``realisation_factory(job, task)`` defaults to :class:`sdmpi.dynamics.Realisation`.
+    """
+    comm = comm or MPI.COMM_WORLD
+    lock = None
+    try:
+        plan, lock = _agree(comm, job_path, overrides, Path(output), new)
+        return _execute(comm, plan, Path(output), realisation_factory, stream or sys.stdout)
+    except BadInput:
+        raise
+    except Exception:  # a bug or a failing realisation: stop every rank, keep the file
+        sys.stderr.write(f"sdmpi run: rank {comm.rank} failed:\n{traceback.format_exc()}")
+        sys.stderr.flush()
+        comm.Abort(1)
+    finally:
+        if lock is not None:
+            os.close(lock)
+
+
+def _agree(comm, job_path, overrides, out: Path, new: bool):
+    """Rank 0 checks everything and takes the lock; all ranks get its plan or raise
+    :class:`BadInput`. Returns (plan, lock descriptor or None)."""
+    plan = lock = None
+    if comm.rank == 0:
+        try:
+            plan = _plan(job_path, overrides, out, new, comm.size)
+            if plan.mode != "complete":
+                lock = take_lock(out)
+        except RunLocked as err:
+            plan = BadInput(f"{out}: in use by another sdmpi run ({err}); wait for it to "
+                            f"finish or stop it")
+        except BadInput as err:
+            plan = err
+        except OSError as err:  # e.g. the log directory cannot be created
+            plan = BadInput(f"{out}: {err}")
+    plan = comm.bcast(plan, root=0)
+    if isinstance(plan, BadInput):
+        raise plan if comm.rank == 0 else BadInput(None)
+    return plan, lock
+
+
+def _execute(comm, plan: Plan, out: Path, factory, stream) -> bool:
+    """Everything after the checks (see the module docstring)."""
+    if plan.mode == "complete":
+        if comm.rank == 0:
+            print(f"{out}: already complete ({len(plan.progress)} tasks); nothing to do",
+                  file=stream)
+        return True
+    if factory is None:
+        from ..dynamics import Realisation as factory
+    return _Driver(comm, parse_job(plan.job_text), plan, out, factory, stream).run()
+
+
+# --------------------------------------------------------------------------- checks (rank 0)
+
+
+def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
+    try:
+        job = load_job(job_path, overrides)
+    except JobError as err:
+        raise BadInput(str(err)) from None
+    if not h5py.get_config().mpi:
+        raise BadInput("sdmpi run needs h5py built with MPI (Debian: python3-h5py-mpi); "
+                       "set H5PY_ALWAYS_USE_MPI=1 before h5py is imported (the sdmpi "
+                       "command does)")
+    rpt = job.ensemble.ranks_per_task
+    if size % rpt:
+        raise BadInput(f"ensemble.ranks_per_task = {rpt} does not divide the {size} MPI "
+                       f"ranks; run with a multiple of {rpt} ranks")
+    _check_output(out, new)
+    tasks = enumerate_tasks(job)
+    meta = (json.dumps(versions()),
+            datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+    if out.exists() and not new:
+        try:
+            summary = store.inspect(out)
+        except store.StoreError as err:
+            raise BadInput(f"{err}\nLeft untouched. Use --new to replace it, or choose "
+                           f"another output file (-o).") from None
+        if resume_hash(summary.job) != resume_hash(job):
+            raise BadInput(_different_job(out, summary.job, job))
+        mode = "complete" if summary.complete else "resume"
+        return Plan(canonical_text(job), mode, tuple(int(p) for p in summary.progress),
+                    summary.slots, *meta)
+    return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
+
+
+def _check_output(out: Path, new: bool) -> None:
+    parent = out.parent
+    if not parent.is_dir():
+        raise BadInput(f"{out}: the directory {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise BadInput(f"{out}: cannot create files in {parent} (permission denied)")
+    if out.is_dir():
+        raise BadInput(f"{out}: is a directory; -o names the run file (e.g. run.h5)")
+    if out.exists() and not new and not os.access(out, os.R_OK | os.W_OK):
+        raise BadInput(f"{out}: exists but is not readable and writable")
+    logs = logs_dir(out)
+    if logs.exists() and not logs.is_dir():
+        raise BadInput(f"{logs}: exists and is not a directory (the run's log directory)")
+
+
+def _key_values(job) -> dict[str, str]:
+    """section.key -> TOML value text of a job's canonical text, layout keys left out."""
+    values, section = {}, ""
+    for line in canonical_text(job, exclude=LAYOUT_KEYS).splitlines():
+        if line.startswith("["):
+            section = line.strip("[]")
+        elif " = " in line:
+            key, value = line.split(" = ", 1)
+            values[f"{section}.{key}"] = value
+    return values
+
+
+def _different_job(out: Path, stored, job) -> str:
+    old, now = _key_values(stored), _key_values(job)
+    keys = list(old) + [k for k in now if k not in old]
+    diffs = [f"  {k}: file has {old.get(k, '(absent)')}, this job has {now.get(k, '(absent)')}"
+             for k in keys if old.get(k) != now.get(k)]
+    return "\n".join([f"{out}: holds a different job ({stored.job.name!r}); it differs in:",
+                      *diffs,
+                      "Left untouched. Use --new to replace it (its data are lost), or "
+                      "choose another output file (-o)."])
+
+
+def versions() -> dict[str, str]:
+    """Versions of sdmpi and of the stack it runs on."""
+    import mpi4py
+
+    return {"sdmpi": __version__, "python": platform.python_version(),
+            "numpy": np.__version__, "h5py": h5py.version.version,
+            "hdf5": h5py.version.hdf5_version, "mpi4py": mpi4py.__version__,
+            "MPI": MPI.Get_library_version().split(",")[0].splitlines()[0].strip()}
+
+
+# --------------------------------------------------------------------------- stopping
+
+
+class _Stop:
+    """Stop requests from signals: the first one asks for a clean stop (finish the step,
+    commit, exit resumable); a second one of the same kind kills the process at once."""
+
+    def __init__(self):
+        self.signal = None
+        self._previous = {}
+
+    def install(self) -> None:
+        for sig in STOP_SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._handler)
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _handler(self, signum, frame) -> None:
+        if self.signal == signum:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+        self.signal = signum
+
+    def requested(self, group) -> bool:
+        """Whether to stop now; agreed by all ranks of ``group`` (they step together)."""
+        flag = self.signal is not None
+        return group.allreduce(flag, op=MPI.LOR) if group.size > 1 else flag
+
+
+# --------------------------------------------------------------------------- the driver
+
+
+class _Driver:
+    def __init__(self, comm, job, plan: Plan, out: Path, factory, stream):
+        self.comm, self.job, self.plan, self.out = comm, job, plan, out
+        self.factory, self.stream = factory, stream
+        self.rank = comm.rank
+        self.log = rank_logger(logs_dir(out), self.rank)
+        self.stop = _Stop()
+        self.t_step = self.t_io = 0.0  # s: stepping, HDF5 writes + checkpoints
+
+    def say(self, text: str) -> None:
+        """Rank 0: print (and log) one line."""
+        if self.rank == 0:
+            print(text, file=self.stream, flush=True)
+
+    def run(self) -> bool:
+        comm, job, plan = self.comm, self.job, self.plan
+        tasks = enumerate_tasks(job)
+        rpt = job.ensemble.ranks_per_task
+        group, index, n_groups = split_groups(comm, rpt)
+        leader = group.rank == 0
+        mine = assign(remaining_costs(tasks, plan.progress), n_groups)[index]
+        self.log.info(f"=== sdmpi {__version__} run {plan.mode}: {self.out}, rank {self.rank} of "
+                      f"{comm.size}, group {index} of {n_groups}, pid {os.getpid()} on "
+                      f"{socket.gethostname()}; tasks {mine}")
+        todo = [t for t in tasks if plan.progress[t.task_id] < t.n_steps]
+        steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
+        if plan.mode == "resume":
+            self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
+                     f"complete, {sum(plan.progress)} steps committed")
+        self.say(f"job {job.job.name!r}: {len(todo)} tasks to run ({steps_todo} steps) on "
+                 f"{comm.size} rank(s), {rpt} per task -> {self.out}")
+
+        self.stop.install()
+        try:
+            realisations = {tid: self.factory(job, tasks[tid]) for tid in mine}
+            layouts = {tid: store.TaskLayout.of(r) for tid, r in realisations.items()} \
+                if leader else {}
+            if plan.mode == "new":
+                self._create(layouts)
+            run_file = store.RunFile(self.out, comm)
+            try:
+                if plan.mode == "resume":
+                    self._check_layouts(run_file, layouts)
+                leaders = [g * rpt for g in range(n_groups)]
+                steps_total = sum(t.n_steps for t in tasks)
+                progress = Progress(comm, leaders, (len(tasks) - len(todo), len(tasks)),
+                                    (steps_total - steps_todo, steps_total), self.stream)
+                t0 = time.perf_counter()
+                unfinished = 0
+                for tid in mine:
+                    if unfinished or self.stop.requested(group):
+                        unfinished += 1
+                        continue
+                    unfinished += not self._run_task(tasks[tid], realisations.pop(tid),
+                                                     run_file, group, leader, progress)
+                wall = time.perf_counter() - t0
+                progress.finish()
+            finally:
+                run_file.close()
+        finally:
+            self.stop.restore()
+        unfinished = comm.allreduce(unfinished if leader else 0)
+        self._summary(wall, unfinished, len(tasks))
+        return unfinished == 0
+
+    def _create(self, layouts) -> None:
+        """Create the run file (collective) in RUN.h5.part, then rename it to RUN.h5."""
+        merged = {}
+        for part in self.comm.allgather(layouts):
+            merged.update(part)
+        part = self.out.with_name(self.out.name + ".part")
+        store.create(part, self.job, self.plan.job_text, merged, self.comm,
+                     self.plan.versions, self.plan.created)
+        self.comm.Barrier()
+        if self.rank == 0:
+            os.replace(part, self.out)
+        self.comm.Barrier()
+        self.log.info(f"created {self.out}")
+
+    def _check_layouts(self, run_file, layouts) -> None:
+        problems = [p for tid, lay in layouts.items() for p in run_file.layout_problems(tid, lay)]
+        problems = [p for part in self.comm.allgather(problems) for p in part]
+        if problems:
+            raise BadInput("\n".join([f"{self.out}: written by a different version of the "
+                                      "dynamics; cannot resume:", *problems])
+                           if self.rank == 0 else None)
+
+    def _run_task(self, task, real, run_file, group, leader, progress) -> bool:
+        """Step one task from its committed step to the end or to a stop request;
+        returns True when the task is complete."""
+        tid, n = task.task_id, task.n_steps
+        start, slot = self.plan.progress[tid], self.plan.slots[tid]
+        if start > 0:
+            real.set_state(run_file.read_state(tid, slot))
+        if real.step != start:
+            raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
+        chunk = self.job.output.checkpoint_every
+        if leader:
+            datasets = run_file.samples(tid)
+            buffers = {k: np.empty((min(chunk, n), *shape), dtype)
+                       for k, (shape, dtype, _, _) in real.sample_fields().items()}
+        self.log.info(f"task {tid}: {'resumed at' if start else 'started at'} step {start} of {n}")
+        t_task = time.perf_counter()
+        io_before = self.t_io
+        committed = step = start
+        stopped = False
+        while step < n and not stopped:
+            end = min((step // chunk + 1) * chunk, n)
+            t0 = time.perf_counter()
+            while step < end:
+                sample = real.advance(1)
+                fault("step")
+                if leader:
+                    for k, buf in buffers.items():
+                        buf[step - committed] = sample[k][0]
+                step += 1
+                progress.add(steps=1)
+                if self.stop.requested(group):
+                    stopped = True
+                    break
+            t1 = time.perf_counter()
+            self.t_step += t1 - t0
+            if leader:
+                slot = 0 if slot < 0 else 1 - slot
+                run_file.commit(tid, datasets, committed, step, buffers, real.get_state(), slot)
+                self.t_io += time.perf_counter() - t1
+            committed = step
+        elapsed = time.perf_counter() - t_task
+        io = self.t_io - io_before
+        rate = (step - start) / elapsed if elapsed > 0 else 0.0
+        if step == n:
+            progress.add(tasks=1)
+            self.log.info(f"task {tid}: complete, {step - start} steps in {elapsed:.3g} s "
+                          f"({rate:.3g} steps/s), writes+checkpoints {io:.3g} s")
+            return True
+        self.log.info(f"task {tid}: stopped by signal {self.stop.signal} at step {step} "
+                      f"(committed)")
+        return False
+
+    def _summary(self, wall: float, unfinished: int, n_tasks: int) -> None:
+        wall_all = self.comm.allreduce(wall)
+        io_all = self.comm.allreduce(self.t_io)
+        share = 100.0 * io_all / wall_all if wall_all > 0 else 0.0
+        self.log.info(f"done: wall {wall:.3g} s, stepping {self.t_step:.3g} s, HDF5 writes + "
+                      f"checkpoints {self.t_io:.3g} s")
+        io_text = (f"HDF5 writes + checkpoints {io_all:.3g} s = {share:.2f}% of "
+                   f"{wall_all:.3g} s rank time")
+        if unfinished == 0:
+            self.say(f"{self.out}: complete ({n_tasks} tasks); {io_text}")
+        else:
+            name = signal.Signals(self.stop.signal).name if self.stop.signal else "a signal"
+            self.say(f"{self.out}: stopped by {name}, {n_tasks - unfinished}/{n_tasks} tasks "
+                     f"complete, all work up to the last checkpoint committed; run the same "
+                     f"command again to resume")

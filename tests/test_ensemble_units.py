@@ -1,0 +1,64 @@
+"""Pieces of the ensemble runner that need no MPI: LPT assignment, the progress line."""
+
+import io
+import types
+
+from sdmpi.config import enumerate_tasks, parse_job
+from sdmpi.ensemble.farm import assign, remaining_costs
+from sdmpi.ensemble.progress import Progress, hms
+
+JOB = """
+[system]
+n_particles = 8
+phi = [0.2, 0.3]
+[shear]
+omega = [1.0, 4.0, 16.0]
+[integration]
+steps_per_period = 8
+periods = 3
+discard_periods = 1
+dt_max = 0.1
+[ensemble]
+realisations = 3
+"""
+
+
+def test_every_task_once_longest_first():
+    tasks = enumerate_tasks(parse_job(JOB))
+    costs = remaining_costs(tasks, [0] * len(tasks))
+    for n_groups in (1, 2, 3, 7, 40):
+        groups = assign(costs, n_groups)
+        assert len(groups) == n_groups
+        assert sorted(t for g in groups for t in g) == list(range(len(tasks)))
+        for g in groups:
+            assert [costs[t] for t in g] == sorted((costs[t] for t in g), reverse=True)
+
+
+def test_lpt_balance_and_determinism():
+    costs = {i: c for i, c in enumerate([7, 7, 6, 5, 5, 4, 3, 3, 2, 1])}
+    groups = assign(costs, 3)
+    assert groups == assign(dict(reversed(list(costs.items()))), 3)  # order-independent
+    loads = [sum(costs[t] for t in g) for g in groups]
+    # LPT bound: makespan <= (4/3 - 1/(3m)) OPT; here OPT = 43/3 rounded up = 15
+    assert max(loads) <= 16 and sum(loads) == 43
+
+
+def test_remaining_costs_skip_finished():
+    tasks = enumerate_tasks(parse_job(JOB))
+    progress = [t.n_steps if t.task_id % 2 else t.n_steps // 2 for t in tasks]
+    costs = remaining_costs(tasks, progress)
+    groups = assign(costs, 2)
+    assigned = sorted(t for g in groups for t in g)
+    assert assigned == [t.task_id for t in tasks if t.task_id % 2 == 0]
+    assert all(costs[t.task_id] == t.cost / 2 for t in tasks if t.task_id % 2 == 0
+               and t.n_steps % 2 == 0)
+
+
+def test_progress_line():
+    comm = types.SimpleNamespace(rank=0)
+    p = Progress(comm, [0, 3], (2, 10), (400, 2000), io.StringIO())
+    p.steps, p.tasks, p.remote[3] = 300, 1, (500, 2)
+    line = p.line(p.start + 40.0)
+    assert line == ("tasks 5/10 done | steps 1200/2000 (60.0%) | 20 steps/s | "
+                    "elapsed 0:00:40 | ETA 0:00:40")
+    assert hms(3725.4) == "1:02:05"
