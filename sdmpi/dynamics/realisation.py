@@ -36,6 +36,7 @@ import numpy as np
 
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
+from ..hydro.lubrication import close_pairs
 from ..hydro.resistance import grand_resistance
 from ..hydro.solvers import make_solver
 from .forces import Repulsion, pair_forces, remove_overlaps
@@ -164,18 +165,36 @@ class Realisation:
     # ------------------------------------------------------------------ physics
 
     def _resistance(self, positions, strain, plan=None):
-        return grand_resistance(positions, self.radii, self.box, strain, plan=plan, **self._hydro)
+        try:
+            return grand_resistance(positions, self.radii, self.box, strain, plan=plan, **self._hydro)
+        except np.linalg.LinAlgError as err:
+            raise RuntimeError(
+                f"task {self.task.task_id}, step {self.step}: the hydrodynamic matrices lost "
+                f"positive definiteness ({err}); a time step of {self.dt:.3g} moves spheres by "
+                f"~{math.sqrt(2 * self.dt):.2g} radii per step (Brownian) - use a smaller "
+                "time step (the seed used 5e-5 <= dt <= 5e-4 t_D)") from err
+
+    def _separate(self, positions, lattice, rounds=10):
+        """Overlapping pairs are counted (with the deepest gap) and separated by the
+        potential-free correction, repeated while a correction creates new overlaps."""
+        found, deepest = 0, np.inf
+        for _ in range(rounds):
+            pairs = close_pairs(positions, self.radii, lattice, cutoff=0.0)
+            if len(pairs.i) == 0:
+                break
+            if found == 0:
+                found, deepest = len(pairs.i), pairs.min_gap
+            positions = remove_overlaps(positions, self.radii, pairs, self._hydro["min_gap"])
+        return positions, found, deepest
 
     def _one_step(self):
         k = self.step
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
-        res = self._resistance(self.positions, strain)
-        n_overlaps, min_gap = int(np.sum(res.pairs.gap < 0)), res.pairs.min_gap
-        if n_overlaps:
-            fixed = remove_overlaps(res.positions, self.radii, res.pairs, self._hydro["min_gap"])
-            res = self._resistance(fixed, strain)
-        pos = res.positions
+        lattice = Lattice(self.box, strain)
+        pos, n_overlaps, overlap_gap = self._separate(lattice.wrap(self.positions), lattice)
+        res = self._resistance(pos, strain)
+        min_gap = min(overlap_gap, res.pairs.min_gap)
         n = self.n_particles
         solver = make_solver(self.job.solver.backend, res)
         e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
@@ -218,9 +237,13 @@ class Realisation:
     def _brownian(self, res, solver, strain):
         """Brownian velocities and stresslets of this step (see `midpoint_brownian`)."""
         z = self.rng.standard_normal((self.n_particles, 6))
-        return midpoint_brownian(res, solver, z, self.kT, self.dt,
-                                 lambda pos, plan: self._resistance(pos, strain, plan=plan),
-                                 self.job.solver.backend)
+
+        def at_midpoint(pos, plan):
+            # a half step may overlap spheres: separate them (rare; as at step starts)
+            pos = remove_overlaps(pos, self.radii, res.pairs, self._hydro["min_gap"])
+            return self._resistance(pos, strain, plan=plan)
+
+        return midpoint_brownian(res, solver, z, self.kT, self.dt, at_midpoint, self.job.solver.backend)
 
 
 def midpoint_brownian(res, solver, z, kT, dt, resistance_at, backend="dense"):
