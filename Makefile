@@ -36,12 +36,14 @@ run: setup
 	mkdir -p out
 	mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi run jobs/demo.toml -o out/demo.h5
 	$(VENV)/bin/sdmpi info out/demo.h5
+	$(VENV)/bin/sdmpi reduce out/demo.h5 -o out/demo
 
 test: setup
 	$(VPY) -m pytest -q tests
 
 bench: setup
 	$(VPY) bench/bench_hydro.py --out bench/results.json
+	$(VPY) bench/bench_ensemble.py
 
 clean:
 	rm -rf $(VENV) .numba_cache build *.egg-info
