@@ -133,6 +133,11 @@ def plot_moduli(red, path, phi) -> Path:
         ax.set_title(f"{name}(ω)")
         ax.grid(True, which="both", alpha=0.25)
         legend_below(ax)
+    return _save(fig, red, phi, path)
+
+
+def _save(fig, red, phi, path) -> Path:
+    """Title (system and error-bar convention) and PNG output of a moduli/viscosity figure."""
     fig.suptitle(_title(red, phi) + "\nbars: ± one standard error; points offset by a few % in ω "
                  "for legibility", fontsize=10)
     fig.savefig(path, dpi=120)
@@ -184,10 +189,7 @@ def plot_viscosities(red, path, phi) -> Path:
         ax.set_title(f"{name}(ω) = {'G″' if q == 1 else 'G′'}/ω  (seed eq. 19)")
         ax.grid(True, which="both", alpha=0.25)
         legend_below(ax)
-    fig.suptitle(_title(red, phi) + "\nbars: ± one standard error; points offset by a few % in ω "
-                 "for legibility", fontsize=10)
-    fig.savefig(path, dpi=120)
-    return Path(path)
+    return _save(fig, red, phi, path)
 
 
 def plot_lissajous(red, path, task_id=None, file_index=0) -> Path:

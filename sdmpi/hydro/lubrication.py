@@ -396,23 +396,23 @@ def _tabulated_kernel(dx, a1, a2, pi, pj, tab, data, offset, k_lo, n_rows, out):
                     acc += w[m] * data[row + m, col]
                 sc[b, f] = acc * unscale
         _fill_pair_work(d, a1[p], a2[p], sc, bm, R, work)
-        idx = (pi[p], pj[p])
-        for uu in range(2):
-            for vv in range(2):
-                r0, c0 = NDOF * idx[uu], NDOF * idx[vv]
-                for a in range(NDOF):
-                    for b2 in range(NDOF):
-                        out[r0 + a, c0 + b2] += R[NDOF * uu + a, NDOF * vv + b2]
+        _add_pair(pi[p], pj[p], R, out)
+
+
+@numba.njit(cache=True)
+def _add_pair(i, j, pair, out):
+    """Adds a pair's 22x22 matrix into the blocks (i,i), (i,j), (j,i), (j,j) of out."""
+    idx = (i, j)
+    for u in range(2):
+        for v in range(2):
+            r0, c0 = NDOF * idx[u], NDOF * idx[v]
+            for a in range(NDOF):
+                for b in range(NDOF):
+                    out[r0 + a, c0 + b] += pair[NDOF * u + a, NDOF * v + b]
 
 
 @numba.njit(cache=True)
 def _scatter_pairs(pi, pj, res, out):
-    """Adds each pair's 22x22 matrix into the blocks (i,i), (i,j), (j,i), (j,j)."""
+    """Adds each pair's 22x22 matrix res[p] into out (see _add_pair)."""
     for p in range(pi.shape[0]):
-        idx = (pi[p], pj[p])
-        for u in range(2):
-            for v in range(2):
-                r0, c0 = NDOF * idx[u], NDOF * idx[v]
-                for a in range(NDOF):
-                    for b in range(NDOF):
-                        out[r0 + a, c0 + b] += res[p, NDOF * u + a, NDOF * v + b]
+        _add_pair(pi[p], pj[p], res[p], out)
