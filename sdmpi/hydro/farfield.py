@@ -271,21 +271,25 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, levi, mob):
     """Adds the real-space Ewald sum over the pair images (pi, pj, shift) (or, with
     xi = 0 and zero shifts, the unbounded pair couplings) into the (11N, 11N) matrix mob.
     Each image pair is stored once: M_ji = M_ij^T (reciprocity) fills the other
-    triangle, and for a self-image (i == j) adds the -n image."""
+    triangle, and for a self-image (i == j) adds the -n image. Consecutive images of the
+    same pair (find_pairs lists them together) are summed before being added to mob."""
     bounds = _power_bounds(table)
     work = np.empty(80)
     block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
-    for p in range(pi.shape[0]):
+    n_img = pi.shape[0]
+    for p in range(n_img):
         i, j = pi[p], pj[p]
         for c in range(3):
             rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
-        block[:, :] = 0.0
         _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, levi, work, block)
+        if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
+            continue
         for a in range(NDOF):
             for b in range(NDOF):
                 mob[NDOF * i + a, NDOF * j + b] += block[a, b]
                 mob[NDOF * j + b, NDOF * i + a] += block[a, b]
+        block[:, :] = 0.0
 
 
 # ---------------------------------------------------------------------------------
