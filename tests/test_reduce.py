@@ -252,7 +252,8 @@ def test_steady_shear_gives_viscosity_csv(tmp_path):
     red = reduce_runs([run])
     paths, _ = write_all(red, tmp_path / "out")
     header, rows = rows_of(tmp_path / "out" / "viscosity.csv")
-    assert header == ["phi", "rate", "component", "n_realisations", "eta", "eta_err"]
+    # issue 7 appended N1, N2, Pi and 95% intervals (tests/test_steady.py); eta first
+    assert header[:6] == ["phi", "rate", "component", "n_realisations", "eta", "eta_err"]
     eta = {r[2]: (float(r[4]), float(r[5])) for r in rows}
     assert eta["medium"] == (1.0, 0.0)
     for comp, value in (("hydrodynamic", 1.5), ("brownian", 0.4), ("total", 2.9)):

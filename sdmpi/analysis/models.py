@@ -1,4 +1,11 @@
-"""Analytic models for overlays and checks. Viscosities are relative to the medium's."""
+"""Analytic models for overlays and checks. Viscosities are relative to the medium's.
+
+Relative viscosity laws: Einstein (dilute), Batchelor-Green (O(phi^2)), seed 000's
+polynomial fit (eq. 38), and the empirical concentrated-suspension laws Krieger-Dougherty,
+Maron-Pierce and Eilers (all with a maximum packing fraction phi_max). Einstein is the
+dilute limit of all but Maron-Pierce, whose slope is 2/phi_max (Einstein only for
+phi_max = 0.8). Maxwell-medium moduli and viscosities (seed 000 eqs. 36, 41-42).
+"""
 
 import numpy as np
 
@@ -79,6 +86,36 @@ def krieger_dougherty(phi, phi_max=0.64, intrinsic=2.5):
     random close packing, for the high-frequency/hydrodynamic viscosity; about
     0.58-0.63 for the zero-shear viscosity of Brownian hard spheres)."""
     phi = np.asarray(phi, float)
+    phi = _check_below_max(phi, phi_max)
+    return (1.0 - phi / phi_max) ** (-intrinsic * phi_max)
+
+
+def _check_below_max(phi, phi_max):
+    phi = np.asarray(phi, float)
     if np.any((phi < 0) | (phi >= phi_max)):
         raise ValueError(f"need 0 <= phi < phi_max = {phi_max}")
-    return (1.0 - phi / phi_max) ** (-intrinsic * phi_max)
+    return phi
+
+
+def maron_pierce(phi, phi_max=0.64):
+    """eta/eta_m = (1 - phi/phi_max)^(-2) (Maron & Pierce, J. Colloid Sci. 11, 80 (1956);
+    the form used by seed 003 and, with phi_max fitted, for non-Brownian suspensions by
+    e.g. Zarraga, Hill & Leighton, J. Rheol. 44, 185 (2000), Mari et al., J. Rheol. 58
+    (2014)). Krieger-Dougherty with the exponent [eta] phi_max fixed at 2. Empirical,
+    0 <= phi < phi_max. Dilute limit 1 + (2/phi_max) phi: Einstein's 2.5 phi only for
+    phi_max = 0.8 (for phi_max = 0.64 the slope is 3.1); it is a concentrated-suspension
+    fit, not a dilute theory. Diverges as (1 - phi/phi_max)^-2."""
+    phi = _check_below_max(phi, phi_max)
+    return (1.0 - phi / phi_max) ** -2
+
+
+def eilers(phi, phi_max=0.64):
+    """eta/eta_m = [1 + 1.25 phi / (1 - phi/phi_max)]^2 (Eilers, Kolloid-Z. 97, 313
+    (1941); reviewed by Stickel & Powell, Annu. Rev. Fluid Mech. 37, 129 (2005);
+    phi_max ~ 0.58-0.64 from fits to non-Brownian data, e.g. Zarraga et al. 2000: 0.62).
+    Empirical, 0 <= phi < phi_max. Dilute limit: 1 + 2.5 phi + (1.5625 + 2.5/phi_max)
+    phi^2 + ..., Einstein for every phi_max (O(phi^2) coefficient 5.47 at phi_max = 0.64,
+    near Batchelor-Green's 5.2); near phi_max: (1.25 phi_max)^2 (1 - phi/phi_max)^-2, the
+    same divergence as Maron-Pierce."""
+    phi = _check_below_max(phi, phi_max)
+    return (1.0 + 1.25 * phi / (1.0 - phi / phi_max)) ** 2

@@ -11,7 +11,15 @@
 * :func:`plot_lissajous`: stress-strain loops of one task, phase-averaged over its
   analysed periods, per contribution.
 
-Units: w in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m. Figures are built
+Steady shear:
+
+* :func:`plot_running`: running averages (1/t) int_0^t of eta, N1, N2 and Pi per
+  contribution from t = 0 (seed 001 Figs. 9-10), the mean over realisations as thick
+  lines and each realisation's total as thin lines; the discarded start-up shaded and
+  the reported mean +- its 95% confidence interval (from the samples after it) as a band.
+
+Units: w in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m; steady shear: t
+in the job's time unit, N1, N2, Pi in eta_m gamma_dot. Figures are built
 on :class:`matplotlib.figure.Figure` (no pyplot state, no display needed).
 """
 
@@ -254,3 +262,67 @@ def plot_all(red, outdir, task_id=None):
             raise
         notes.append(f"no Lissajous figure: {err}")
     return paths, notes
+
+
+STEADY_LABEL = {"eta": "η / η_m  (relative viscosity)", "N1": "N1 / (η_m γ̇)",
+                "N2": "N2 / (η_m γ̇)", "Pi": "Π / (η_m γ̇)  (particle pressure)"}
+
+
+def plot_running(red, path, phi) -> Path:
+    """Running averages of eta, N1, N2, Pi vs time for one phi of a steady-shear
+    reduction (module docstring)."""
+    from .reduce import STEADY_QUANTITIES, confidence_half_width
+    g = int(np.flatnonzero(red.phi == phi)[0])
+    run = red.running
+    t = run["time"] + red.job.time_step(None)    # average over samples 0..k spans (k+1) dt
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(11.0, 8.8))
+    axes = fig.subplots(2, 2).ravel()
+    e = red.ensemble
+    for q, (ax, name) in enumerate(zip(axes, STEADY_QUANTITIES)):
+        for c, comp in _active(red, red.phi == phi):
+            colour, _ = STYLE[comp]
+            curves = run["values"][g, c, q]                         # (R, T)
+            if comp == "total":
+                for r, curve in enumerate(curves):
+                    ax.plot(t, curve, "-", color="0.6", lw=0.6,
+                            label="total, each realisation" if r == 0 else None)
+            with np.errstate(all="ignore"):
+                mean = np.nanmean(curves, axis=0) if np.any(np.isfinite(curves)) else curves[0]
+            label = ("medium (exact)" if comp == "medium"
+                     else LABEL[comp] + " (mean of realisations)")
+            ax.plot(t, mean, "-", color=colour, lw=2.0 if comp == "total" else 1.5,
+                    label=label)
+            m = e.mean[g, c, q]
+            half = float(confidence_half_width(e.err[g, c, q], e.dof[g, c, q]))
+            if np.isfinite(m) and np.isfinite(half) and half > 0:
+                late = t >= run["discard_time"]
+                ax.fill_between(t[late], m - half, m + half, color=colour, alpha=0.18, lw=0)
+        ax.axvspan(0.0, run["discard_time"], color="0.9", zorder=0,
+                   label="discarded start-up")
+        ax.axhline(0.0, color="0.6", lw=0.6)
+        ax.set_xlim(0.0, t[-1])
+        ax.set_xlabel(f"t  [{red.job.time_unit}]")
+        ax.set_ylabel(STEADY_LABEL[name])
+        ax.set_title(f"running average of {name}")
+        ax.grid(True, which="both", alpha=0.25)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=3, frameon=False)
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.91, bottom=0.14, hspace=0.3, wspace=0.22)
+    job = red.job
+    n = int(e.n_realisations[g, 1, 0])
+    brown = f"Pe = {job.shear.rate:g}" if job.brownian.enabled else "non-Brownian"
+    fig.suptitle(f"{job.job.name}: φ = {phi:g}, N = {job.system.n_particles}, steady shear "
+                 f"({brown}), interparticle {job.interparticle.kind}, realisations {n}"
+                 + ("" if red.complete else ", PARTIAL RUN")
+                 + "\nbands: reported mean ± 95% confidence interval (samples after the "
+                 "start-up)", fontsize=10)
+    fig.savefig(path, dpi=120)
+    return Path(path)
+
+
+def plot_running_all(red, outdir) -> list:
+    """running_phi<phi>.png for every volume fraction of a steady-shear reduction."""
+    outdir = Path(outdir)
+    return [plot_running(red, outdir / f"running_phi{phi:g}.png", phi)
+            for phi in dict.fromkeys(red.phi.tolist())]

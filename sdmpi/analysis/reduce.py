@@ -31,9 +31,32 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
    realisations (:mod:`.errors`, ``blocking`` then ``combine``). eta' = G''/w and
    eta'' = G'/w, relative to eta_m (eq. 19; :func:`.projection.viscosities`).
 
-Steady-shear jobs are reduced to viscosities instead: eta = <sigma_xy>/gamma_dot per
-contribution over the samples after ``discard_steps`` (same blocking and ensemble
-errors; medium: its zero-shear viscosity, sum of the Maxwell modes' eta_k, or 1).
+Steady-shear jobs (seed 001 sec. 2) are reduced to ``viscosity.csv`` instead, one row
+per (phi, rate, component), from every sample after ``discard_steps`` of the stored
+particle-stress 6-vectors Sigma (xx yy zz xy xz yz) of each contribution. The bulk
+stress is sigma = -p I + 2 eta_m E_inf + Sigma (p the fluid pressure, tension positive),
+and per sample
+
+    eta = Sigma_xy / gamma_dot                      (relative viscosity, eta_m = 1)
+    N1  = (Sigma_xx - Sigma_yy) / gamma_dot         (first normal-stress difference)
+    N2  = (Sigma_yy - Sigma_zz) / gamma_dot         (second normal-stress difference)
+    Pi  = -(Sigma_xx + Sigma_yy + Sigma_zz) / (3 gamma_dot)   (particle pressure,
+                                                     positive = pushes outwards)
+
+all made dimensionless with eta_m gamma_dot (multiply by the rate for eta_m/t_D in a
+Brownian job). Components: ``medium`` (eta = its zero-shear viscosity, the sum of the
+Maxwell modes' eta_k or 1; N1 = N2 = Pi = 0: the medium's linear stress, seed 000 eq. 2,
+has no normal stresses; exact, errors 0), ``hydrodynamic``, ``brownian``,
+``interparticle`` and ``total`` (medium + the parts, sample by sample). NB: SD's FTS
+stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
+construction: Pi here is the interparticle (virial) pressure only; the stresslet trace
+(Jeffrey, Morris & Brady 1993) and the kinetic n kT are not computed. Errors: the same
+blocking within a realisation and spread between realisations (:mod:`.errors`) give one
+standard error ``*_err`` with ``dof`` degrees of freedom (R - 1 for R >= 2
+realisations); ``*_ci95`` is the half-width of the 95% confidence interval,
+t_{0.975, dof} x err (Student t; the sub-average method of Allen & Tildesley 1987 that
+seed 001 uses). For figures, running averages (1/t) int_0^t of every quantity from t = 0
+(start-up included) are kept per realisation (:attr:`Reduction.running`).
 Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
 
 Partial runs are reduced from what is committed; every incomplete task is named in
@@ -67,8 +90,16 @@ COMPONENTS = ("medium", "hydrodynamic", "brownian", "interparticle", "total")
 MODULI_COLUMNS = ("phi", "omega", "component", "n_realisations", "G_prime", "G_prime_err",
                   "G_dprime", "G_dprime_err", "eta_prime", "eta_prime_err", "eta_dprime",
                   "eta_dprime_err")
-#: viscosity.csv columns (steady shear)
-VISCOSITY_COLUMNS = ("phi", "rate", "component", "n_realisations", "eta", "eta_err")
+#: quantities of a steady-shear reduction (module docstring), in units of eta_m gamma_dot
+STEADY_QUANTITIES = ("eta", "N1", "N2", "Pi")
+#: viscosity.csv columns (steady shear): per quantity mean, one standard error, and the
+#: half-width of the 95% confidence interval; dof of the intervals last
+VISCOSITY_COLUMNS = ("phi", "rate", "component", "n_realisations") + tuple(
+    c for q in STEADY_QUANTITIES for c in (q, f"{q}_err", f"{q}_ci95")) + ("dof",)
+#: confidence level of the *_ci95 columns
+CONFIDENCE = 0.95
+#: at most this many points per running-average curve (Reduction.running)
+RUNNING_POINTS = 400
 #: index of the xy component in the stored 6-vectors (component_order xx yy zz xy xz yz)
 XY = 3
 
@@ -98,7 +129,7 @@ class Reduction:
     job, job_text the job of the first file (canonical TOML text)
     files         input paths; seeds (per file)
     phi, control  (G,) per task group: volume fraction and omega (1/t_D) or shear rate
-    quantities    names of the last axis Q: ("G_prime", "G_dprime") or ("eta",)
+    quantities    names of the last axis Q: ("G_prime", "G_dprime") or STEADY_QUANTITIES
     ensemble      :class:`.errors.Ensemble`, fields (G, C, Q), C = len(COMPONENTS)
     per_realisation :class:`.errors.Blocking`, fields (G, C, Q, R), realisations R of all
                   files (n == 0: nothing committed after the start-up, absent)
@@ -106,6 +137,10 @@ class Reduction:
     task_id       (G, R): the task of group g, realisation r in its file
     committed, n_steps  (G, R): samples committed and planned per task
     notes         human-readable remarks (partial runs, single realisations, ...)
+    running       steady shear only (else None): {"time": (T,) sample times in the job's
+                  time unit, "values": (G, C, Q, R, T) running averages (1/t) sum over
+                  samples 0..k of each quantity per realisation, NaN after a partial
+                  task's last committed sample, "discard_time": time of discard_steps}
     """
 
     kind: str
@@ -124,6 +159,7 @@ class Reduction:
     committed: np.ndarray
     n_steps: np.ndarray
     notes: tuple
+    running: dict | None = None
 
     @property
     def complete(self) -> bool:
@@ -153,7 +189,12 @@ class Reduction:
                                eta_prime_err=float(err1), eta_dprime=float(eta2),
                                eta_dprime_err=float(err2))
                 else:
-                    row.update(eta=float(e.mean[g, c, 0]), eta_err=float(e.err[g, c, 0]))
+                    half = confidence_half_width(e.err[g, c], e.dof[g, c])
+                    for q, name in enumerate(STEADY_QUANTITIES):
+                        row[name] = float(e.mean[g, c, q])
+                        row[f"{name}_err"] = float(e.err[g, c, q])
+                        row[f"{name}_ci95"] = float(half[q])
+                    row["dof"] = int(e.dof[g, c, 0])
                 out.append(row)
         return out
 
@@ -182,6 +223,17 @@ def medium_moduli(job: Job, omega):
         g1, g2 = maxwell_moduli(omega, [m.eta for m in modes], [m.lam for m in modes])
         return float(g1), float(g2)
     return 0.0, float(omega)
+
+
+def confidence_half_width(err, dof, level=CONFIDENCE):
+    """Half-width t_{(1+level)/2, dof} x err of the two-sided confidence interval of a
+    mean with standard error ``err`` and ``dof`` degrees of freedom (Student t); 0 where
+    err is 0 (exact values), NaN where dof < 1."""
+    from scipy.stats import t as student_t
+    err, dof = np.asarray(err, float), np.asarray(dof)
+    with np.errstate(invalid="ignore"):
+        q = student_t.ppf(0.5 + 0.5 * level, np.where(dof >= 1, dof, 1))
+    return np.where(err == 0, 0.0, np.where(dof >= 1, q * err, np.nan))
 
 
 def medium_viscosity(job: Job) -> float:
@@ -259,8 +311,9 @@ def _open_h5(path):
         return h5py.File(path, "r")
 
 
-def _read_xy(f, task, committed, names):
-    """(len(names), committed) xy stress of one task, committed samples only; checks
+def _read_xy(f, task, committed, names, columns=XY):
+    """(len(names), committed) xy stress of one task, committed samples only (with
+    ``columns = slice(None)``: (len(names), committed, 6), all components); checks
     that the samples are taken at t_k = k dt (the projection assumes t0 = 0)."""
     from ..ensemble.store import task_key
     group = f[f"tasks/{task_key(task.task_id)}/samples"]
@@ -274,25 +327,47 @@ def _read_xy(f, task, committed, names):
         if not np.allclose(t, k * task.dt, rtol=1e-9, atol=1e-12 * task.dt):
             raise ReduceError(f"{f.filename}: task {task.task_id}: samples are not at "
                               f"t_k = k dt (time[{k.tolist()}] = {t.tolist()})")
-    return np.stack([group[n][:committed, XY] for n in names])
+    return np.stack([group[n][:committed, columns] for n in names])
 
 
-def task_series(job: Job, task, xy):
+def task_series(job: Job, task, stress):
     """Per-value series of one task, (C, Q, n): per whole period (G', G'') after the
-    start-up for oscillatory jobs, per sample sigma_xy/gamma_dot after discard_steps
-    for steady ones. ``xy``: (3, committed) hydrodynamic, Brownian, interparticle xy
-    stress. Rows follow COMPONENTS; the medium row is its exact value repeated and the
-    total row is medium + the three parts, value by value."""
+    start-up for oscillatory jobs, per sample (eta, N1, N2, Pi) after discard_steps for
+    steady ones (module docstring). ``stress``: hydrodynamic, Brownian, interparticle
+    stress of the committed samples, (3, committed) xy for oscillatory jobs and
+    (3, committed, 6) 6-vectors for steady ones. Rows follow COMPONENTS; the medium row
+    is its exact value repeated and the total row is medium + the three parts, value by
+    value."""
     if job.shear.protocol == "oscillatory":
         n = job.steps_per_period(task.omega)
-        g1, g2 = project_periods(xy, job.shear.gamma0, task.omega, n, task.discard_steps // n)
+        g1, g2 = project_periods(stress, job.shear.gamma0, task.omega, n, task.discard_steps // n)
         parts = np.stack([g1, g2], axis=1)                         # (3, 2, P)
         medium = np.array(medium_moduli(job, task.omega))
     else:
-        parts = (xy[:, task.discard_steps:] / job.shear.rate)[:, None, :]   # (3, 1, M)
-        medium = np.array([medium_viscosity(job)])
+        parts = steady_quantities(stress[:, task.discard_steps:], job.shear.rate)  # (3, 4, M)
+        medium = np.array([medium_viscosity(job), 0.0, 0.0, 0.0])
     med = np.broadcast_to(medium[:, None], parts.shape[1:])
     return np.concatenate([med[None], parts, (med + parts.sum(axis=0))[None]])
+
+
+def steady_quantities(stress, rate):
+    """(..., n, 6) stress 6-vectors (xx yy zz xy xz yz) -> (..., 4, n): eta, N1, N2, Pi
+    per sample in units of eta_m gamma_dot (module docstring)."""
+    s = np.moveaxis(np.asarray(stress, float), -1, -2) / rate       # (..., 6, n)
+    xx, yy, zz, xy = s[..., 0, :], s[..., 1, :], s[..., 2, :], s[..., 3, :]
+    return np.stack([xy, xx - yy, yy - zz, -(xx + yy + zz) / 3.0], axis=-2)
+
+
+def running_average(x, points=RUNNING_POINTS):
+    """Running averages (1/(k+1)) sum_{i <= k} x_i along the last axis, and the indices
+    k at which they are kept (about ``points`` of them, geometrically spaced, the last
+    sample always included)."""
+    x = np.asarray(x, float)
+    n = x.shape[-1]
+    keep = np.unique(np.concatenate([np.geomspace(1, n, min(points, n)).astype(int) - 1,
+                                     [n - 1]])) if n else np.zeros(0, int)
+    csum = np.cumsum(x, axis=-1)
+    return csum[..., keep] / (keep + 1), keep
 
 
 def periods_needed(job: Job, task) -> str:
@@ -324,6 +399,7 @@ def reduce_runs(paths) -> Reduction:
             f"and steady-shear (viscosity.csv) jobs are reduced")
     kind = "oscillatory" if job.shear.protocol == "oscillatory" else "steady"
     names = stress_datasets(job)
+    columns_read = XY if kind == "oscillatory" else slice(None)
 
     groups = list(dict.fromkeys((t.phi, t.omega) for t in summaries[0].tasks))
     file_index, realisation, columns, notes = [], [], [], []   # columns: per realisation
@@ -338,6 +414,14 @@ def reduce_runs(paths) -> Reduction:
 
     n_groups, n_real = len(groups), len(columns)
     series = [[None] * n_real for _ in range(n_groups)]
+    running = None
+    if kind == "steady":
+        n_planned = summaries[0].tasks[0].n_steps
+        _, keep = running_average(np.zeros(n_planned))
+        running = {"time": keep * summaries[0].tasks[0].dt,
+                   "values": np.full((n_groups, len(COMPONENTS), len(STEADY_QUANTITIES),
+                                      n_real, keep.size), np.nan),
+                   "discard_time": job.integration.discard_steps * job.integration.dt}
     committed = np.zeros((n_groups, n_real), dtype=np.int64)
     planned = np.zeros_like(committed)
     task_id = np.zeros_like(committed)
@@ -349,7 +433,10 @@ def reduce_runs(paths) -> Reduction:
                     continue
                 for g, task in enumerate(tasks):
                     done = int(s.progress[task.task_id])
-                    x = task_series(job, task, _read_xy(f, task, done, names))
+                    stress = _read_xy(f, task, done, names, columns_read)
+                    x = task_series(job, task, stress)
+                    if running is not None and done:
+                        _running_into(running["values"][g, :, :, col], job, stress, keep)
                     series[g][col] = x
                     committed[g, col], planned[g, col] = done, task.n_steps
                     task_id[g, col] = task.task_id
@@ -381,9 +468,20 @@ def reduce_runs(paths) -> Reduction:
     return Reduction(kind, job, summaries[0].job_text, tuple(paths),
                      tuple(s.job.job.seed for s in summaries),
                      np.array([p for p, _ in groups]), control,
-                     ("G_prime", "G_dprime") if kind == "oscillatory" else ("eta",),
+                     ("G_prime", "G_dprime") if kind == "oscillatory" else STEADY_QUANTITIES,
                      ens, stacked, np.array(file_index), np.array(realisation), task_id,
-                     committed, planned, tuple(notes))
+                     committed, planned, tuple(notes), running)
+
+
+def _running_into(out, job: Job, stress, keep):
+    """Running averages of one steady task from t = 0 into out (C, Q, T) at the sample
+    indices ``keep`` that it has committed (the rest stays NaN)."""
+    parts = steady_quantities(stress, job.shear.rate)                # (3, Q, done)
+    medium = np.array([medium_viscosity(job), 0.0, 0.0, 0.0])[:, None]
+    full = np.concatenate([np.broadcast_to(medium, parts.shape[1:])[None], parts,
+                           (medium + parts.sum(axis=0))[None]])
+    have = keep < full.shape[-1]
+    out[..., have] = np.cumsum(full, axis=-1)[..., keep[have]] / (keep[have] + 1)
 
 
 def _stack_blocking(per_real):
@@ -394,12 +492,14 @@ def _stack_blocking(per_real):
 
 
 def _exact_medium(ens: Ensemble, job: Job, groups, kind) -> Ensemble:
-    """Put the medium's exact values (seed eq. 36) into row 0 with zero errors, instead
+    """Put the medium's exact values (seed eq. 36; steady shear: eta_0m and no normal
+    stresses) into row 0 with zero errors, instead
     of the average of identical numbers (equal to round-off) or NaN when no data."""
     mean, err = ens.mean.copy(), ens.err.copy()
     within, between = ens.err_within.copy(), ens.err_between.copy()
     for g, (_, omega) in enumerate(groups):
-        mean[g, 0] = medium_moduli(job, omega) if kind == "oscillatory" else medium_viscosity(job)
+        mean[g, 0] = (medium_moduli(job, omega) if kind == "oscillatory"
+                      else (medium_viscosity(job), 0.0, 0.0, 0.0))
         err[g, 0] = within[g, 0] = between[g, 0] = 0.0
     return ens._replace(mean=mean, err=err, err_within=within, err_between=between)
 

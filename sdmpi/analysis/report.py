@@ -3,7 +3,12 @@
 ``moduli.csv`` (oscillatory jobs; DESIGN.md contract 4): one row per (phi, omega,
 component), columns :data:`.reduce.MODULI_COLUMNS`; ``*_err`` is one standard error;
 floats in shortest round-trip form, ``nan`` where nothing is known yet. Steady-shear
-jobs give ``viscosity.csv`` (:data:`.reduce.VISCOSITY_COLUMNS`) instead.
+jobs give ``viscosity.csv`` instead, one row per (phi, rate, component), columns
+:data:`.reduce.VISCOSITY_COLUMNS`: ``phi, rate, component, n_realisations``, then for
+each of ``eta`` (relative viscosity), ``N1``, ``N2`` (normal-stress differences) and
+``Pi`` (particle pressure), all in units of eta_m gamma_dot, the mean, ``*_err`` (one
+standard error) and ``*_ci95`` (half-width of the 95% confidence interval, Student t),
+and last ``dof`` (see :mod:`.reduce` for definitions and sign conventions).
 
 ``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1):
 
@@ -16,9 +21,10 @@ jobs give ``viscosity.csv`` (:data:`.reduce.VISCOSITY_COLUMNS`) instead.
 | `/realisations/<field>` | (G, C, Q, R): per-realisation `mean`, `err`, `n` (periods or samples used), `block_size`, `n_blocks` (:class:`.errors.Blocking`) |
 | `/realisations/file_index`, `realisation` | (R,): input file (index into `input_files`) and realisation number in it |
 | `/realisations/task_id`, `committed`, `n_steps` | (G, R): task of each realisation, samples committed and planned |
+| `/running/time`, `/running/values` | steady shear only: (T,) times and (G, C, Q, R, T) running averages from t = 0 (`Reduction.running`); attr `discard_time` |
 
 Axes: G task groups (phi-major, then omega), C = components in the order of
-:data:`.reduce.COMPONENTS`, Q = quantities (G', G'' or eta), R = realisations.
+:data:`.reduce.COMPONENTS`, Q = quantities (G', G''; or eta, N1, N2, Pi), R = realisations.
 """
 
 from __future__ import annotations
@@ -35,7 +41,8 @@ from .. import __version__
 from .reduce import COMPONENTS
 
 UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/t_D",
-         "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m", "eta": "eta_m"}
+         "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m", "eta": "eta_m",
+         "N1": "eta_m gamma_dot", "N2": "eta_m gamma_dot", "Pi": "eta_m gamma_dot"}
 
 
 def _fmt(x) -> str:
@@ -94,6 +101,12 @@ def write_h5(red, path) -> Path:
             per[name] = np.asarray(value)
         for name in ("file_index", "realisation", "task_id", "committed", "n_steps"):
             per[name] = getattr(red, name)
+        if red.running is not None:
+            run = f.create_group("running")
+            run.attrs["axes"] = "group, component, quantity, realisation, time"
+            run.attrs["discard_time"] = red.running["discard_time"]
+            run["time"] = red.running["time"]
+            run["values"] = red.running["values"]
     return path
 
 
@@ -117,22 +130,25 @@ def format_table(red) -> str:
                  ("eta_prime", "eta_prime_err"), ("eta_dprime", "eta_dprime_err")]
         units = "omega in 1/t_D; G', G'' in eta_m/t_D; eta', eta'' relative to eta_m"
     else:
-        head = ["phi", "rate", "component", "n", "eta"]
-        pairs = [("eta", "eta_err")]
-        units = f"rate in 1/{red.job.time_unit}; eta relative to eta_m"
+        head = ["phi", "rate", "component", "n", "eta", "N1", "N2", "Pi"]
+        pairs = [(q, f"{q}_ci95") for q in ("eta", "N1", "N2", "Pi")]
+        rate = ("rate (Pe) in 1/t_D" if red.job.time_unit == "t_D"
+                else "rate 1 = gamma_dot (time unit 1/gamma_dot)")
+        units = f"{rate}; eta relative to eta_m; N1, N2, Pi in eta_m gamma_dot"
     lines = [[f"{r['phi']:g}", f"{r[red.columns[1]]:.5g}", r["component"],
               str(r["n_realisations"])] + [pm(r[m], r[e]) for m, e in pairs]
              for r in red.rows()]
     widths = [max(len(x) for x in col) for col in zip(head, *lines)]
     text = ["  ".join(x.ljust(w) for x, w in zip(row, widths)).rstrip()
             for row in [head] + lines]
-    return "\n".join(text + [f"({units}; ± one standard error)"])
+    bars = "one standard error" if red.kind == "oscillatory" else "95% confidence interval"
+    return "\n".join(text + [f"({units}; ± {bars})"])
 
 
 def write_all(red, outdir, *, plots=True, task_id=None):
-    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear) and, for
-    oscillatory jobs, the figures (:func:`.plots.plot_all`) into ``outdir`` (created).
-    Returns (paths written, notes)."""
+    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear) and the
+    figures (:func:`.plots.plot_all`; steady shear: :func:`.plots.plot_running`) into
+    ``outdir`` (created). Returns (paths written, notes)."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     stem = "moduli" if red.kind == "oscillatory" else "viscosity"
@@ -143,5 +159,6 @@ def write_all(red, outdir, *, plots=True, task_id=None):
         figures, notes = plot_all(red, outdir, task_id)
         paths += figures
     elif plots:
-        notes.append("steady shear: no figures (a table of viscosities only)")
+        from .plots import plot_running_all
+        paths += plot_running_all(red, outdir)
     return paths, notes

@@ -477,8 +477,43 @@ def _repulsion_range(job):
     return []
 
 
+def _force_range(job):
+    """vdw / dlvo: the cap inside the cut-off, and the shift that truncates the force at
+    the lubrication cut-off negligible (sdmpi.dynamics.forces.TAIL of the contact force)."""
+    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
+    if inter.kind not in ("vdw", "dlvo"):
+        return []
+    if inter.cap_gap >= cutoff:
+        return [Problem("interparticle.cap_gap", "must be smaller than "
+                        f"hydrodynamics.lubrication_cutoff (= {cutoff:g})", inter.cap_gap,
+                        allowed=f"0 < cap_gap < {cutoff:g}")]
+    # the formulas live with the force laws (imported here only for these kinds)
+    from ..dynamics.forces import TAIL, tail_ratios
+    problems = []
+    for path, ratio in tail_ratios(job).items():
+        if abs(ratio) > TAIL:
+            what = ("the van der Waals force at the cut-off" if path.endswith("cap_gap")
+                    else "the double-layer force at the cut-off")
+            fix = ("a smaller cap_gap" if path.endswith("cap_gap") else "a shorter debye_length")
+            problems.append(Problem(path, f"{what} is {abs(ratio):.2g} of its contact value; "
+                                    f"the force is shifted to vanish at the lubrication cut-off "
+                                    f"(= {cutoff:g}), which needs <= {TAIL:g}",
+                                    getattr(inter, path.split(".")[1]),
+                                    allowed=f"{fix}, or a larger hydrodynamics.lubrication_cutoff"))
+    return problems
+
+
+def _forces_need_pairs(job):
+    if job.interparticle.kind != "none" and not job.hydrodynamics.lubrication:
+        return [Problem("hydrodynamics.lubrication", "interparticle forces act on the "
+                        "lubrication pair list; without lubrication only overlapping pairs "
+                        "would feel them", False,
+                        allowed='true, or interparticle.kind = "none"')]
+    return []
+
+
 #: backends implemented in this version (the others are named by the job schema)
-IMPLEMENTED_BACKENDS = ("dense",)
+IMPLEMENTED_BACKENDS = ("dense", "petsc-dense")
 
 
 def _backend(job):
@@ -503,5 +538,8 @@ CROSS_CHECKS = (
      + _INTEGRATION, _time_step),
     (("system.n_particles", "system.phi"), _initial_configuration),
     (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
+    (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
+      "hydrodynamics.lubrication_cutoff"), _force_range),
+    (("interparticle.kind", "hydrodynamics.lubrication"), _forces_need_pairs),
     (("solver.backend",), _backend),
 )

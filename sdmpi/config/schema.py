@@ -132,6 +132,8 @@ STEADY = ("shear", "protocol", ("steady",))
 STEADY_OR_NONE = ("shear", "protocol", ("steady", "none"))
 MAXWELL = ("medium", "kind", ("maxwell",))
 REPULSION = ("interparticle", "kind", ("repulsion",))
+VDW_OR_DLVO = ("interparticle", "kind", ("vdw", "dlvo"))
+DLVO = ("interparticle", "kind", ("dlvo",))
 
 
 @dataclass(frozen=True)
@@ -243,17 +245,42 @@ class Interparticle:
 
     none: hard spheres (lubrication, plus the potential-free overlap correction);
     repulsion: F(h) = f0 tau exp(-tau h)/(1 + exp(-tau h)) along the line of centres
-    (seed 001), with h the surface gap; forces in kT/a (Brownian) or
-    6 pi eta_m a^2 gamma_dot (non-Brownian)."""
+    (seed 001), with h the surface gap; vdw: Hamaker's van der Waals attraction between
+    spheres (seed 003 eqs. 4-5), constant below cap_gap; dlvo: vdw plus the electrostatic
+    double-layer repulsion psi^2 R ln(1 + exp(-h/debye_length)) (Derjaguin, constant low
+    potential; R = a_i a_j/(a_i + a_j)). vdw and dlvo forces are shifted to vanish at the
+    lubrication cut-off. Force unit 6 pi eta_m a^2/(time unit): kT/a (Brownian) or
+    6 pi eta_m a^2 gamma_dot (non-Brownian steady shear); energy unit = force unit x a
+    (kT, or 6 pi eta_m a^3 gamma_dot). See sdmpi.dynamics.forces."""
 
-    kind: str = key("none", "str", "interparticle force", allowed=Choice(("none", "repulsion")),
+    kind: str = key("none", "str", "interparticle force",
+                    allowed=Choice(("none", "repulsion", "vdw", "dlvo")),
                     controls="interparticle.kind")
-    f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2)",
+    f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2); seed 001: "
+                           "F0 = 1/(2 gamma*) in non-Brownian jobs",
                            unit="force unit x a", allowed=Range(0.0, None, lo_open=True),
                            only_if=REPULSION, example=1.0)
     tau: float | None = key(None, "float", "inverse range tau of the repulsion; 1/tau must "
                             "be below the lubrication cut-off / 12", unit="1/a",
                             allowed=Range(0.0, None, lo_open=True), only_if=REPULSION, example=1000.0)
+    hamaker: float | None = key(None, "float", "Hamaker constant A (seed 003 eq. 4; "
+                                "e.g. A/kT = 1.8 for 7.5e-21 J at 300 K)", unit="energy unit",
+                                allowed=Range(0.0, None, lo_open=True), only_if=VDW_OR_DLVO,
+                                example=1.0)
+    cap_gap: float | None = key(None, "float", "gap below which the van der Waals force is "
+                                "held constant (seed 003: 0.4 nm); F(cut-off) <= 1e-3 F(cap) "
+                                "is required", unit="a",
+                                allowed=Range(0.0, 1.0, lo_open=True), only_if=VDW_OR_DLVO,
+                                example=0.01)
+    debye_length: float | None = key(None, "float", "Debye screening length 1/kappa of the "
+                                     "double layer; F(cut-off) <= 1e-3 F(0) is required",
+                                     unit="a", allowed=Range(0.0, None, lo_open=True),
+                                     only_if=DLVO, example=0.05)
+    surface_potential: float | None = key(
+        None, "float", "reduced surface potential psi, psi^2 = 4 pi eps eps0 a psi0^2 / "
+        "energy unit (= (e psi0/kT)^2 a/l_B in a Brownian job, l_B the Bjerrum length)",
+        unit="sqrt(energy unit / a)", allowed=Range(0.0, None, lo_open=True), only_if=DLVO,
+        example=10.0)
 
 
 @dataclass(frozen=True)

@@ -1,16 +1,63 @@
 """Interparticle forces between sphere pairs, and the potential-free overlap correction.
 
-Pair forces act along the line of centres; a `PairForce` gives the magnitude F(h) of the
-repulsion (positive pushes apart) at surface gap h. Totals are summed over the pair list
-of the hydrodynamics (periodic images included), so the force range must lie within the
-lubrication cut-off. Units: forces in kT/a for Brownian jobs (kT = 6 pi in sdmpi's
-reduced units), in 6 pi eta a^2 gamma_dot otherwise.
+Pair forces act along the line of centres; a force law gives the magnitude F(h) at
+surface gap h of a pair of radii a_i, a_j, positive when it pushes the spheres apart
+(repulsion) and negative when it pulls them together (attraction), with F = -dU/dh.
+Totals are summed over the pair list of the hydrodynamics (periodic images included),
+so a force must vanish beyond the lubrication cut-off: the repulsion decays there
+(checked by the loader), the algebraic van der Waals force and the double layer are
+shifted to vanish there (shifted-force truncation, below).
+
+Units. In the job file, forces are in the job's force unit 6 pi eta_m a^2 / (time unit):
+kT/a for Brownian jobs (kT = 6 pi in sdmpi's reduced units), 6 pi eta_m a^2 gamma_dot for
+non-Brownian steady shear (time unit 1/gamma_dot); energies (Hamaker constant) in force
+unit x a, i.e. kT or 6 pi eta_m a^3 gamma_dot; lengths in a. The hydrodynamics works in
+plain Stokes units (eta_m = 1, a = 1), where a force 1 moves an isolated sphere at 1/(6 pi),
+so :func:`force_law` multiplies every strength by ``FORCE_UNIT`` = 6 pi.
+
+Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
+
+* :class:`Repulsion` (seed 001 eq. 9): F0 tau e^(-tau h)/(1 + e^(-tau h)).
+* :class:`VanDerWaals` (seed 003 eqs. 4-5 = Hamaker, Physica 4, 1058 (1937), for
+  spheres of radii a_i, a_j at centre distance r = a_i + a_j + h):
+      U(h) = -(A/6) [2 a_i a_j/(h (2a_i + 2a_j + h)) + 2 a_i a_j/((2a_i + h)(2a_j + h))
+                     + ln(h (2a_i + 2a_j + h)/((2a_i + h)(2a_j + h)))],
+      F(h) = -(32/3) A a_i^3 a_j^3 (a_i + a_j + h) / (h^2 (2a_i + 2a_j + h)^2
+                                                      ((2a_i + h)(2a_j + h))^2),
+  (the seed writes b for h, r for the radii; with r^2 - (a_i + a_j)^2 = h (2a_i + 2a_j + h)
+  and r^2 - (a_i - a_j)^2 = (2a_i + h)(2a_j + h) these are Hamaker's eqs.). Limits:
+  F -> -A R/(6 h^2) as h -> 0 (Derjaguin, R = a_i a_j/(a_i + a_j)); F -> -(32/3) A a_i^3
+  a_j^3 / r^7 (London) as h -> inf. Capped below ``cap_gap`` (seed 003: 0.4 nm, the
+  minimum roughness): F(h < cap) = F(cap), U continued linearly, so overlapping or
+  touching spheres feel a finite attraction.
+* :class:`DoubleLayer` (DLVO electrostatic repulsion at constant, low surface potential
+  psi0, Derjaguin approximation; Hogg, Healy & Fuerstenau, Trans. Faraday Soc. 62, 1638
+  (1966); Russel, Saville & Schowalter, Colloidal Dispersions (1989) ch. 4):
+      U(h) = 4 pi eps eps0 psi0^2 R ln(1 + e^(-kappa h)),   R = a_i a_j/(a_i + a_j),
+  written in reduced units as U = psi^2 R ln(1 + e^(-h/lambda_D)) with lambda_D = 1/kappa
+  in a and the reduced surface potential psi, psi^2 = 4 pi eps eps0 a psi0^2 / E_unit
+  (= (e psi0/kT)^2 a / l_B for Brownian jobs, l_B the Bjerrum length). For equal spheres
+  it is the seed-001 repulsion with F0 = psi^2/2, tau = 1/lambda_D; far away it is the
+  linear superposition form 4 pi eps eps0 psi0^2 R e^(-kappa h) (low potential). Valid for
+  kappa a >> 1, h << a, |e psi0/kT| <~ 2.
+* :class:`Combined`: a sum of laws (DLVO = van der Waals + double layer).
+
+Shifted-force truncation (van der Waals, double layer): with h_c = cut-off x (a_i+a_j)/2,
+F_s(h) = F(h) - F(h_c) and U_s(h) = U(h) - U(h_c) + F(h_c) (h - h_c) for h < h_c, both 0
+beyond; F_s = -dU_s/dh still, and both are continuous at h_c. The loader requires
+|F(h_c)| <= ``TAIL`` |F(contact)| (contact: the cap for van der Waals, h = 0 for the
+double layer) so that the shift is negligible.
 """
 
 import math
 from dataclasses import dataclass
 
 import numpy as np
+
+#: the job's force unit, 6 pi eta_m a^2 / (time unit), in Stokes units (eta_m = a = 1)
+FORCE_UNIT = 6 * math.pi
+#: largest allowed |F(cut-off)| / |F(contact)| of the truncated (shifted) laws
+TAIL = 1e-3
 
 
 @dataclass(frozen=True)
@@ -22,11 +69,11 @@ class Repulsion:
     f0: float
     tau: float
 
-    def magnitude(self, gap):
+    def magnitude(self, gap, a_i=1.0, a_j=1.0):
         e = np.exp(-self.tau * np.maximum(gap, 0.0))
         return self.f0 * self.tau * e / (1.0 + e)
 
-    def potential(self, gap):
+    def potential(self, gap, a_i=1.0, a_j=1.0):
         return self.f0 * np.log1p(np.exp(-self.tau * np.maximum(gap, 0.0)))
 
     @property
@@ -35,16 +82,146 @@ class Repulsion:
         return 12 * math.log(10) / self.tau
 
 
-def pair_forces(force_law, pairs, n):
+class _Truncated:
+    """Shifted-force truncation at cut-off x mean radius (module docstring); subclasses
+    give the untruncated _force(h, a_i, a_j) and _energy(h, a_i, a_j)."""
+
+    def _h_cut(self, a_i, a_j):
+        return self.cutoff * 0.5 * (np.asarray(a_i, float) + a_j)
+
+    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+        gap = np.asarray(gap, float)
+        if math.isinf(self.cutoff):
+            return self._force(gap, a_i, a_j)
+        hc = self._h_cut(a_i, a_j)
+        return np.where(gap < hc, self._force(gap, a_i, a_j) - self._force(hc, a_i, a_j), 0.0)
+
+    def potential(self, gap, a_i=1.0, a_j=1.0):
+        gap = np.asarray(gap, float)
+        if math.isinf(self.cutoff):
+            return self._energy(gap, a_i, a_j)
+        hc = self._h_cut(a_i, a_j)
+        u = self._energy(gap, a_i, a_j) - self._energy(hc, a_i, a_j) \
+            + self._force(hc, a_i, a_j) * (gap - hc)
+        return np.where(gap < hc, u, 0.0)
+
+
+@dataclass(frozen=True)
+class VanDerWaals(_Truncated):
+    """Hamaker's sphere-sphere van der Waals attraction (module docstring), capped below
+    ``cap_gap`` (a) and truncated at ``cutoff`` mean radii (inf: not truncated).
+    ``hamaker`` in energy units; magnitude < 0 (attraction)."""
+
+    hamaker: float
+    cap_gap: float
+    cutoff: float = math.inf
+
+    def _force_free(self, h, a_i, a_j):
+        h = np.asarray(h, float)
+        p, q, s = 2 * a_i + h, 2 * a_j + h, 2 * (a_i + a_j) + h
+        return -(32.0 / 3.0) * self.hamaker * (a_i * a_j) ** 3 * (a_i + a_j + h) \
+            / (h * h * s * s * (p * q) ** 2)
+
+    def _energy_free(self, h, a_i, a_j):
+        h = np.asarray(h, float)
+        p, q, s = 2 * a_i + h, 2 * a_j + h, 2 * (a_i + a_j) + h
+        return -(self.hamaker / 6.0) * (2 * a_i * a_j / (h * s) + 2 * a_i * a_j / (p * q)
+                                        + np.log(h * s / (p * q)))
+
+    def _force(self, h, a_i, a_j):
+        return self._force_free(np.maximum(h, self.cap_gap), a_i, a_j)
+
+    def _energy(self, h, a_i, a_j):
+        h = np.asarray(h, float)
+        hh = np.maximum(h, self.cap_gap)
+        # below the cap: constant force, energy continued linearly (F = -dU/dh)
+        return self._energy_free(hh, a_i, a_j) - self._force_free(hh, a_i, a_j) * (h - hh)
+
+
+@dataclass(frozen=True)
+class DoubleLayer(_Truncated):
+    """Electrostatic double-layer repulsion, U = strength R ln(1 + e^(-h/debye_length)),
+    R = a_i a_j/(a_i + a_j) (module docstring; strength = psi^2 in energy units / a),
+    truncated at ``cutoff`` mean radii. Overlaps (h < 0) feel the contact force."""
+
+    strength: float
+    debye_length: float
+    cutoff: float = math.inf
+
+    def _force(self, h, a_i, a_j):
+        e = np.exp(-np.maximum(np.asarray(h, float), 0.0) / self.debye_length)
+        reff = a_i * a_j / (np.asarray(a_i, float) + a_j)
+        return self.strength * reff / self.debye_length * e / (1.0 + e)
+
+    def _energy(self, h, a_i, a_j):
+        h = np.asarray(h, float)
+        hh = np.maximum(h, 0.0)
+        reff = a_i * a_j / (np.asarray(a_i, float) + a_j)
+        u = self.strength * reff * np.log1p(np.exp(-hh / self.debye_length))
+        return u - self._force(hh, a_i, a_j) * (h - hh)
+
+
+@dataclass(frozen=True)
+class Combined:
+    """The sum of several pair laws (e.g. DLVO: van der Waals + double layer)."""
+
+    parts: tuple
+
+    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+        return sum(p.magnitude(gap, a_i, a_j) for p in self.parts)
+
+    def potential(self, gap, a_i=1.0, a_j=1.0):
+        return sum(p.potential(gap, a_i, a_j) for p in self.parts)
+
+
+def force_law(job):
+    """The pair force law of a job's [interparticle] section in Stokes units (strengths
+    times ``FORCE_UNIT``), truncated at the lubrication cut-off where it is algebraic or
+    shifted; None for hard spheres (kind "none")."""
+    inter = job.interparticle
+    cutoff = job.hydrodynamics.lubrication_cutoff
+    if inter.kind == "none":
+        return None
+    if inter.kind == "repulsion":
+        return Repulsion(FORCE_UNIT * inter.f0, inter.tau)
+    vdw = VanDerWaals(FORCE_UNIT * inter.hamaker, inter.cap_gap, cutoff)
+    if inter.kind == "vdw":
+        return vdw
+    if inter.kind == "dlvo":
+        layer = DoubleLayer(FORCE_UNIT * inter.surface_potential ** 2, inter.debye_length, cutoff)
+        return Combined((vdw, layer))
+    raise ValueError(f"unknown interparticle.kind {inter.kind!r}")
+
+
+def tail_ratios(job):
+    """|F(cut-off)| / |F(contact)| of each truncated part of the job's law (equal spheres
+    of radius 1): {"interparticle.<key>": ratio} for the loader's check against TAIL."""
+    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
+    out = {}
+    if inter.kind in ("vdw", "dlvo"):
+        law = VanDerWaals(1.0, inter.cap_gap)
+        out["interparticle.cap_gap"] = float(law.magnitude(cutoff) / law.magnitude(inter.cap_gap))
+    if inter.kind == "dlvo":
+        layer = DoubleLayer(1.0, inter.debye_length)
+        out["interparticle.debye_length"] = float(layer.magnitude(cutoff) / layer.magnitude(0.0))
+    return out
+
+
+def pair_forces(force_law, pairs, n, radii=None):
     """Forces (N, 3) on the particles and the virial sum_pairs dx F_ij (3, 3) for the
     close pairs (a PairList: dx = x_j - x_i, true gaps). The force on i is
-    -F(h) dx/|dx| (repulsion pushes i away from j), and +F(h) dx/|dx| on j."""
+    -F(h) dx/|dx| (repulsion pushes i away from j), and +F(h) dx/|dx| on j. radii (N,)
+    give each pair's a_i, a_j; None: each pair's mean radius (radii_sum / 2) for both."""
     forces = np.zeros((n, 3))
     virial = np.zeros((3, 3))
     if force_law is None or len(pairs.i) == 0:
         return forces, virial
+    if radii is None:
+        a_i = a_j = 0.5 * pairs.radii_sum
+    else:
+        a_i, a_j = radii[pairs.i], radii[pairs.j]
     unit = pairs.dx / np.linalg.norm(pairs.dx, axis=1)[:, None]
-    f_on_j = force_law.magnitude(pairs.gap)[:, None] * unit
+    f_on_j = force_law.magnitude(pairs.gap, a_i, a_j)[:, None] * unit
     np.add.at(forces, pairs.j, f_on_j)
     np.add.at(forces, pairs.i, -f_on_j)
     # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j (true separations)

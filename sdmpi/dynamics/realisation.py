@@ -39,7 +39,7 @@ from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
 from ..hydro.resistance import grand_resistance
 from ..hydro.solvers import make_solver
-from .forces import Repulsion, pair_forces, remove_overlaps
+from .forces import force_law, pair_forces, remove_overlaps
 from .initial import hard_sphere_fluid
 from .media import MaxwellFilter
 from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
@@ -76,10 +76,12 @@ class Realisation:
     stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
     (taken at the start of the step, t_k = k dt); exposes its full state."""
 
-    def __init__(self, job, task):
-        self.job, self.task = job, task
-        inter = job.interparticle
-        self.force_law = Repulsion(inter.f0, inter.tau) if inter.kind == "repulsion" else None
+    def __init__(self, job, task, comm=None):
+        # comm: the MPI communicator of the ranks that step this realisation together
+        # (ensemble.ranks_per_task > 1, PETSc backends; every rank builds and steps the
+        # same realisation, the solves are collective); None: this rank alone
+        self.job, self.task, self.comm = job, task, comm
+        self.force_law = force_law(job)
         seq = np.random.SeedSequence(job.job.seed, spawn_key=(task.task_id,))
         self.rng = np.random.Generator(np.random.PCG64(seq))
         n = job.system.n_particles
@@ -196,7 +198,7 @@ class Realisation:
         res = self._resistance(pos, strain)
         min_gap = min(overlap_gap, res.pairs.min_gap)
         n = self.n_particles
-        solver = make_solver(self.job.solver.backend, res)
+        solver = make_solver(self.job.solver.backend, res, self.comm)
         e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
 
         u_flow = solver.velocities(np.zeros((n, 6)), e5)
@@ -243,10 +245,11 @@ class Realisation:
             pos = remove_overlaps(pos, self.radii, res.pairs, self._hydro["min_gap"])
             return self._resistance(pos, strain, plan=plan)
 
-        return midpoint_brownian(res, solver, z, self.kT, self.dt, at_midpoint, self.job.solver.backend)
+        return midpoint_brownian(res, solver, z, self.kT, self.dt, at_midpoint, self.job.solver.backend,
+                                 self.comm)
 
 
-def midpoint_brownian(res, solver, z, kT, dt, resistance_at, backend="dense"):
+def midpoint_brownian(res, solver, z, kT, dt, resistance_at, backend="dense", comm=None):
     """Fixman midpoint step (module docstring) for the noise z (N, 6): returns the
     Brownian velocities R_FU^-1(x*) F_B (N, 6), whose mean is kT div R_FU^-1, and the
     Brownian stresslets (N, 5), whose mean is -kT div(R_SU R_FU^-1); F_B = sqrt(2 kT/dt) C z.
@@ -255,7 +258,7 @@ def midpoint_brownian(res, solver, z, kT, dt, resistance_at, backend="dense"):
     force = math.sqrt(2 * kT / dt) * solver.brownian_forces(z)
     u_start = solver.velocities(force, zero)
     mid = resistance_at(res.positions + 0.5 * dt * u_start[:, :3], res.plan)
-    solver_mid = make_solver(backend, mid)
+    solver_mid = make_solver(backend, mid, comm)
     u_mid = solver_mid.velocities(force, zero)
     return u_mid, solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
 

@@ -7,7 +7,8 @@ Phases, in order (collective over MPI_COMM_WORLD unless said otherwise):
    fails (:class:`BadInput` on every rank; rank 0's carries the message).
 2. Groups of ``ensemble.ranks_per_task`` ranks; tasks still to run are assigned to
    groups by :func:`sdmpi.ensemble.farm.assign`; each rank builds the realisations of
-   its group's tasks.
+   its group's tasks (on the group's sub-communicator when the group has several ranks:
+   all of them step each task redundantly and solve collectively).
 3. A new run: the leaders' task layouts are gathered and the whole file is created into
    ``RUN.h5.part`` and renamed to ``RUN.h5`` when complete (no half-created run files).
 4. The file is opened by all ranks; group leaders step their tasks and commit samples and
@@ -73,7 +74,9 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
     (default MPI_COMM_WORLD). Returns True when every task is complete, False when
     stopped by a signal (resumable). Raises :class:`BadInput` (nothing written).
 
-    ``realisation_factory(job, task)`` defaults to :class:`sdmpi.dynamics.Realisation`.
+    ``realisation_factory(job, task)`` defaults to :class:`sdmpi.dynamics.Realisation`;
+    with ``ensemble.ranks_per_task > 1`` it is called as ``(job, task, comm=group)``, the
+    sub-communicator of the ranks that step the task together.
     """
     comm = comm or MPI.COMM_WORLD
     lock = None
@@ -275,7 +278,10 @@ class _Driver:
 
         self.stop.install()
         try:
-            realisations = {tid: self.factory(job, tasks[tid]) for tid in mine}
+            # with ranks_per_task > 1 every rank of a group builds and steps the same
+            # realisations on the group's communicator (collective solves); the leader writes
+            extra = {"comm": group} if group.size > 1 else {}
+            realisations = {tid: self.factory(job, tasks[tid], **extra) for tid in mine}
             layouts = {tid: store.TaskLayout.of(r) for tid, r in realisations.items()} \
                 if leader else {}
             if plan.mode == "new":

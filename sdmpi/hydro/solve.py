@@ -49,7 +49,7 @@ def check_inputs(positions, box, radii, strain, forces, torques, rate_of_strain)
 
 def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torques=None,
                    rate_of_strain=None, lubrication=True, solver="dense",
-                   ewald_tol=DEFAULT_EWALD_TOL):
+                   ewald_tol=DEFAULT_EWALD_TOL, comm=None):
     """Velocities and stresslets of N rigid spheres (Stokes units: viscosity 1).
 
     positions (N, 3); box (3,) periodic Lees-Edwards box at `strain`, or None for
@@ -59,11 +59,14 @@ def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torqu
     stresslets S (N, 3, 3). Zero-volume-flux frame. An isolated sphere gives
     U = F/(6 pi a), Omega = T/(8 pi a^3), S = (20/3) pi a^3 E_inf.
     Overlaps deeper than MAX_OVERLAP mean radii raise ValueError; shallower ones and
-    touching pairs are regularised (see `lubrication`)."""
+    touching pairs are regularised (see `lubrication`).
+    solver: a backend of `sdmpi.hydro.solvers.BACKENDS` ("dense", "petsc-dense"); comm:
+    the MPI communicator a PETSc backend solves on, collective over it (default: this
+    rank alone, as outside mpirun)."""
     pos, box, radii, strain, forces, torques, einf = check_inputs(
         positions, box, radii, strain, forces, torques, rate_of_strain)
     res = grand_resistance(pos, radii, box, strain, lubrication, ewald_tol, max_overlap=MAX_OVERLAP)
-    backend = make_solver(solver, res)
+    backend = make_solver(solver, res, comm)
     n = pos.shape[0]
     e5 = np.broadcast_to(to_five(einf), (n, 5))
     vel = backend.velocities(np.hstack([forces, torques]), e5)

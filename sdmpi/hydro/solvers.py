@@ -10,8 +10,11 @@ e_inf the 5-vector of E_inf at every particle), plus the Brownian factor:
 R_FU = C C^T, so C z (z standard normal) has covariance R_FU, and the velocities it
 drives, R_FU^-1 C z = C^-T z, have covariance R_FU^-1 (fluctuation-dissipation).
 
-`dense` factorises R_FU by LAPACK Cholesky. PETSc backends (issue: large N) plug into
-BACKENDS with the same methods.
+`dense` factorises R_FU by LAPACK Cholesky on one rank. `petsc-dense`
+(`petsc_dense.PetscDenseSolver`) distributes R_FU over an MPI communicator and factorises
+it by ScaLAPACK through PETSc; it is imported only when asked for. Every backend is
+built as backend(resistance, comm): the communicator of the ranks that solve together
+(None: one rank; `dense` ignores it).
 """
 
 import numpy as np
@@ -23,7 +26,7 @@ class DenseSolver:
 
     name = "dense"
 
-    def __init__(self, resistance):
+    def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
         self.r_fu, self.r_fe, self.r_su, self.r_se = resistance.blocks()
         self.n = resistance.n_particles
         try:
@@ -46,13 +49,20 @@ class DenseSolver:
         return (chol @ noise.ravel()).reshape(self.n, 6)
 
 
-BACKENDS = {"dense": DenseSolver}
+def _petsc_dense(resistance, comm=None):
+    from .petsc_dense import PetscDenseSolver
+
+    return PetscDenseSolver(resistance, comm)
 
 
-def make_solver(name, resistance):
-    """The backend `name` for a GrandResistance."""
+BACKENDS = {"dense": DenseSolver, "petsc-dense": _petsc_dense}
+
+
+def make_solver(name, resistance, comm=None):
+    """The backend `name` for a GrandResistance, solving on the MPI communicator `comm`
+    (None: this rank alone; collective over comm for the PETSc backends)."""
     try:
         backend = BACKENDS[name]
     except KeyError:
         raise ValueError(f"solver must be one of {sorted(BACKENDS)}, got {name!r}") from None
-    return backend(resistance)
+    return backend(resistance, comm)

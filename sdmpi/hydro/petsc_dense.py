@@ -1,0 +1,263 @@
+"""`petsc-dense`: R_FU distributed over an MPI communicator, ScaLAPACK Cholesky through PETSc.
+
+Same interface and equations as `solvers.DenseSolver` (see `sdmpi.hydro.solvers`):
+
+    U' = R_FU^-1 (F + R_FE e_inf),   S = R_SE e_inf - R_SU U',   F_B = C z with R_FU = C C^T.
+
+What is distributed, and what is not (this version):
+
+- R_FU (6N x 6N) is a PETSc MATMPIDENSE over the communicator (each rank copies only
+  its own block of rows out of the replicated numpy R), converted to MATSCALAPACK (2-D
+  block-cyclic) and factorised in place by ScaLAPACK's pdpotrf (R_FU = L L^T). Each solve
+  is pdpotrs on a distributed vector; the solution is gathered to every rank.
+- The Brownian factor is the Cholesky factor itself: after the factorisation, L is
+  copied back into a MATMPIDENSE (lower triangle, the strict upper part zeroed) and
+  C z = L z is a distributed product, gathered to every rank. The Cholesky factor is
+  unique, so F_B equals the `dense` backend's up to rounding (not necessarily bit for
+  bit: ScaLAPACK and LAPACK may block the factorisation differently; measured ~1e-16).
+  PETSc refuses to convert a factored matrix, so the copy marks the factor unfactored,
+  converts it and marks it factored again (MatSetFactorType through ctypes, as petsc4py
+  3.18 does not wrap it; if that fails, R_FU is factorised a second time for the copy).
+- R_FE, R_SU, R_SE products stay replicated numpy on every rank, and so does the
+  assembly of R (`grand_resistance`, including the O((11N)^3) inverse of M_inf): every
+  rank of the communicator holds the whole (11N)^2 matrix. Distributing the assembly is
+  what is left for large N (issue 6).
+
+Inputs and outputs are replicated numpy arrays; every method is collective over the
+communicator (all its ranks must build the same solver and call the same methods in the
+same order, with the same arguments), and every rank gets the same result.
+
+PETSc here: Debian's PETSc 3.18 (python3-petsc4py) is built with ScaLAPACK, MUMPS and
+SuperLU_dist but not Elemental; ScaLAPACK is the parallel dense Cholesky (MUMPS and
+SuperLU_dist are sparse direct solvers and would treat the dense matrix as sparse, and
+neither exposes its factor for the Brownian product). Without petsc4py or without
+ScaLAPACK, building the backend raises `PetscUnavailable` saying what is missing.
+
+petsc4py is found through PETSC_DIR (Debian's .pth file reads it when Python starts); if
+PETSC_DIR is unset, `load_petsc` sets it to the Debian default and adds its site
+directory itself. PETSc is initialised with -no_signal_handler so that the ensemble
+runner keeps its own SIGTERM/SIGINT/SIGUSR1 handlers.
+"""
+
+import glob
+import os
+import sys
+
+import numpy as np
+
+from .farfield import NDOF
+
+#: options PETSc is initialised with (when sdmpi is the first to import it)
+PETSC_OPTIONS = ["-no_signal_handler"]
+
+_PETSC = None
+_KEEPALIVE = {}  # communicator handle -> a PETSc object, keeps PETSc's inner comm (and BLACS grid)
+
+
+class PetscUnavailable(RuntimeError):
+    """petsc4py cannot be imported, or this PETSc lacks the solver a backend needs."""
+
+
+def _petsc_dir_candidates():
+    return ["/usr/lib/petsc", *sorted(glob.glob("/usr/lib/petscdir/petsc*/x86_64-linux-gnu-real"),
+                                      reverse=True)]
+
+
+def load_petsc():
+    """Import petsc4py (setting PETSC_DIR if unset) and return the PETSc module."""
+    global _PETSC
+    if _PETSC is not None:
+        return _PETSC
+    if not os.environ.get("PETSC_DIR"):
+        for cand in _petsc_dir_candidates():
+            if os.path.isdir(os.path.join(cand, "lib", "python3", "dist-packages", "petsc4py")):
+                os.environ["PETSC_DIR"] = cand
+                break
+    if os.environ.get("PETSC_DIR"):
+        site = os.path.join(os.environ["PETSC_DIR"], "lib", "python3", "dist-packages")
+        if os.path.isdir(site) and site not in sys.path:
+            sys.path.append(site)
+    try:
+        from mpi4py import MPI  # noqa: F401  (MPI initialised by mpi4py, as everywhere in sdmpi)
+        import petsc4py
+        if "petsc4py.PETSc" not in sys.modules:
+            petsc4py.init(PETSC_OPTIONS)
+        from petsc4py import PETSc
+    except ImportError as err:
+        raise PetscUnavailable(
+            f"the PETSc backends need petsc4py, which cannot be imported ({err}); on Debian "
+            "install python3-petsc4py and set PETSC_DIR=/usr/lib/petscdir/petsc3.18/"
+            "x86_64-linux-gnu-real (or install petsc-dev); otherwise use "
+            'solver.backend = "dense"') from err
+    _PETSC = PETSc
+    return PETSc
+
+
+def petsc_info():
+    """Version and the direct-solver packages this PETSc was built with."""
+    PETSc = load_petsc()
+    packages = ("scalapack", "elemental", "mumps", "superlu_dist", "strumpack", "mkl_cpardiso")
+    return {"version": ".".join(map(str, PETSc.Sys.getVersion())),
+            "packages": {p: bool(PETSc.Sys.hasExternalPackage(p)) for p in packages}}
+
+
+def _mpi_comm(comm):
+    """An mpi4py communicator: None -> COMM_SELF (one rank, as outside mpirun)."""
+    from mpi4py import MPI
+
+    if comm is None:
+        return MPI.COMM_SELF
+    if hasattr(comm, "tompi4py"):  # a PETSc.Comm
+        return comm.tompi4py()
+    return comm
+
+
+def _keepalive(PETSc, comm):
+    """Hold one PETSc object per communicator so that PETSc's duplicated inner
+    communicator and ScaLAPACK's BLACS grid, cached on it, outlive each solver."""
+    from mpi4py import MPI
+
+    key = MPI._handleof(comm)
+    if key not in _KEEPALIVE:
+        _KEEPALIVE[key] = PETSc.Vec().createMPI((0, PETSc.DECIDE), comm=comm)
+    return _KEEPALIVE[key]
+
+
+#: MatFactorType value of MAT_FACTOR_CHOLESKY (petscmat.h, PETSc 3.18)
+MAT_FACTOR_CHOLESKY = 2
+_SET_FACTOR_TYPE = []
+
+
+def _set_factor_type():
+    """MatSetFactorType(Mat, MatFactorType) from the loaded libpetsc, or None."""
+    if not _SET_FACTOR_TYPE:
+        func = None
+        try:
+            import ctypes
+
+            with open("/proc/self/maps") as maps:
+                libs = sorted({line.split()[-1] for line in maps
+                               if "/libpetsc" in line and ".so" in line})
+            for lib in libs:
+                handle = ctypes.CDLL(lib)
+                if hasattr(handle, "MatSetFactorType"):
+                    func = handle.MatSetFactorType
+                    func.argtypes = [ctypes.c_void_p, ctypes.c_int]
+                    func.restype = ctypes.c_int
+                    break
+        except OSError:
+            func = None
+        _SET_FACTOR_TYPE.append(func)
+    return _SET_FACTOR_TYPE[0]
+
+
+class PetscDenseSolver:
+    """ScaLAPACK Cholesky of R_FU over `comm` (an mpi4py communicator; None: COMM_SELF).
+    Collective over comm; see the module docstring."""
+
+    name = "petsc-dense"
+
+    def __init__(self, resistance, comm=None):
+        PETSc = load_petsc()
+        if not PETSc.Sys.hasExternalPackage("scalapack"):
+            info = petsc_info()
+            have = ", ".join(p for p, ok in info["packages"].items() if ok) or "none"
+            raise PetscUnavailable(
+                f"petsc-dense needs a PETSc built with ScaLAPACK (parallel dense Cholesky); "
+                f"this PETSc {info['version']} has: {have}. Use solver.backend = \"dense\"")
+        self.comm = _mpi_comm(comm)
+        _keepalive(PETSc, self.comm)
+        self.n = n = resistance.n_particles
+        m = 6 * n
+        # the blocks of resistance.blocks(), but R_FU only in this rank's rows
+        idx = np.arange(NDOF * n).reshape(n, NDOF)
+        rigid, strain = idx[:, :6].ravel(), idx[:, 6:].ravel()
+        mat = resistance.matrix
+        self.r_fe = mat[np.ix_(rigid, strain)]
+        self.r_su = mat[np.ix_(strain, rigid)]
+        self.r_se = mat[np.ix_(strain, strain)]
+
+        dense = PETSc.Mat().createDense([m, m], comm=self.comm)
+        dense.setUp()
+        r0, r1 = dense.getOwnershipRange()
+        rows = mat[np.ix_(rigid[r0:r1], rigid)]
+        dense.getDenseArray()[:] = rows
+        dense.assemble()
+        factor = dense.convert("scalapack")  # in place (petsc4py: no `out`)
+        perm = PETSc.IS().createStride(r1 - r0, first=r0, step=1, comm=self.comm)
+        try:
+            factor.factorCholesky(perm)
+        except PETSc.Error as exc:
+            detail = str(exc).strip().splitlines()[-1].strip()
+            raise np.linalg.LinAlgError(f"R_FU is not positive definite ({detail})") from exc
+        perm.destroy()
+        self._factor = factor
+        self._chol = self._lower_factor(PETSc, factor, rows)
+        self._b, self._x = factor.createVecs()
+        self._range = self._b.getOwnershipRange()
+        self._chol_vecs = self._chol.createVecs()
+        self._chol_range = self._chol_vecs[0].getOwnershipRange()
+        self._gather, self._all = PETSc.Scatter.toAll(self._x)
+        self._PETSc = PETSc
+
+    def _lower_factor(self, PETSc, factor, rows):
+        """L (R_FU = L L^T) as a row-distributed MATMPIDENSE, its strict upper part zero.
+
+        After pdpotrf the ScaLAPACK matrix holds L in its lower triangle. PETSc refuses
+        to convert (or duplicate) a factored matrix, so the factor is marked unfactored,
+        converted, and marked factored again (MatSetFactorType, not wrapped by petsc4py
+        3.18: called through ctypes). If that call is unavailable, R_FU is factorised a
+        second time for the copy (twice the factorisation cost, same result)."""
+        mark = _set_factor_type()
+        if mark is not None:
+            factor.setUnfactored()
+            lower = factor.convert("dense", PETSc.Mat())  # a new matrix
+            mark(factor.handle, MAT_FACTOR_CHOLESKY)
+        else:
+            dense = PETSc.Mat().createDense([6 * self.n, 6 * self.n], comm=self.comm)
+            dense.setUp()
+            r0, r1 = dense.getOwnershipRange()
+            dense.getDenseArray()[:] = rows
+            dense.assemble()
+            second = dense.convert("scalapack")  # in place
+            perm = PETSc.IS().createStride(r1 - r0, first=r0, step=1, comm=self.comm)
+            second.factorCholesky(perm)
+            second.setUnfactored()
+            lower = second.convert("dense")  # in place
+            perm.destroy()
+        l0, _ = lower.getOwnershipRange()
+        local = lower.getDenseArray()
+        local[:] = np.tril(local, k=l0)  # local row i is global row l0 + i
+        lower.assemble()
+        return lower
+
+    # ------------------------------------------------------------------ interface
+
+    def _gathered(self, vec):
+        PETSc = self._PETSc
+        self._gather.scatter(vec, self._all, addv=PETSc.InsertMode.INSERT,
+                             mode=PETSc.ScatterMode.FORWARD)
+        return self._all.getArray().copy()
+
+    def _solve(self, rhs):
+        r0, r1 = self._range
+        self._b.setArray(rhs[r0:r1])
+        self._factor.solve(self._b, self._x)
+        return self._gathered(self._x)
+
+    def velocities(self, forces, einf):
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
+        rhs = forces.ravel() + self.r_fe @ einf.ravel()
+        return self._solve(rhs).reshape(self.n, 6)
+
+    def stresslets(self, velocities, einf):
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
+        return (self.r_se @ einf.ravel() - self.r_su @ velocities.ravel()).reshape(self.n, 5)
+
+    def brownian_forces(self, noise):
+        """L z for z (N, 6), R_FU = L L^T: a force sample with covariance R_FU."""
+        z, y = self._chol_vecs
+        r0, r1 = self._chol_range
+        z.setArray(noise.ravel()[r0:r1])
+        self._chol.mult(z, y)
+        return self._gathered(y).reshape(self.n, 6)

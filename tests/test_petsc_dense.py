@@ -1,0 +1,130 @@
+"""The petsc-dense backend (ScaLAPACK Cholesky of R_FU through PETSc) against dense: on
+one rank in process, on two ranks under mpirun, through solve_mobility, and a Brownian
+realisation with ranks_per_task = 2 against one rank."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from sdmpi.hydro import solve_mobility
+from sdmpi.hydro.petsc_dense import PetscUnavailable, load_petsc, petsc_info
+
+try:
+    load_petsc()
+except PetscUnavailable as err:
+    pytest.skip(f"petsc4py not available: {err}", allow_module_level=True)
+
+from petsc_check import compare  # noqa: E402  (tests/ is on sys.path under pytest)
+from test_ensemble import _env  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+MPIRUN = shutil.which("mpirun")
+needs_mpi = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
+TOL = 1e-10  # relative to the largest entry
+
+
+def test_scalapack_is_available():
+    info = petsc_info()
+    assert info["packages"]["scalapack"], info
+
+
+@pytest.mark.parametrize("phi", [0.1, 0.5])
+def test_agrees_with_dense_one_rank(phi):
+    out = compare(phi)
+    assert out["min_gap"] < 0.01  # near-contact pairs present
+    for key in ("velocities", "stresslets", "brownian"):
+        assert out[key] < TOL, (key, out)
+
+
+@needs_mpi
+@pytest.mark.mpi
+def test_agrees_with_dense_two_ranks():
+    cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, str(HERE / "petsc_check.py"),
+           "0.1", "0.5"]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=120, cwd=ROOT)
+    assert res.returncode == 0, res.stderr
+    lines = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("[")]
+    assert len(lines) == 2  # one per rank
+    for rows in lines:
+        for out in rows:
+            assert out["ranks"] == 2 and out["same_on_all_ranks"], out
+            for key in ("velocities", "stresslets", "brownian"):
+                assert out[key] < TOL, (key, out)
+
+
+def test_solve_mobility_one_rank():
+    rng = np.random.default_rng(5)
+    pos = rng.uniform(0, 6, (4, 3))
+    pos[1] = pos[0] + [0.0, 2.01, 0.0]
+    kw = dict(strain=0.2, forces=rng.standard_normal((4, 3)), torques=rng.standard_normal((4, 3)),
+              rate_of_strain=np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]]))
+    box = [9.0, 8.0, 10.0]
+    for a, b in zip(solve_mobility(pos, box, solver="dense", **kw),
+                    solve_mobility(pos, box, solver="petsc-dense", **kw)):
+        assert np.abs(a - b).max() < TOL * np.abs(a).max()
+    # the isolated sphere
+    u, w, s = solve_mobility([[0.0, 0.0, 0.0]], None, forces=[[1.0, 2.0, 3.0]],
+                             torques=[[0.0, 0.0, 1.0]], rate_of_strain=kw["rate_of_strain"],
+                             solver="petsc-dense")
+    assert np.allclose(u, np.array([1.0, 2.0, 3.0]) / (6 * np.pi), rtol=1e-12)
+    assert np.allclose(w, np.array([0.0, 0.0, 1.0]) / (8 * np.pi), rtol=1e-12)
+    assert np.allclose(s, 20 / 3 * np.pi * kw["rate_of_strain"], rtol=1e-12)
+
+
+def test_not_positive_definite_is_a_linalg_error():
+    from sdmpi.hydro.resistance import grand_resistance
+    from sdmpi.hydro.solvers import make_solver
+
+    res = grand_resistance(np.array([[0.0, 0, 0], [3.0, 0, 0]]), np.ones(2))
+    res.matrix[0, 0] = -1.0
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        make_solver("petsc-dense", res)
+
+
+# ---------------------------------------------------------------- ranks_per_task = 2
+
+SHORT = ["--set", "system.n_particles=27", "--set", "system.phi=[0.45]",
+         "--set", "integration.periods=1", "--set", "integration.discard_periods=0",
+         "--set", "shear.omega=[25.132741228718345]", "--set", "ensemble.realisations=1",
+         "--set", "output.checkpoint_every=40"]
+PETSC = ["--set", 'solver.backend="petsc-dense"']
+
+
+def _run(out, *extra, ranks=None):
+    cmd = [sys.executable, "-m", "sdmpi.cli", "run", str(ROOT / "jobs" / "demo.toml"),
+           "-o", str(out), *SHORT, *extra]
+    if ranks:
+        cmd = [MPIRUN, "--oversubscribe", "-n", str(ranks), *cmd]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr
+    with h5py.File(out, "r") as f:
+        (task,) = f["tasks"]
+        samples = f["tasks"][task]["samples"]
+        return {k: samples[k][()] for k in samples}
+
+
+@needs_mpi
+@pytest.mark.mpi
+def test_two_ranks_per_task_same_stream(tmp_path):
+    """A Brownian realisation (N = 27, phi = 0.45, 100 steps) on a 2-rank sub-communicator
+    against dense on one rank: the deterministic columns are equal, the stresses agree
+    to rounding (the Brownian force uses the same, unique Cholesky factor), so their
+    statistics agree too."""
+    one = _run(tmp_path / "one.h5")
+    two = _run(tmp_path / "two.h5", *PETSC, "--set", "ensemble.ranks_per_task=2", ranks=2)
+    for key in ("time", "strain", "rate", "n_overlaps"):
+        assert np.array_equal(one[key], two[key]), key
+    for key in ("stress_hydrodynamic", "stress_brownian", "stress_interparticle", "min_gap"):
+        scale = np.abs(one[key]).max()
+        assert np.abs(one[key] - two[key]).max() <= 1e-9 * scale, key
+    b1, b2 = one["stress_brownian"], two["stress_brownian"]
+    err = b1.std(axis=0) / np.sqrt(len(b1))
+    assert np.all(np.abs(b1.mean(axis=0) - b2.mean(axis=0)) < 1e-6 * err)
+    assert np.allclose(b1.std(axis=0), b2.std(axis=0), rtol=1e-8)
