@@ -120,8 +120,11 @@ Accuracy (measured, see tests)
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
 import threading
+from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -285,44 +288,75 @@ _TABLES = None
 _TABLES_LOCK = threading.Lock()
 
 
+def _cache_file(m_max):
+    """Where the lambda polynomial tables are kept between processes: $SDMPI_CACHE_DIR or
+    ~/.cache/sdmpi, keyed by the series order and a hash of this module's source (any
+    edit of the recurrences invalidates it)."""
+    digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+    root = Path(os.environ.get("SDMPI_CACHE_DIR", Path.home() / ".cache" / "sdmpi"))
+    return root / f"two_sphere_m{m_max}_{digest}.npz"
+
+
 def _lambda_polynomials(m_max=SERIES_ORDER):
     """{name: (T[k, j], shift)}: f_k(lam) / (2 (1 + lam))^k = sum_j T[k, j] x^j y^(k-j),
-    x = lam/(1+lam), y = 1/(1+lam) (j may exceed k by one: y^-1 = 1 + lam)."""
+    x = lam/(1+lam), y = 1/(1+lam) (j may exceed k by one: y^-1 = 1 + lam).
+    Computed once (~2 s), then read from a disk cache (`_cache_file`) by later processes."""
     global _TABLES
     with _TABLES_LOCK:
         if _TABLES is not None and _TABLES[0] == m_max:
             return _TABLES[1]
-        out = {}
-
-        def take(T, n, scale, shift):
-            c = np.zeros((m_max + 1, m_max + 2))
-            for k in range(m_max + 1):
-                q = np.arange(k + 1)
-                c[k, q + (k % 2 if shift else 0)] += scale * T[n, k - q, q]
-            return c
-
-        P = _recurrence_x(m_max, 1)
-        out["XA"] = take(P, 1, 1.0, False)
-        out["XG"] = take(P, 2, 0.75, False)
-        del P
-        P = _recurrence_x(m_max, 2)
-        out["XM"] = take(P, 2, 1.0, True)
-        del P
-        P, Q = _recurrence_y(m_max, 1, 1.0, 0.0)
-        out["YA"] = take(P, 1, 1.0, False)
-        out["YB"] = take(Q, 1, 2.0, False)
-        out["YG"] = take(P, 2, 0.75, False)
-        del P, Q
-        P, Q = _recurrence_y(m_max, 1, 0.0, 1.0)
-        out["YC"] = take(Q, 1, 1.0, True)
-        out["YH"] = take(P, 2, -0.375, True)
-        del P, Q
-        P, _ = _recurrence_y(m_max, 2, 1.0, 0.0)
-        out["YM"] = take(P, 2, 1.0, True)
-        del P
-        out["ZM"] = take(_recurrence_z(m_max), 2, 1.0, True)
+        path = _cache_file(m_max)
+        try:
+            with np.load(path) as data:
+                out = {name: data[name] for name in FUNCTIONS if name != "XC"}
+            _TABLES = (m_max, out)
+            return out
+        except (OSError, KeyError, ValueError):
+            pass  # absent or unreadable: compute (and try to store) below
+        out = _compute_polynomials(m_max)
+        try:  # atomic: ranks starting together never read a half-written file
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+            np.savez(tmp, **out)
+            os.replace(tmp, path)
+        except OSError:
+            pass  # a read-only home only costs the recomputation next time
         _TABLES = (m_max, out)
         return out
+
+
+def _compute_polynomials(m_max):
+    """The lambda polynomial tables of `_lambda_polynomials`, from the recurrences."""
+    out = {}
+
+    def take(T, n, scale, shift):
+        c = np.zeros((m_max + 1, m_max + 2))
+        for k in range(m_max + 1):
+            q = np.arange(k + 1)
+            c[k, q + (k % 2 if shift else 0)] += scale * T[n, k - q, q]
+        return c
+
+    P = _recurrence_x(m_max, 1)
+    out["XA"] = take(P, 1, 1.0, False)
+    out["XG"] = take(P, 2, 0.75, False)
+    del P
+    P = _recurrence_x(m_max, 2)
+    out["XM"] = take(P, 2, 1.0, True)
+    del P
+    P, Q = _recurrence_y(m_max, 1, 1.0, 0.0)
+    out["YA"] = take(P, 1, 1.0, False)
+    out["YB"] = take(Q, 1, 2.0, False)
+    out["YG"] = take(P, 2, 0.75, False)
+    del P, Q
+    P, Q = _recurrence_y(m_max, 1, 0.0, 1.0)
+    out["YC"] = take(Q, 1, 1.0, True)
+    out["YH"] = take(P, 2, -0.375, True)
+    del P, Q
+    P, _ = _recurrence_y(m_max, 2, 1.0, 0.0)
+    out["YM"] = take(P, 2, 1.0, True)
+    del P
+    out["ZM"] = take(_recurrence_z(m_max), 2, 1.0, True)
+    return out
 
 
 def f_coefficients(name, lam, m_max=SERIES_ORDER):
