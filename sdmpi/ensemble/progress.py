@@ -103,6 +103,7 @@ class Progress:
         self.remote = {r: (0, 0) for r in self.others}  # rank 0: (steps, tasks) per leader
         self.finished: set[int] = set()
         self.start = self._last_print = self._last_send = time.monotonic()
+        self._first = None  # (time, session steps) when steps were first seen
         self._request = None
 
     def add(self, steps: int = 0, tasks: int = 0) -> None:
@@ -162,9 +163,15 @@ class Progress:
         steps = self.steps_before + session
         tasks = self.tasks_before + self.tasks + sum(t for _, t in self.remote.values())
         elapsed = max(now - self.start, 1e-9)
-        rate = session / elapsed
+        # the rate is measured from the first reported step on, so that start-up
+        # (imports, compiled-kernel loading, initial configurations) does not skew the ETA
+        if self._first is None and session > 0:
+            self._first = (now, session)
+        rate, eta = 0.0, "?"
+        if self._first is not None and now > self._first[0] and session > self._first[1]:
+            rate = (session - self._first[1]) / (now - self._first[0])
+            eta = hms((self.steps_total - steps) / rate)
         pct = 100.0 * steps / self.steps_total
-        eta = hms((self.steps_total - steps) / rate) if rate > 0 else "?"
         return (f"tasks {tasks}/{self.tasks_total} done | steps {steps}/{self.steps_total} "
                 f"({pct:.1f}%) | {rate:.3g} steps/s | elapsed {hms(elapsed)} | ETA {eta}")
 
