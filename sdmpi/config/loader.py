@@ -191,7 +191,8 @@ def _resolve_table(table, cls, prefix, st: _Pass, out: dict) -> dict:
                                            allowed=f"remove it, or set {fix}"))
             out[f.name] = None
         elif name not in table:
-            if meta["default"] is None and applies and name not in misspelt:
+            if meta["default"] is None and applies and not meta["optional"] \
+                    and name not in misspelt:
                 when = f" when {condition}" if condition else ""
                 example = toml_literal(meta["example"])
                 st.problems.append(Problem(path, f"is required{when}",
@@ -430,7 +431,12 @@ def _time_step(job):
     """Seed eq. 14a (dt < t_D = 1, Brownian jobs) and dt < lambda (Maxwell media)."""
     limits = []
     if job.brownian.enabled:
-        limits.append((1.0, "the diffusion time t_D = 1 (seed eq. 14a)"))
+        smallest = min(job.system.class_radii)
+        if smallest == 1.0:
+            limits.append((1.0, "the diffusion time t_D = 1 (seed eq. 14a)"))
+        else:  # size classes: t_D is the largest spheres' diffusion time
+            limits.append((smallest ** 3, "the diffusion time a^2/D0(a) = a^3 t_D = "
+                           f"{smallest ** 3:.4g} of the smallest spheres (radius {smallest:g})"))
     if job.medium.kind == "maxwell":
         lam = min(m.lam for m in job.medium.modes)
         limits.append((lam, f"the shortest Maxwell relaxation time ({lam:g})"))
@@ -452,18 +458,70 @@ def _time_step(job):
 
 
 def _initial_configuration(job):
-    """The hard-sphere generator starts from a simple cubic lattice (sdmpi.dynamics.initial)."""
-    n = job.system.n_particles
+    """The hard-sphere generator starts from a simple cubic lattice (sdmpi.dynamics.initial)
+    spaced for the largest diameter: phi < (pi/6) sum_i a_i^3 / N (pi/6 if monodisperse)."""
+    system = job.system
+    n = system.n_particles
     problems = []
     if round(n ** (1 / 3)) ** 3 != n:
         cubes = ", ".join(str(m ** 3) for m in range(1, 8))
         problems.append(Problem("system.n_particles", "the initial configuration starts from a "
                                 "simple cubic lattice, so N must be a perfect cube", n,
                                 allowed=f"a cube: {cubes}, ..."))
-    for k, phi in enumerate(job.system.phi):
-        if phi >= math.pi / 6:
-            problems.append(Problem(f"system.phi[{k}]", "a simple cubic lattice start holds at "
-                                    "most pi/6", phi, allowed="0 < phi < 0.5236"))
+    if _size_classes(job):
+        return problems  # reported by _size_classes; the limit needs valid classes
+    limit = system.lattice_phi_limit
+    for k, phi in enumerate(system.phi):
+        if phi >= limit:
+            if system.size_classes is None:
+                problems.append(Problem(f"system.phi[{k}]", "a simple cubic lattice start "
+                                        "holds at most pi/6", phi, allowed="0 < phi < 0.5236"))
+            else:
+                problems.append(Problem(
+                    f"system.phi[{k}]", "a simple cubic lattice start spaced for the largest "
+                    f"diameter (2) holds at most (pi/6) sum_i a_i^3 / N = {limit:.4f} with "
+                    f"these size classes ({_counts_text(system)})", phi,
+                    allowed=f"0 < phi < {math.floor(limit * 1e4) / 1e4:.4f}"))
+    return problems
+
+
+def _counts_text(system) -> str:
+    return ", ".join(f"{m} of radius {r:g}" for r, m in zip(system.class_radii,
+                                                           system.class_counts))
+
+
+def _size_classes(job):
+    """Volume shares summing to 1, the largest radius 1 (the length unit), distinct radii,
+    and at least one sphere per class after rounding the counts."""
+    system = job.system
+    classes = system.size_classes
+    if classes is None:
+        return []
+    problems = []
+    total = math.fsum(c.fraction for c in classes)
+    if abs(total - 1.0) > 1e-9:
+        problems.append(Problem("system.size_classes", f"the volume shares (fraction) sum to "
+                                f"{total:g}; they divide the particle volume, so they sum to 1",
+                                classes, allowed="fractions > 0 whose sum is 1"))
+    largest = max(c.radius for c in classes)
+    if largest != 1.0:
+        problems.append(Problem("system.size_classes", f"the largest radius is {largest:g}, "
+                                "but the largest radius is the length unit a, so it is 1",
+                                classes, allowed="radii divided by the largest, e.g. "
+                                "[{radius = 1.0, ...}, {radius = 0.5, ...}]"))
+    for k, c in enumerate(classes):
+        if any(c.radius == d.radius for d in classes[:k]):
+            problems.append(Problem(f"system.size_classes[{k}].radius", "appears twice; "
+                                    "merge the two classes", c.radius,
+                                    allowed="distinct radii"))
+    if problems:
+        return problems
+    for k, (c, m) in enumerate(zip(classes, system.class_counts)):
+        if m == 0:
+            problems.append(Problem(f"system.size_classes[{k}]", f"gets no sphere among N = "
+                                    f"{system.n_particles} (volume share {c.fraction:g} of "
+                                    f"radius {c.radius:g} spheres)", c,
+                                    allowed="a larger system.n_particles, or a larger fraction"))
     return problems
 
 
@@ -534,9 +592,10 @@ CROSS_CHECKS = (
     (("hydrodynamics.min_gap", "hydrodynamics.lubrication_cutoff"), _gaps),
     (("ensemble.ranks_per_task", "solver.backend"), _ranks),
     (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),
-    (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes")
-     + _INTEGRATION, _time_step),
-    (("system.n_particles", "system.phi"), _initial_configuration),
+    (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes",
+      "system.size_classes") + _INTEGRATION, _time_step),
+    (("system.n_particles", "system.size_classes"), _size_classes),
+    (("system.n_particles", "system.phi", "system.size_classes"), _initial_configuration),
     (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
     (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
       "hydrodynamics.lubrication_cutoff"), _force_range),

@@ -4,7 +4,8 @@ Each field carries its TOML spelling, kind, allowed values, unit and a one-line 
 ``dataclasses.field(metadata=...)``; the loader, the canonical writer and
 :func:`schema_text` all read the schema from there, so a key is declared exactly once.
 
-Units are the seed's reduced units: sphere radius a = 1, medium zero-shear viscosity
+Units are the seed's reduced units: sphere radius a = 1 (with size classes: the largest
+radius; kT, D0 and t_D are then those of the largest spheres), medium zero-shear viscosity
 eta_m = 1, time in t_D = a^2/D0 with D0 = kT/(6 pi eta_m a). The one exception is
 non-Brownian steady shear, whose time unit is 1/gamma_dot (so ``shear.rate`` is 1 there).
 Non-Brownian oscillatory jobs keep t_D as the time unit, so omega and the Maxwell
@@ -96,7 +97,7 @@ _CONTROLLER_DEFAULTS: dict[str, str] = {}  # "section.key" -> default of keys na
 
 
 def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, table=None,
-        example=None, controls=None):
+        example=None, controls=None, optional=False):
     """Declare one job-file key.
 
     default  the value when the key is absent (None together with ``only_if`` means the key
@@ -107,7 +108,9 @@ def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, t
     toml     the TOML spelling when it differs from the attribute name;
     table    the dataclass of each element of a "tables" key;
     example  a value shown in messages about a required key;
-    controls "section.key" of this key when other keys' only_if refer to it.
+    controls "section.key" of this key when other keys' only_if refer to it;
+    optional a key whose default None means "absent" rather than "required" (it is then
+             left out of the canonical text).
 
     The dataclass default is None for a key that does not apply under the defaults of
     its controlling key, so that ``Job()`` equals the job of an empty file.
@@ -117,7 +120,7 @@ def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, t
         _CONTROLLER_DEFAULTS[controls] = default
     applies = only_if is None or _CONTROLLER_DEFAULTS[f"{only_if[0]}.{only_if[1]}"] in only_if[2]
     meta = dict(kind=kind, doc=doc, unit=unit, allowed=allowed, only_if=only_if,
-                toml=toml, table=table, default=default, example=example)
+                toml=toml, table=table, default=default, example=example, optional=optional)
     return field(default=default if applies else None, metadata=meta)
 
 
@@ -147,15 +150,82 @@ class JobSection:
 
 
 @dataclass(frozen=True)
+class SizeClass:
+    """One size class: sphere radius (in a, the largest radius) and its share of the
+    particle volume."""
+
+    radius: float = key(None, "float", "sphere radius; the largest class has radius 1 "
+                        "(it is the length unit a)", unit="a",
+                        allowed=Range(0.0, 1.0, lo_open=True), example=1.0)
+    fraction: float = key(None, "float", "share of the total particle volume (not of the "
+                          "number); the classes sum to 1", allowed=Range(0.0, 1.0, lo_open=True),
+                          example=0.5)
+
+
+@dataclass(frozen=True)
 class System:
-    """[system]: the particles. Monodisperse spheres of radius 1 in a cubic periodic box
-    of side L = (4 pi N / (3 phi))^(1/3); one task group per volume fraction."""
+    """[system]: the particles. Spheres of radius 1, or of several size classes (radii
+    relative to the largest), in a cubic periodic box of side L = (sum_i 4 pi a_i^3 / (3 phi))^(1/3); one task group
+    per volume fraction.
+
+    Size classes: the class counts N_k are N x_k rounded by largest remainder (ties to the
+    earlier class), x_k = (f_k/a_k^3) / sum_j (f_j/a_j^3) the number fractions of the
+    volume shares f_k; particles 0..N_0-1 have the first class's radius, and so on. phi is
+    the total volume fraction and holds exactly (the box is sized from the realised
+    particle volume); the realised volume shares are ``realised_fractions``."""
 
     n_particles: int = key(27, "int", "number of spheres N per realisation",
                            allowed=Range(1, None))
     phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions, one task group each",
                                  allowed=Range(0.0, 0.64, lo_open=True, hi_open=True))
     box: str = key("cubic", "str", "box shape", allowed=Choice(("cubic",)))
+    size_classes: tuple[SizeClass, ...] | None = key(
+        None, "tables", "discrete size classes [{radius = ..., fraction = ...}, ...]; radii "
+        "in units of the largest (= 1, the length unit), fractions = volume shares summing "
+        "to 1; absent: monodisperse spheres of radius 1", table=SizeClass, optional=True,
+        example=({"radius": 1.0, "fraction": 0.5}, {"radius": 0.5, "fraction": 0.5}))
+
+    # ---- derived quantities (standard library only)
+
+    @property
+    def class_counts(self) -> tuple[int, ...]:
+        """Spheres per size class (N,) when monodisperse; see the class docstring."""
+        n = self.n_particles
+        if self.size_classes is None:
+            return (n,)
+        weights = [c.fraction / c.radius ** 3 for c in self.size_classes]
+        total = math.fsum(weights)
+        exact = [n * w / total for w in weights]
+        counts = [math.floor(x) for x in exact]
+        order = sorted(range(len(exact)), key=lambda k: (-(exact[k] - counts[k]), k))
+        for k in order[:n - sum(counts)]:
+            counts[k] += 1
+        return tuple(counts)
+
+    @property
+    def class_radii(self) -> tuple[float, ...]:
+        """The radius of each size class ((1.0,) when monodisperse)."""
+        return (1.0,) if self.size_classes is None else tuple(c.radius for c in self.size_classes)
+
+    @property
+    def radii(self) -> tuple[float, ...]:
+        """The radius of every particle, class by class in the order listed."""
+        return tuple(r for r, m in zip(self.class_radii, self.class_counts) for _ in range(m))
+
+    @property
+    def realised_fractions(self) -> tuple[float, ...]:
+        """The volume share of each class after rounding the counts."""
+        vols = [m * r ** 3 for r, m in zip(self.class_radii, self.class_counts)]
+        total = math.fsum(vols)
+        return tuple(v / total for v in vols)
+
+    @property
+    def lattice_phi_limit(self) -> float:
+        """The largest phi of the simple-cubic lattice start, whose spacing L/m must exceed
+        the largest diameter 2: (pi/6) sum_i a_i^3 / N (pi/6 = 0.5236 when monodisperse)."""
+        if self.size_classes is None:
+            return math.pi / 6
+        return math.pi / 6 * math.fsum(r ** 3 for r in self.radii) / self.n_particles
 
 
 @dataclass(frozen=True)
@@ -405,7 +475,9 @@ def schema_text() -> str:
 def _key_line(f, literal, indent, prefix=""):
     m = f.metadata
     name = prefix + toml_name(f)
-    default = "required" if m["default"] is None else literal(m["default"])
+    default = literal(m["default"])
+    if m["default"] is None:
+        default = "absent" if m["optional"] else "required"
     allowed = m["allowed"].describe(name) if m["allowed"] else m["kind"]
     extra = f"; unit {m['unit']}" if m["unit"] else ""
     if m["only_if"]:

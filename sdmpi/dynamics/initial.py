@@ -1,11 +1,15 @@
 """Initial configurations: equilibrium hard-sphere fluids in a cubic periodic box.
 
-Spheres start on a simple cubic lattice (dense enough up to phi = pi/6 = 0.524) and are
+Spheres of equal or unequal radii a_i start on a simple cubic lattice spaced for the
+largest diameter (dense enough up to phi = (pi/6) sum_i a_i^3 / (N a_max^3), pi/6 = 0.524
+for equal spheres; unequal spheres are placed on randomly permuted sites) and are
 randomised by hard-sphere Metropolis Monte Carlo (trial displacements uniform in a cube,
-rejected on overlap; Metropolis et al. 1953), which samples the equilibrium hard-sphere
+rejected on overlap, |x_i - x_j| < a_i + a_j; Metropolis et al. 1953), which samples the equilibrium hard-sphere
 distribution for the given volume fraction. Denser random packings (up to phi ~ 0.62) come
 from `compress`: alternating MC sweeps with affine box shrinks limited by the closest
 pair, a slow Lubachevsky-Stillinger-like compression (Lubachevsky & Stillinger 1990).
+Equal radii take exactly the arithmetic (and random stream) of the monodisperse code
+before size classes existed, so old seeds give the same positions bit for bit.
 """
 
 import math
@@ -19,6 +23,25 @@ def cubic_box(n_particles, phi, radius=1.0):
     return (n_particles * 4.0 / 3.0 * math.pi * radius ** 3 / phi) ** (1.0 / 3.0)
 
 
+def box_side(radii, phi):
+    """Side L of the cube holding spheres of these radii (N,) at volume fraction phi
+    (equal radii: exactly :func:`cubic_box`)."""
+    radii = np.asarray(radii, float)
+    if np.all(radii == radii[0]):
+        return cubic_box(len(radii), phi, float(radii[0]))
+    return (float(np.sum(radii ** 3)) * 4.0 / 3.0 * math.pi / phi) ** (1.0 / 3.0)
+
+
+def _radii(n, radius, radii):
+    """Per-particle radii (N,) from either a common radius or an array."""
+    if radii is None:
+        return np.full(n, float(radius))
+    radii = np.ascontiguousarray(radii, dtype=float)
+    if radii.shape != (n,) or not np.all(radii > 0):
+        raise ValueError(f"radii must be {n} positive numbers, got shape {radii.shape}")
+    return radii
+
+
 @numba.njit(cache=True)
 def _min_image(dx, side, strain):
     """Lees-Edwards minimum image of a separation (3,) in a cube at the given strain."""
@@ -30,10 +53,9 @@ def _min_image(dx, side, strain):
 
 
 @numba.njit(cache=True)
-def _mc_sweeps(pos, side, diameter, step, sweeps, seed, strain):
+def _mc_sweeps(pos, side, radii, step, sweeps, seed, strain):
     np.random.seed(seed)
     n = pos.shape[0]
-    d2 = diameter * diameter
     accepted = 0
     trial = np.empty(3)
     dx = np.empty(3)
@@ -48,7 +70,8 @@ def _mc_sweeps(pos, side, diameter, step, sweeps, seed, strain):
                 for c in range(3):
                     dx[c] = trial[c] - pos[j, c]
                 _min_image(dx, side, strain)
-                if dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2 < d2:
+                contact = radii[i] + radii[j]
+                if dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2 < contact * contact:
                     ok = False
                     break
             if ok:
@@ -57,31 +80,41 @@ def _mc_sweeps(pos, side, diameter, step, sweeps, seed, strain):
     return accepted / (sweeps * n)
 
 
-def hard_sphere_fluid(n_particles, phi, rng, sweeps=200, radius=1.0, strain=0.0):
+def hard_sphere_fluid(n_particles, phi, rng, sweeps=200, radius=1.0, strain=0.0, radii=None):
     """Equilibrium hard-sphere configuration in a cube of side L with Lees-Edwards
     images at the given strain: positions (N, 3) (not wrapped) and L.
 
-    n_particles must be a perfect cube (lattice start: layers L/m > 2a apart in y, so
-    no overlap at any strain) and phi < pi/6. The MC step is tuned to ~40% acceptance."""
+    Spheres have the common ``radius``, or the per-particle ``radii`` (N,) when given
+    (then L comes from their total volume, :func:`box_side`). n_particles must be a
+    perfect cube (lattice start: layers L/m > 2 a_max apart in y, so no overlap at any
+    strain) and phi < (pi/6) sum_i a_i^3 / (N a_max^3) (pi/6 for equal spheres). Unequal
+    spheres take the lattice sites in an order drawn from ``rng`` (equal ones in raster
+    order, drawing nothing). The MC step is tuned to ~40% acceptance."""
     m = round(n_particles ** (1 / 3))
     if m ** 3 != n_particles:
         raise ValueError(f"n_particles must be a perfect cube for a lattice start, got {n_particles}")
-    if not 0 < phi < math.pi / 6:
-        raise ValueError(f"phi must be in (0, pi/6 = 0.5236) for a lattice start, got {phi}")
-    side = cubic_box(n_particles, phi, radius)
+    radii = _radii(n_particles, radius, radii)
+    a_max = float(radii.max())
+    limit = math.pi / 6 * float(np.mean((radii / a_max) ** 3))
+    if not 0 < phi < limit:
+        raise ValueError(f"phi must be in (0, {limit:.4f}) for a lattice start spaced for the "
+                         f"largest diameter (pi/6 <(a/a_max)^3>), got {phi}")
+    side = box_side(radii, phi)
     grid = (np.arange(m) + 0.5) * side / m
     pos = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
-    step = 0.5 * (side / m - 2 * radius) + 0.01
+    if np.any(radii != radii[0]):
+        pos = pos[rng.permutation(n_particles)]
+    step = 0.5 * (side / m - 2 * a_max) + 0.01
     seed = int(rng.integers(2 ** 31))
     for block in range(10):
-        rate = _mc_sweeps(pos, side, 2 * radius, step, max(sweeps // 10, 1), seed + block, strain)
+        rate = _mc_sweeps(pos, side, radii, step, max(sweeps // 10, 1), seed + block, strain)
         step *= min(max(rate / 0.4, 0.5), 2.0)
     return pos, side
 
 
 @numba.njit(cache=True)
-def min_distance(pos, side, strain=0.0):
-    """Smallest centre distance (Lees-Edwards minimum image) in a cube."""
+def _contact_ratio(pos, side, strain, radii):
+    """Smallest |x_i - x_j| / (a_i + a_j) (Lees-Edwards minimum image) in a cube."""
     n = pos.shape[0]
     best = np.inf
     dx = np.empty(3)
@@ -90,25 +123,39 @@ def min_distance(pos, side, strain=0.0):
             for c in range(3):
                 dx[c] = pos[i, c] - pos[j, c]
             _min_image(dx, side, strain)
-            best = min(best, dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2)
+            contact = radii[i] + radii[j]
+            best = min(best, (dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2) / (contact * contact))
     return math.sqrt(best)
 
 
-def compress(pos, side, phi_target, rng, sweeps_per_shrink=5, radius=1.0, max_shrinks=20000, strain=0.0):
+def min_distance(pos, side, strain=0.0):
+    """Smallest centre distance (Lees-Edwards minimum image) in a cube."""
+    return _contact_ratio(pos, side, strain, np.full(len(pos), 0.5))
+
+
+def min_gap_ratio(pos, side, radii, strain=0.0):
+    """Smallest |x_i - x_j| / (a_i + a_j) over pairs (>= 1: no overlap)."""
+    return _contact_ratio(pos, side, strain, np.ascontiguousarray(radii, dtype=float))
+
+
+def compress(pos, side, phi_target, rng, sweeps_per_shrink=5, radius=1.0, max_shrinks=20000, strain=0.0,
+             radii=None):
     """Compress a hard-sphere configuration (N, 3) in a cube of the given side (Lees-Edwards
-    strain fixed) to volume fraction phi_target. Returns (positions, side). Raises
-    RuntimeError if it jams."""
+    strain fixed) to volume fraction phi_target; spheres of the common ``radius`` or of the
+    per-particle ``radii``. Returns (positions, side). Raises RuntimeError if it jams."""
     pos = pos.copy()
     n = len(pos)
-    target = cubic_box(n, phi_target, radius)
+    radii = _radii(n, radius, radii)
+    target = box_side(radii, phi_target)
     step = 0.05
     for _ in range(max_shrinks):
         if side <= target:
             return pos, side
-        dmin = min_distance(pos, side, strain)
-        factor = max(2 * radius / dmin * (1 + 1e-9), target / side)
+        ratio = _contact_ratio(pos, side, strain, radii)
+        factor = max(1.0 / ratio * (1 + 1e-9), target / side)
         pos *= factor
         side *= factor
-        rate = _mc_sweeps(pos, side, 2 * radius, step, sweeps_per_shrink, int(rng.integers(2 ** 31)), strain)
+        rate = _mc_sweeps(pos, side, radii, step, sweeps_per_shrink, int(rng.integers(2 ** 31)), strain)
         step = min(max(step * (0.5 + rate / 0.4 * 0.5), 1e-4), 0.5)
-    raise RuntimeError(f"compression to phi = {phi_target} jammed at phi = {n * 4 / 3 * math.pi / side ** 3:.3f}")
+    volume = 4.0 / 3.0 * math.pi * float(np.sum(radii ** 3))
+    raise RuntimeError(f"compression to phi = {phi_target} jammed at phi = {volume / side ** 3:.3f}")

@@ -24,6 +24,10 @@ hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf; Brownian
 S_H by their modes (`media`). Units: a = 1, eta_m = 1, D0 = kT/(6 pi eta_m a) = 1, so
 kT = 6 pi and time is in t_D = a^2/D0; non-Brownian runs use the same code with kT = 0.
 
+Size classes (`job.system.size_classes`): every particle has its own radius a_i (in units
+of the largest, a = 1); the hydrodynamics, the overlap correction and the pair forces use
+them, and a, kT = 6 pi and t_D keep their meaning (those of the largest spheres).
+
 Hard spheres: lubrication keeps overlaps rare; those produced by a finite step are
 counted and removed by the potential-free correction of `forces.remove_overlaps` before
 the step's hydrodynamics (seed 000 sec. III, Bossis & Brady 1984). An optional pair
@@ -86,9 +90,11 @@ class Realisation:
         self.rng = np.random.Generator(np.random.PCG64(seq))
         n = job.system.n_particles
         self.protocol = protocol_of(job, task)
-        pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0))
+        # radii in a (the largest radius): all 1, or job.system.size_classes class by class
+        self.radii = np.array(job.system.radii, dtype=float)
+        pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0),
+                                      radii=self.radii)
         self.n_particles = n
-        self.radii = np.ones(n)
         self.box = np.full(3, side)
         self.volume = float(np.prod(self.box))
         self.positions = Lattice(self.box, self.protocol.strain(0.0)).wrap(pos)
@@ -204,7 +210,7 @@ class Realisation:
         u_flow = solver.velocities(np.zeros((n, 6)), e5)
         s_h = solver.stresslets(u_flow, e5)
         velocity = u_flow
-        forces, virial = pair_forces(self.force_law, res.pairs, n)
+        forces, virial = pair_forces(self.force_law, res.pairs, n, self.radii)
         stress_p = np.zeros(6)
         if self.force_law is not None:
             f6 = np.hstack([forces, np.zeros((n, 3))])

@@ -50,13 +50,15 @@ class TaskLayout:
     """What the store needs of one task's realisation (picklable, for allgather).
 
     sample_fields  name -> (shape per sample, dtype, unit, description);
-    state_fields   name -> (shape, dtype); box (3,) in radii; n_particles.
+    state_fields   name -> (shape, dtype); box (3,) in radii; n_particles;
+    radii          (N,) sphere radii in a (all 1 unless the job has size classes).
     """
 
     sample_fields: dict
     state_fields: dict
     box: tuple
     n_particles: int
+    radii: tuple = ()
 
     @classmethod
     def of(cls, realisation) -> "TaskLayout":
@@ -64,8 +66,10 @@ class TaskLayout:
         samples = {k: (tuple(s), np.dtype(d).str, u, t)
                    for k, (s, d, u, t) in realisation.sample_fields().items()}
         state = {k: (tuple(s), np.dtype(d).str) for k, (s, d) in realisation.state_fields().items()}
-        return cls(samples, state, tuple(float(x) for x in realisation.box),
-                   int(realisation.n_particles))
+        n = int(realisation.n_particles)
+        radii = getattr(realisation, "radii", None)
+        radii = (1.0,) * n if radii is None else tuple(float(a) for a in radii)
+        return cls(samples, state, tuple(float(x) for x in realisation.box), n, radii)
 
 
 def _nan_if_none(x):
@@ -102,6 +106,10 @@ def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
         "realisation": task.realisation, "dt": task.dt, "n_steps": task.n_steps,
         "discard_steps": task.discard_steps, "n_particles": layout.n_particles,
         "box": np.array(layout.box), "gamma0": _nan_if_none(job.shear.gamma0)})
+    radii = group.create_dataset("radii", data=np.array(layout.radii or
+                                                        (1.0,) * layout.n_particles, dtype="f8"),
+                                 track_times=False)
+    radii.attrs.update({"unit": "a", "description": "sphere radius of each particle"})
     samples = group.create_group("samples")
     for name, (shape, dtype, unit, description) in layout.sample_fields.items():
         ds = samples.create_dataset(name, (task.n_steps, *shape), dtype, track_times=False)
