@@ -95,6 +95,11 @@ def summary(job) -> str:
         f"  shear {shear}; Brownian {'on' if job.brownian.enabled else 'off'}; "
         f"time unit {unit}",
     ]
+    if job.system.size_classes:
+        sysm = job.system
+        lines.insert(2, "  size classes: " + ", ".join(
+            f"{m} x radius {r:g} ({100 * f:.1f}% of the particle volume)"
+            for r, m, f in zip(sysm.class_radii, sysm.class_counts, sysm.realised_fractions)))
     for omega in job.frequencies:
         head = "  every task      " if omega is None else f"  omega = {omega:<9.5g}"
         lines.append(f"{head}  dt = {job.time_step(omega):<9.3g} "

@@ -214,3 +214,13 @@ def test_bidisperse_job_two_ranks_run_and_reduce(tmp_path):
     assert res.returncode == 0, res.stderr
     lines = (out / "moduli.csv").read_text().splitlines()
     assert lines[0].startswith("phi,omega,component") and len(lines) == 1 + 5
+
+
+def test_validate_summary_lists_size_classes():
+    from sdmpi.cli import main
+    import contextlib
+    import io
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["validate", "jobs/bidisperse_demo.toml"]) == 0
+    assert "size classes: 3 x radius 1" in out.getvalue()
