@@ -459,3 +459,9 @@ def test_initial_configuration_and_repulsion_range_checked():
     assert "system.phi[1] = 0.55" in text and "0.5236" in text
     with pytest.raises(JobError, match=r"interparticle.tau = 5.*tau >= 13.8"):
         parse_job('[interparticle]\nkind = "repulsion"\nf0 = 1.0\ntau = 5.0\n')
+
+
+def test_maxwell_medium_with_interparticle_forces_is_refused():
+    with pytest.raises(JobError, match="interparticle.kind.*Maxwell medium"):
+        parse_job('[medium]\nkind = "maxwell"\nmodes = [{eta = 1.0, lambda = 0.5}]\n'
+                  '[interparticle]\nkind = "repulsion"\nf0 = 1.0\ntau = 300.0\n')

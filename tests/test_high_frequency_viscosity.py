@@ -14,14 +14,11 @@ from sdmpi.hydro.bulk import hydrodynamic_viscosity
 @pytest.mark.parametrize("n, configs", [(27, 8), (64, 6)])
 def test_eta_inf_at_phi_045_close_to_seed_eq38(n, configs):
     """eta'_inf = 1 + n <S_xy>/gamma_dot over independent equilibrium (Monte Carlo)
-    configurations. Measured (README): 4.9-5.1 (N = 27) and 4.8-4.9 (N = 64), against
-    5.41 from eq. 38: 6-11% lower. Eq. 38 fits the seed's *Brownian SD* hydrodynamic
-    stress (Phung's code, leading lubrication singularities, dynamic microstructure with
-    Bossis-Brady overlap correction) within 1%; our configurations are exact equilibrium
-    (g near contact 4.55 vs Carnahan-Starling 4.66, checked), the lubrication cut-off
-    costs 0.4% (gap 2 vs 6) and the Ewald accuracy 1e-6 relative. The tolerance is 12%
-    (the observed gap plus 2 standard errors); it still fails without lubrication (2.9)
-    or with the dilute Batchelor-Green value (2.58)."""
+    configurations, against 5.41 from eq. 38. Measured (README): 4.9 +- 0.1 here, and
+    5.07 +- 0.04 on 120 configurations: 6% low, a gap we have not explained (README lists
+    what was checked). Eq. 38 fits the seed's Brownian SD within 1%; the tolerance is 12%
+    (the gap plus the scatter of 6-8 configurations); it still fails without
+    lubrication (2.9) or with the dilute Batchelor-Green value (2.58)."""
     rng = np.random.default_rng(20000803 + n)
     values = [hydrodynamic_viscosity(*_config(n, rng)) for _ in range(configs)]
     eta_inf = 1 + np.mean(values)

@@ -574,6 +574,16 @@ def _forces_need_pairs(job):
 IMPLEMENTED_BACKENDS = ("dense", "petsc-dense")
 
 
+def _maxwell_forces(job):
+    """Seed 000 covers hard spheres in a Maxwell medium: the viscoelastic response of the
+    force-induced stresslets is not modelled, so the combination is refused."""
+    if job.medium.kind == "maxwell" and job.interparticle.kind != "none":
+        return [Problem("interparticle.kind", "interparticle forces in a Maxwell medium are not "
+                        "modelled (their stresslets would need the medium's memory too)",
+                        job.interparticle.kind, allowed='"none" with medium.kind = "maxwell"')]
+    return []
+
+
 def _backend(job):
     if job.solver.backend not in IMPLEMENTED_BACKENDS:
         return [Problem("solver.backend", "is not implemented yet in this version",
@@ -601,4 +611,5 @@ CROSS_CHECKS = (
       "hydrodynamics.lubrication_cutoff"), _force_range),
     (("interparticle.kind", "hydrodynamics.lubrication"), _forces_need_pairs),
     (("solver.backend",), _backend),
+    (("medium.kind", "interparticle.kind"), _maxwell_forces),
 )
