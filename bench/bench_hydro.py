@@ -25,8 +25,7 @@ def one_solve(pos, side, timings):
     t0 = time.perf_counter()
     plan = farfield.plan_far_field(pos, radii, lattice, tol=resistance.DEFAULT_EWALD_TOL)
     mob = np.zeros((farfield.NDOF * n, farfield.NDOF * n))
-    farfield._real_space_sum(pos, radii, *plan.images, plan.table, plan.params.xi, farfield.BASIS,
-                             farfield._LEVI, mob)
+    farfield._real_space_sum(pos, radii, *plan.images, plan.table, plan.params.xi, farfield.BASIS, mob)
     t1 = time.perf_counter()
     mob += farfield._reciprocal_matrix(pos, radii, plan.kvec, plan.params.xi, plan.volume)
     for i in range(n):

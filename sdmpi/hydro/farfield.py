@@ -108,9 +108,6 @@ def radial_table(xi):
 # real-space pair kernel (numba)
 # ---------------------------------------------------------------------------------
 
-_LEVI = np.zeros((3, 3, 3))
-_LEVI[0, 1, 2] = _LEVI[1, 2, 0] = _LEVI[2, 0, 1] = 1.0
-_LEVI[0, 2, 1] = _LEVI[2, 1, 0] = _LEVI[1, 0, 2] = -1.0
 
 
 @numba.njit(cache=True)
@@ -152,7 +149,7 @@ def _radial_values(table, bounds, xi, r, pw, out):
 
 
 @numba.njit(cache=True)
-def _pair_block(rvec, ai, aj, table, bounds, xi, basis, levi, work, out):
+def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
     """11x11 real-space block coupling receiver sphere i to source sphere j at
     rvec = x_i - x_j (plus a lattice translation); adds into out. work: (80,) scratch."""
     r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
@@ -267,7 +264,7 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, levi, work, out):
 
 
 @numba.njit(cache=True)
-def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, levi, mob):
+def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, mob):
     """Adds the real-space Ewald sum over the pair images (pi, pj, shift) (or, with
     xi = 0 and zero shifts, the unbounded pair couplings) into the (11N, 11N) matrix mob.
     Each image pair is stored once: M_ji = M_ij^T (reciprocity) fills the other
@@ -282,7 +279,7 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, levi, mob):
         i, j = pi[p], pj[p]
         for c in range(3):
             rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
-        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, levi, work, block)
+        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, block)
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
         for a in range(NDOF):
@@ -295,12 +292,6 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, levi, mob):
 # ---------------------------------------------------------------------------------
 # reciprocal space and self terms (numpy + BLAS)
 # ---------------------------------------------------------------------------------
-
-
-def _hasimoto(k2, xi):
-    """h(k) = (1 + k^2/4xi^2 + k^4/8xi^4) exp(-k^2/4xi^2)."""
-    u = k2 / (4 * xi * xi)
-    return (1 + u + 2 * u * u) * np.exp(-u)
 
 
 @numba.njit(cache=True)
@@ -485,7 +476,7 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None
     n = pos.shape[0]
     mob = np.zeros((NDOF * n, NDOF * n))
     xi_used = 0.0 if plan.params is None else plan.params.xi
-    _real_space_sum(pos, radii, *plan.images, plan.table, xi_used, BASIS, _LEVI, mob)
+    _real_space_sum(pos, radii, *plan.images, plan.table, xi_used, BASIS, mob)
     if plan.params is not None:
         mob += _reciprocal_matrix(pos, radii, plan.kvec, xi_used, plan.volume)
     for i, a in enumerate(radii):

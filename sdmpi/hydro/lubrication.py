@@ -47,7 +47,7 @@ import numba
 import numpy as np
 
 from .basis import BASIS
-from .farfield import _LEVI, NDOF, _pair_block, _power_bounds, radial_table, self_mobility
+from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
 from .geometry import find_pairs
 from .two_sphere import _basis5, _fill_pair_work, pair_resistance
 
@@ -103,7 +103,7 @@ def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=D
 
 
 @numba.njit(cache=True)
-def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, levi, res):
+def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, res):
     """res[p] -= inverse of the 22x22 unbounded two-sphere far-field mobility."""
     mob = np.zeros((2 * NDOF, 2 * NDOF))
     bounds = _power_bounds(table)
@@ -115,7 +115,7 @@ def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, levi, res):
         block[:, :] = 0.0
         for c in range(3):
             rvec[c] = -dx[p, c]  # receiver 1 minus source 2
-        _pair_block(rvec, a1[p], a2[p], table, bounds, 0.0, basis, levi, work, block)
+        _pair_block(rvec, a1[p], a2[p], table, bounds, 0.0, basis, work, block)
         mob[:NDOF, :NDOF] = self1[p]
         mob[NDOF:, NDOF:] = self2[p]
         mob[:NDOF, NDOF:] = block
@@ -136,7 +136,7 @@ def pair_corrections_exact(dx, a1, a2):
     selfs = {a: self_mobility(a) for a in np.unique(np.concatenate([a1, a2]))}
     self1 = np.stack([selfs[a] for a in a1])
     self2 = np.stack([selfs[a] for a in a2])
-    _subtract_far_field(dx, a1, a2, self1, self2, _RADIAL_TABLE, BASIS, _LEVI, res)
+    _subtract_far_field(dx, a1, a2, self1, self2, _RADIAL_TABLE, BASIS, res)
     return res
 
 
