@@ -12,6 +12,8 @@ import time
 
 import numpy as np
 
+from sdmpi.dynamics.realisation import sample_fields
+
 SLEEP = float(os.environ.get("SDMPI_DOUBLE_SLEEP", "0"))
 
 
@@ -28,22 +30,7 @@ class DoubleRealisation:
         self.gamma0 = job.shear.gamma0 or 0.0
 
     def sample_fields(self):
-        su = "eta_m/t_D" if self.job.time_unit == "t_D" else "eta_m gamma_dot"
-        fields = {
-            "time": ((), "f8", self.job.time_unit, "t_k = k dt"),
-            "strain": ((), "f8", "1", "gamma(t_k)"),
-            "rate": ((), "f8", "1/" + self.job.time_unit, "gamma_dot(t_k)"),
-            "stress_hydrodynamic": ((6,), "f8", su, "double"),
-            "stress_brownian": ((6,), "f8", su, "double"),
-            "stress_interparticle": ((6,), "f8", su, "double"),
-            "n_overlaps": ((), "i4", "1", "double"),
-            "min_gap": ((), "f8", "a", "double"),
-        }
-        if self.job.medium.kind == "maxwell":
-            fields["stress_hydrodynamic_maxwell"] = ((6,), "f8", su, "double")
-        if self.job.output.per_particle:
-            fields["stresslets"] = ((self.n_particles, 5), "f8", "eta_m a^3/t_D", "double")
-        return fields
+        return sample_fields(self.job)  # the real stream's datasets
 
     def state_fields(self):
         return {"positions": ((self.n_particles, 3), "f8"), "step": ((1,), "i8"),
@@ -85,6 +72,7 @@ class DoubleRealisation:
             out["stress_brownian"][i] = kick[:2].ravel()
             out["stress_interparticle"][i] = -six
             out["n_overlaps"][i] = int(np.sum(np.abs(kick) > 2.5))
+            out["n_overlaps_midpoint"][i] = int(np.sum(np.abs(kick) > 3.0))
             out["min_gap"][i] = float(np.min(np.abs(kick)))
             if "stress_hydrodynamic_maxwell" in out:
                 out["stress_hydrodynamic_maxwell"][i] = 0.5 * six

@@ -75,6 +75,28 @@ def protocol_of(job, task):
     return NoShear()
 
 
+def sample_fields(job):
+    """name -> (shape per sample, dtype, unit, description) of a task's sample stream:
+    the datasets under samples/ in docs/store.md (the same for every task of a job)."""
+    su = "eta_m/t_D" if job.time_unit == "t_D" else "eta_m gamma_dot"
+    fields = {
+        "time": ((), "f8", job.time_unit, "t_k = k dt"),
+        "strain": ((), "f8", "1", "gamma(t_k)"),
+        "rate": ((), "f8", "1/" + job.time_unit, "gamma_dot(t_k)"),
+        "stress_hydrodynamic": ((6,), "f8", su, "(1/V) sum S_H, viscous medium"),
+        "stress_brownian": ((6,), "f8", su, "-(kT/V) sum div(R_SU R_FU^-1)"),
+        "stress_interparticle": ((6,), "f8", su, "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
+        "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
+        "n_overlaps_midpoint": ((), "i4", "1", "overlapping pairs corrected at the Brownian midpoint"),
+        "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
+    }
+    if job.medium.kind == "maxwell":
+        fields["stress_hydrodynamic_maxwell"] = ((6,), "f8", su, "hydrodynamic stress filtered by the Maxwell modes")
+    if job.output.per_particle:
+        fields["stresslets"] = ((job.system.n_particles, 5), "f8", "eta_m a^3/t_D", "S_H in the 5-basis")
+    return fields
+
+
 class Realisation:
     """One task's SD realisation, a deterministic function of (job, task): its random
     stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
@@ -116,23 +138,7 @@ class Realisation:
 
     def sample_fields(self):
         """name -> (shape per sample, dtype, unit, description) of the sample stream."""
-        su = "eta_m/t_D" if self.job.time_unit == "t_D" else "eta_m gamma_dot"
-        fields = {
-            "time": ((), "f8", self.job.time_unit, "t_k = k dt"),
-            "strain": ((), "f8", "1", "gamma(t_k)"),
-            "rate": ((), "f8", "1/" + self.job.time_unit, "gamma_dot(t_k)"),
-            "stress_hydrodynamic": ((6,), "f8", su, "(1/V) sum S_H, viscous medium"),
-            "stress_brownian": ((6,), "f8", su, "-(kT/V) sum div(R_SU R_FU^-1)"),
-            "stress_interparticle": ((6,), "f8", su, "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
-            "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
-            "n_overlaps_midpoint": ((), "i4", "1", "overlapping pairs corrected at the Brownian midpoint"),
-            "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
-        }
-        if self.maxwell is not None:
-            fields["stress_hydrodynamic_maxwell"] = ((6,), "f8", su, "hydrodynamic stress filtered by the Maxwell modes")
-        if self.job.output.per_particle:
-            fields["stresslets"] = ((self.n_particles, 5), "f8", "eta_m a^3/t_D", "S_H in the 5-basis")
-        return fields
+        return sample_fields(self.job)
 
     def state_fields(self):
         """name -> (shape, dtype) of the state (fixed for the realisation)."""
