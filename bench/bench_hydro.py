@@ -25,9 +25,11 @@ def one_solve(pos, side, timings):
     t0 = time.perf_counter()
     plan = farfield.plan_far_field(pos, radii, lattice, tol=resistance.DEFAULT_EWALD_TOL)
     mob = np.zeros((farfield.NDOF * n, farfield.NDOF * n))
-    farfield._real_space_sum(pos, radii, *plan.images, plan.table, plan.params.xi, farfield.BASIS, mob)
+    grid = plan.grid
+    farfield._real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h,
+                             plan.params.xi, farfield.BASIS, mob)
     t1 = time.perf_counter()
-    mob += farfield._reciprocal_matrix(pos, radii, plan.kvec, plan.params.xi, plan.volume)
+    farfield._reciprocal_sum(pos, radii, plan.kvec, plan.params.xi, plan.volume, mob)
     for i in range(n):
         s = slice(farfield.NDOF * i, farfield.NDOF * (i + 1))
         mob[s, s] += plan.self_blocks[1.0]

@@ -140,3 +140,43 @@ def test_radial_machinery_matches_closed_forms():
     d1 = RadialFunction(xi, table[0, 1, 0], table[0, 1, 1])
     h = 1e-6
     assert np.allclose(d1(r), (phi0(r + h) - phi0(r - h)) / (2 * h), rtol=1e-7)
+
+
+def test_pair_search_finds_exactly_the_images_within_reach():
+    """find_pairs' direct enumeration of lattice translations against a brute-force scan
+    of every translation |n_i| <= 4, for unwrapped positions and positive and negative
+    strain (the x-extent of a sheared box makes the enumeration order matter)."""
+    from sdmpi.hydro.geometry import find_pairs
+
+    rng = np.random.default_rng(5)
+    box = np.array([5.0, 4.0, 6.0])
+    for strain in (0.0, 0.45, -0.3):
+        lat = Lattice(box, strain)
+        pos = rng.uniform(-3, 9, (7, 3))  # not wrapped on purpose
+        radii = rng.uniform(0.5, 1.0, 7)
+        i, j, shift = find_pairs(pos, radii, lat, 2.0, 1.5)
+        got = {(a, b, tuple(np.round(s, 9))) for a, b, s in zip(i, j, shift)}
+        n = np.stack(np.meshgrid(*[np.arange(-4, 5)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        shifts = n @ lat.vectors
+        want = set()
+        for a in range(7):
+            for b in range(a, 7):
+                d = np.linalg.norm(pos[b] + shifts - pos[a], axis=1)
+                for k in np.nonzero(d < 2.0 + 1.5 * (radii[a] + radii[b]))[0]:
+                    if a == b and tuple(n[k][::-1]) <= (0, 0, 0):  # one of each +-n
+                        continue
+                    want.add((a, b, tuple(np.round(shifts[k], 9))))
+        assert got == want and len(got) == len(i)
+
+
+@pytest.mark.parametrize("tol", [1e-4, 1e-6, 1e-8])
+def test_requested_accuracy_is_met(tol):
+    """The whole periodic M_inf at accuracy tol (interpolated real-space radial values,
+    truncated sums) against a tol = 1e-13 sum (exact radial values): the largest error,
+    relative to the largest entry, is below tol (measured 0.1-0.3 tol)."""
+    rng = np.random.default_rng(11)
+    box = np.array([7.0, 7.0, 7.0])
+    pos, rad = _random_config(rng, 12, box, rmin=0.9, rmax=1.0)
+    ref = far_field_mobility(pos, rad, box=box, strain=-0.4, tol=1e-13)
+    got = far_field_mobility(pos, rad, box=box, strain=-0.4, tol=tol)
+    assert np.abs(got - ref).max() < tol * np.abs(ref).max()

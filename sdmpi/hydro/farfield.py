@@ -90,14 +90,15 @@ class RadialFunction:
 
 def radial_table(xi):
     """T[p, m] = coefficients (2, NPOW) of d^m/dr^m of phi_p = lap^p chi_r,
-    p = 0..3, m = 0..4, with chi_r = r erfc(xi r)/(8 pi)."""
+    p = 0..3, m = 0..5, with chi_r = r erfc(xi r)/(8 pi). The kernels use m <= 4;
+    m = 5 is the slope of m = 4 for the interpolation grid."""
     c = np.zeros(_NPOW)
     c[_P0 + 1] = 1.0 / (8 * math.pi)
     phi = RadialFunction(xi, c, np.zeros(_NPOW))
-    table = np.zeros((4, 5, 2, _NPOW))
+    table = np.zeros((4, 6, 2, _NPOW))
     for p in range(4):
         f = phi
-        for m in range(5):
+        for m in range(6):
             table[p, m, 0], table[p, m, 1] = f.c, f.d
             f = f.derivative()
         phi = phi.laplacian()
@@ -113,9 +114,9 @@ def radial_table(xi):
 @numba.njit(cache=True)
 def _power_bounds(table):
     """[lo, hi) index range of the non-zero powers of each (p, m) entry of the table."""
-    bounds = np.zeros((4, 5, 2), dtype=np.int64)
+    bounds = np.zeros((4, table.shape[1], 2), dtype=np.int64)
     for p in range(4):
-        for m in range(5):
+        for m in range(table.shape[1]):
             lo, hi = table.shape[3], 0
             for n in range(table.shape[3]):
                 if table[p, m, 0, n] != 0.0 or table[p, m, 1, n] != 0.0:
@@ -127,8 +128,8 @@ def _power_bounds(table):
 
 @numba.njit(cache=True)
 def _radial_values(table, bounds, xi, r, pw, out):
-    """out[p, m] = d^m phi_p / dr^m at r (bounds from _power_bounds(table); pw is a
-    work array of length NPOW)."""
+    """out[p, m] = d^m phi_p / dr^m at r for m < out.shape[1] (bounds from
+    _power_bounds(table); pw is a work array of length NPOW)."""
     erfc = math.erfc(xi * r)
     gauss = math.exp(-xi * xi * r * r)
     npow = table.shape[3]
@@ -139,7 +140,7 @@ def _radial_values(table, bounds, xi, r, pw, out):
     for n in range(_P0 - 1, -1, -1):
         pw[n] = pw[n + 1] * inv
     for p in range(4):
-        for m in range(5):
+        for m in range(out.shape[1]):
             sc = 0.0
             sd = 0.0
             for n in range(bounds[p, m, 0], bounds[p, m, 1]):
@@ -149,15 +150,52 @@ def _radial_values(table, bounds, xi, r, pw, out):
 
 
 @numba.njit(cache=True)
+def _fill_radial_grid(table, xi, r0, h, grid):
+    """grid[g, p, m] = d^m phi_p/dr^m at r = r0 + g h, m = 0..5."""
+    bounds = _power_bounds(table)
+    pw = np.empty(_NPOW)
+    for g in range(grid.shape[0]):
+        _radial_values(table, bounds, xi, r0 + g * h, pw, grid[g])
+
+
+@numba.njit(cache=True)
+def _radial_lookup(grid, r0, h, table, bounds, xi, r, pw, out):
+    """out[p, m] (m <= 4) as _radial_values, by cubic Hermite interpolation on the grid
+    (values and their r-derivatives, the next m); exact evaluation off the grid."""
+    s = (r - r0) / h
+    g = int(math.floor(s))
+    if g < 0 or g + 1 >= grid.shape[0]:
+        _radial_values(table, bounds, xi, r, pw, out)
+        return
+    t = s - g
+    t2 = t * t
+    c00 = (2 * t - 3) * t2 + 1
+    c10 = ((t - 2) * t + 1) * t * h
+    c01 = (3 - 2 * t) * t2
+    c11 = (t - 1) * t2 * h
+    for p in range(4):
+        for m in range(5):
+            out[p, m] = (c00 * grid[g, p, m] + c10 * grid[g, p, m + 1]
+                         + c01 * grid[g + 1, p, m] + c11 * grid[g + 1, p, m + 1])
+
+
+@numba.njit(cache=True)
 def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
     """11x11 real-space block coupling receiver sphere i to source sphere j at
     rvec = x_i - x_j (plus a lattice translation); adds into out. work: (80,) scratch."""
     r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
+    v = work[3:23].reshape((4, 5))
+    _radial_values(table, bounds, xi, r, work[23:23 + _NPOW], v)
+    _block_from_radial(rvec, r, v, ai, aj, basis, work, out)
+
+
+@numba.njit(cache=True)
+def _block_from_radial(rvec, r, v, ai, aj, basis, work, out):
+    """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
+    (work: (80,) scratch, entries 3..50 untouched)."""
     e = work[0:3]
     for c in range(3):
         e[c] = rvec[c] / r
-    v = work[3:23].reshape((4, 5))
-    _radial_values(table, bounds, xi, r, work[23:23 + _NPOW], v)
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
     be_i, be_j = ai * ai / 10.0, aj * aj / 10.0
     ir = 1.0 / r
@@ -264,14 +302,16 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
 
 
 @numba.njit(cache=True)
-def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, mob):
+def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, mob):
     """Adds the real-space Ewald sum over the pair images (pi, pj, shift) (or, with
     xi = 0 and zero shifts, the unbounded pair couplings) into the (11N, 11N) matrix mob.
+    Radial values come from the interpolation grid (see RadialGrid) where it covers r.
     Each image pair is stored once: M_ji = M_ij^T (reciprocity) fills the other
     triangle, and for a self-image (i == j) adds the -n image. Consecutive images of the
     same pair (find_pairs lists them together) are summed before being added to mob."""
     bounds = _power_bounds(table)
     work = np.empty(80)
+    v = np.empty((4, 5))
     block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
     n_img = pi.shape[0]
@@ -279,7 +319,9 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, mob):
         i, j = pi[p], pj[p]
         for c in range(3):
             rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
-        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, block)
+        r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
+        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, work[23:23 + _NPOW], v)
+        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, work, block)
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
         for a in range(NDOF):
@@ -294,18 +336,34 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, xi, basis, mob):
 # ---------------------------------------------------------------------------------
 
 
+# Pair form of the reciprocal sum. With b_i(k) the real 11x2 matrix of R_i(k) q_t
+# sqrt(h)/k (U rows (1 - a_i^2 k^2/6) q, Omega rows (1/2) k x q, E rows
+# (1 - a_i^2 k^2/10) k.B^m.q; the Omega and E rows carry a factor i), the block is
+#   M_ij = (2/V) sum_k [cos(k.r_ij) A_k + sin(k.r_ij) B_k],  r_ij = x_i - x_j,
+# A_k = (b_i b_j^T) on the U-U and (Omega,E)-(Omega,E) entries, B_k = +-(b_i b_j^T) on
+# the U-(Omega,E) (+) and (Omega,E)-U (-) entries (the sum over +-k of the Gram form
+# Re[Z Z^H], Z_i = b_i exp(i k.x_i)). Over all pairs i <= j this is two matrix
+# products (pairs x k) @ (k x entries), N^2 n_k 121 flops: a quarter of those of the
+# Gram form as a rank-4 n_k update of the 11N x 11N matrix. The radius factors
+# f_a(a_i) f_b(a_j), f = 1 - c a^2 k^2 (c = 1/6 U, 0 Omega, 1/10 E), are folded into
+# A_k, B_k when all radii are equal, and otherwise expanded in powers of k^2.
+
+_ROW_C = np.array([1 / 6] * 3 + [0.0] * 3 + [1 / 10] * 5)  # Faxen coefficient per row
+_EVEN = np.arange(NDOF) < 3  # U rows (real); Omega and E rows carry a factor i
+#: (row, column) entries of the cosine (same parity) and sine (mixed parity) parts
+_COS_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(NDOF) if _EVEN[a] == _EVEN[b]])
+_SIN_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(NDOF) if _EVEN[a] != _EVEN[b]])
+_SIN_SIGN = np.where(_EVEN[_SIN_ENTRIES[:, 0]], 1.0, -1.0)
+_PAIR_CHUNK = 2048  # pairs per matrix product (bounds the work arrays)
+
+
 @numba.njit(cache=True)
-def _reciprocal_rows(pos, radii, kvec, xi, basis, z):
-    """Rows of Z for the reciprocal sum: for wave vector k and each of the two unit
-    vectors q normal to it, Z_i = R_i(k) q sqrt(h(k))/k exp(i k.x_i), real parts in rows
-    [0, 2 nk), imaginary parts in rows [2 nk, 4 nk). R_i(k): U rows (1 - a^2 k^2/6) q,
-    Omega rows (i/2) k x q, E rows i (1 - a^2 k^2/10) k.B^m.q."""
-    nk = kvec.shape[0]
-    n = pos.shape[0]
-    q = np.empty((2, 3))
-    kq = np.empty((2, 5))
-    kxq = np.empty((2, 3))
-    for kk in range(nk):
+def _wave_tensors(kvec, xi, basis, cos_entries, sin_entries, sin_sign, tcos, tsin):
+    """tcos[k, e] = (b b^T)[entry e] and tsin[k, e] = sign_e (b b^T)[entry e] for unit
+    radius factors (see the pair form above)."""
+    b = np.empty((NDOF, 2))
+    q = np.empty(3)
+    for kk in range(kvec.shape[0]):
         k0, k1, k2 = kvec[kk, 0], kvec[kk, 1], kvec[kk, 2]
         ksq = k0 * k0 + k1 * k1 + k2 * k2
         kmag = math.sqrt(ksq)
@@ -317,47 +375,90 @@ def _reciprocal_rows(pos, radii, kvec, xi, basis, z):
         else:
             a0, a1, a2 = 0.0, k2, -k1  # k x e_x
         norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        q[0, 0], q[0, 1], q[0, 2] = a0 / norm, a1 / norm, a2 / norm
-        q[1, 0] = (k1 * q[0, 2] - k2 * q[0, 1]) / kmag
-        q[1, 1] = (k2 * q[0, 0] - k0 * q[0, 2]) / kmag
-        q[1, 2] = (k0 * q[0, 1] - k1 * q[0, 0]) / kmag
+        p0, p1, p2 = a0 / norm, a1 / norm, a2 / norm
         for t in range(2):
+            if t == 0:
+                q[0], q[1], q[2] = p0, p1, p2
+            else:
+                q[0] = (k1 * p2 - k2 * p1) / kmag
+                q[1] = (k2 * p0 - k0 * p2) / kmag
+                q[2] = (k0 * p1 - k1 * p0) / kmag
             for c in range(3):
-                q[t, c] *= scale
-            kxq[t, 0] = 0.5 * (k1 * q[t, 2] - k2 * q[t, 1])
-            kxq[t, 1] = 0.5 * (k2 * q[t, 0] - k0 * q[t, 2])
-            kxq[t, 2] = 0.5 * (k0 * q[t, 1] - k1 * q[t, 0])
+                b[c, t] = scale * q[c]
+            b[3, t] = 0.5 * scale * (k1 * q[2] - k2 * q[1])
+            b[4, t] = 0.5 * scale * (k2 * q[0] - k0 * q[2])
+            b[5, t] = 0.5 * scale * (k0 * q[1] - k1 * q[0])
             for m in range(5):
                 acc = 0.0
                 for a in range(3):
-                    for b in range(3):
-                        acc += kvec[kk, a] * basis[m, a, b] * q[t, b]
-                kq[t, m] = acc
-        for i in range(n):
-            ph = k0 * pos[i, 0] + k1 * pos[i, 1] + k2 * pos[i, 2]
-            cs, sn = math.cos(ph), math.sin(ph)
-            a2i = radii[i] * radii[i] * ksq
-            fu, fe = 1 - a2i / 6, 1 - a2i / 10
-            col = NDOF * i
-            for t in range(2):
-                rr, ri = 2 * kk + t, 2 * nk + 2 * kk + t
-                for c in range(3):  # U rows: real
-                    z[rr, col + c] = fu * q[t, c] * cs
-                    z[ri, col + c] = fu * q[t, c] * sn
-                for c in range(3):  # Omega rows: imaginary
-                    z[rr, col + 3 + c] = -kxq[t, c] * sn
-                    z[ri, col + 3 + c] = kxq[t, c] * cs
-                for m in range(5):  # E rows: imaginary
-                    z[rr, col + 6 + m] = -fe * kq[t, m] * sn
-                    z[ri, col + 6 + m] = fe * kq[t, m] * cs
+                    for c in range(3):
+                        acc += kvec[kk, a] * basis[m, a, c] * q[c]
+                b[6 + m, t] = scale * acc
+        for e in range(cos_entries.shape[0]):
+            r, c = cos_entries[e, 0], cos_entries[e, 1]
+            tcos[kk, e] = b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1]
+        for e in range(sin_entries.shape[0]):
+            r, c = sin_entries[e, 0], sin_entries[e, 1]
+            tsin[kk, e] = sin_sign[e] * (b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1])
 
 
-def _reciprocal_matrix(pos, radii, kvec, xi, volume):
-    """(2/V) sum over half-space k of Re[Z Z^H] (see _reciprocal_rows)."""
-    n = pos.shape[0]
-    z = np.empty((4 * kvec.shape[0], NDOF * n))
-    _reciprocal_rows(pos, radii, kvec, xi, BASIS, z)
-    return (2.0 / volume) * (z.T @ z)
+@numba.njit(cache=True)
+def _pair_phases(phase_re, phase_im, pi, pj, cos_out, sin_out):
+    """cos and sin of k.(x_i - x_j) for the pairs (pi, pj), from exp(i k.x) per particle."""
+    for p in range(pi.shape[0]):
+        i, j = pi[p], pj[p]
+        for kk in range(phase_re.shape[1]):
+            cos_out[p, kk] = phase_re[i, kk] * phase_re[j, kk] + phase_im[i, kk] * phase_im[j, kk]
+            sin_out[p, kk] = phase_im[i, kk] * phase_re[j, kk] - phase_re[i, kk] * phase_im[j, kk]
+
+
+@numba.njit(cache=True)
+def _scatter_pairs(pi, pj, vcos, vsin, cos_entries, sin_entries, mob):
+    """Adds the pair blocks (entries of the cosine and sine parts) as M_ij and M_ji = M_ij^T."""
+    for p in range(pi.shape[0]):
+        ri, rj = NDOF * pi[p], NDOF * pj[p]
+        for half in range(2):
+            vals = vcos if half == 0 else vsin
+            entries = cos_entries if half == 0 else sin_entries
+            for e in range(entries.shape[0]):
+                a, b = entries[e, 0], entries[e, 1]
+                mob[ri + a, rj + b] += vals[p, e]
+                if pi[p] != pj[p]:
+                    mob[rj + b, ri + a] += vals[p, e]
+
+
+def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
+    """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N)."""
+    n, nk = len(pos), len(kvec)
+    tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
+    _wave_tensors(kvec, xi, BASIS, _COS_ENTRIES, _SIN_ENTRIES, _SIN_SIGN, tcos, tsin)
+    tcos *= 2.0 / volume
+    tsin *= 2.0 / volume
+    ksq = np.einsum("ij,ij->i", kvec, kvec)[:, None]
+    c_row = {"cos": _ROW_C[_COS_ENTRIES[:, 0]], "sin": _ROW_C[_SIN_ENTRIES[:, 0]]}
+    c_col = {"cos": _ROW_C[_COS_ENTRIES[:, 1]], "sin": _ROW_C[_SIN_ENTRIES[:, 1]]}
+    equal = bool(np.all(radii == radii[0]))
+    if equal:  # fold f_a(a) f_b(a) into the tensors: one product per part
+        a2 = radii[0] ** 2
+        tcos *= (1 - c_row["cos"] * a2 * ksq) * (1 - c_col["cos"] * a2 * ksq)
+        tsin *= (1 - c_row["sin"] * a2 * ksq) * (1 - c_col["sin"] * a2 * ksq)
+    tensors = {"cos": tcos, "sin": tsin}
+    phase = pos @ kvec.T
+    phase_re, phase_im = np.cos(phase), np.sin(phase)
+    pi, pj = np.triu_indices(n)
+    for start in range(0, len(pi), _PAIR_CHUNK):
+        ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
+        cos_k, sin_k = np.empty((len(ci), nk)), np.empty((len(ci), nk))
+        _pair_phases(phase_re, phase_im, ci, cj, cos_k, sin_k)
+        vals = {}
+        for part, trig in (("cos", cos_k), ("sin", sin_k)):
+            t = tensors[part]
+            vals[part] = trig @ t
+            if not equal:  # f_a(a_i) f_b(a_j) = 1 - (c_a a_i^2 + c_b a_j^2) k^2 + c_a c_b a_i^2 a_j^2 k^4
+                ai2, aj2 = radii[ci, None] ** 2, radii[cj, None] ** 2
+                vals[part] -= (c_row[part] * ai2 + c_col[part] * aj2) * (trig @ (ksq * t))
+                vals[part] += c_row[part] * c_col[part] * ai2 * aj2 * (trig @ (ksq * ksq * t))
+        _scatter_pairs(ci, cj, vals["cos"], vals["sin"], _COS_ENTRIES, _SIN_ENTRIES, mob)
 
 
 def _gauss_moment(p, xi):
@@ -437,6 +538,7 @@ class FarFieldPlan:
     images: tuple
     kvec: np.ndarray
     table: np.ndarray
+    grid: "RadialGrid"
     self_blocks: dict
     volume: float
 
@@ -446,16 +548,48 @@ def _cached_radial_table(xi):
     return radial_table(xi)
 
 
+@dataclass(frozen=True)
+class RadialGrid:
+    """The real-space radial values d^m lap^p chi_r/dr^m (m = 0..5) at r = r0 + g h,
+    for cubic Hermite interpolation by `_radial_lookup` (exact evaluation off the grid).
+    The interpolation error is h^4/384 max|f^(4)|; measured relative to each function's
+    largest value on [1, r_c], it is 4e-8 (h/0.01)^4, so h is set for 1e-2 tol. Below
+    h = 0.002 (tol < 6e-9) the grid would outgrow the caches: exact values instead."""
+
+    r0: float
+    h: float
+    values: np.ndarray  # (n, 4, 6)
+
+    #: start of the grid (closer pairs, possible only with radii below 1, are exact)
+    START = 1.0
+
+    @classmethod
+    @functools.lru_cache(maxsize=16)
+    def build(cls, xi, r_max, tol):
+        """A grid on [START, r_max] for splitting parameter xi and Ewald accuracy tol;
+        xi = 0 (unbounded fluid, no cut-off): an empty grid, all values exact."""
+        h = min(0.02, 0.01 * (2.5e5 * tol) ** 0.25)
+        if xi == 0 or h < 0.002:
+            return cls(cls.START, 1.0, np.zeros((0, 4, 6)))
+        n = int(math.ceil((r_max - cls.START) / h)) + 2
+        values = np.empty((n, 4, 6))
+        _fill_radial_grid(_cached_radial_table(xi), xi, cls.START, h, values)
+        return cls(cls.START, h, values)
+
+
 def plan_far_field(positions, radii, lattice=None, tol=1e-8, xi=None):
     """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid)."""
     if lattice is None:
         images = find_pairs(positions, radii, None, np.inf, 0.0)
         return FarFieldPlan(None, images, np.zeros((0, 3)), _cached_radial_table(0.0),
+                            RadialGrid.build(0.0, 0.0, tol),
                             {a: self_mobility(a) for a in np.unique(radii)}, np.inf)
     par = EwaldParameters.choose(lattice, len(positions), tol=tol, xi=xi)
     images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
+    # the grid reaches past r_c for the small displacements a plan is reused for
+    grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
     return FarFieldPlan(par, images, lattice.wave_vectors(par.kcut), _cached_radial_table(par.xi),
-                        {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
+                        grid, {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
 
 
 def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None, plan=None):
@@ -476,9 +610,10 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None
     n = pos.shape[0]
     mob = np.zeros((NDOF * n, NDOF * n))
     xi_used = 0.0 if plan.params is None else plan.params.xi
-    _real_space_sum(pos, radii, *plan.images, plan.table, xi_used, BASIS, mob)
+    grid = plan.grid
+    _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob)
     if plan.params is not None:
-        mob += _reciprocal_matrix(pos, radii, plan.kvec, xi_used, plan.volume)
+        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob)
     for i, a in enumerate(radii):
         mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob

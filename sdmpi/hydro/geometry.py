@@ -7,6 +7,8 @@ gamma -> gamma + Lx/Ly, so the strain is reduced to |gamma| <= Lx/(2 Ly) before 
 this keeps the lattice vectors short and makes every result periodic in the strain.
 """
 
+import math
+
 import numba
 import numpy as np
 
@@ -68,26 +70,57 @@ class Lattice:
 
 
 @numba.njit(cache=True)
-def _scan_pairs(pos, radii, shifts, reach_abs, reach_rel, out_i, out_j, out_s):
-    """Fills (up to their length) the pairs (i <= j, image s) with
-    |x_j + shift_s - x_i| < reach_abs + reach_rel (a_i + a_j); returns how many there are.
-    Self-images (i == j) keep one of each +-n pair: shifts must be symmetric about their
-    middle entry, the zero shift."""
+def _scan_pairs(pos, radii, cell, periodic, reach_abs, reach_rel, out_i, out_j, out_s):
+    """Fills (up to their length) the pairs (i <= j) and lattice translations
+    n0 L1 + n1 L2 + n2 L3 with |x_j + shift - x_i| < reach_abs + reach_rel (a_i + a_j);
+    returns how many there are. cell = (Lx, Ly, Lz, gamma Ly): L3 is along z and L2 has
+    no z part, so the admissible n2, then n1, then n0 follow from the z, y and x
+    separations in turn (no image is tested in vain). Self-images (i == j) keep one of
+    each +-n pair (the first non-zero of n2, n1, n0 positive)."""
+    lx, ly, lz, tilt = cell[0], cell[1], cell[2], cell[3]
     n = pos.shape[0]
     count = 0
-    half = shifts.shape[0] // 2
     for i in range(n):
         for j in range(i, n):
             reach = reach_abs + reach_rel * (radii[i] + radii[j])
-            reach2 = reach * reach
-            for s in range(half + 1 if i == j else 0, shifts.shape[0]):
-                d0 = pos[j, 0] + shifts[s, 0] - pos[i, 0]
-                d1 = pos[j, 1] + shifts[s, 1] - pos[i, 1]
-                d2 = pos[j, 2] + shifts[s, 2] - pos[i, 2]
-                if d0 * d0 + d1 * d1 + d2 * d2 < reach2:
-                    if count < out_i.shape[0]:
-                        out_i[count], out_j[count], out_s[count] = i, j, s
-                    count += 1
+            r2 = reach * reach
+            dx0 = pos[j, 0] - pos[i, 0]
+            dy0 = pos[j, 1] - pos[i, 1]
+            dz0 = pos[j, 2] - pos[i, 2]
+            lo2, hi2 = 0, 0
+            if periodic:
+                lo2, hi2 = math.ceil((-reach - dz0) / lz), math.floor((reach - dz0) / lz)
+            for n2 in range(lo2, hi2 + 1):
+                dz = dz0 + n2 * lz
+                rem_z = r2 - dz * dz
+                if rem_z <= 0.0:
+                    continue
+                lo1, hi1 = 0, 0
+                if periodic:
+                    ry = math.sqrt(rem_z)
+                    lo1, hi1 = math.ceil((-ry - dy0) / ly), math.floor((ry - dy0) / ly)
+                for n1 in range(lo1, hi1 + 1):
+                    dy = dy0 + n1 * ly
+                    rem_y = rem_z - dy * dy
+                    if rem_y <= 0.0:
+                        continue
+                    dxy = dx0 + n1 * tilt
+                    lo0, hi0 = 0, 0
+                    if periodic:
+                        rx = math.sqrt(rem_y)
+                        lo0, hi0 = math.ceil((-rx - dxy) / lx), math.floor((rx - dxy) / lx)
+                    for n0 in range(lo0, hi0 + 1):
+                        dx = dxy + n0 * lx
+                        if dx * dx >= rem_y:
+                            continue
+                        if i == j and not (n2 > 0 or (n2 == 0 and (n1 > 0 or (n1 == 0 and n0 > 0)))):
+                            continue
+                        if count < out_i.shape[0]:
+                            out_i[count], out_j[count] = i, j
+                            out_s[count, 0] = n0 * lx + n1 * tilt
+                            out_s[count, 1] = n1 * ly
+                            out_s[count, 2] = n2 * lz
+                        count += 1
     return count
 
 
@@ -97,13 +130,17 @@ def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
     lattice None (unbounded fluid) only the zero shift is used. Self-images appear once
     per +-n pair."""
     if lattice is None:
-        shifts = np.zeros((1, 3))
+        cell, periodic = np.ones(4), False
     else:
-        shifts = lattice.image_shifts(reach_abs + 2 * reach_rel * radii.max())
-    size = 16 * len(positions)
+        lx, ly, lz = lattice.box
+        cell, periodic = np.array([lx, ly, lz, lattice.strain * ly]), True
+    pos = np.ascontiguousarray(positions, dtype=float)
+    radii = np.ascontiguousarray(radii, dtype=float)
+    size = 16 * len(pos)
     while True:
-        i, j, s = (np.empty(size, dtype=np.int64) for _ in range(3))
-        count = _scan_pairs(positions, radii, shifts, float(reach_abs), float(reach_rel), i, j, s)
+        i, j = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+        s = np.empty((size, 3))
+        count = _scan_pairs(pos, radii, cell, periodic, float(reach_abs), float(reach_rel), i, j, s)
         if count <= size:
-            return i[:count], j[:count], shifts[s[:count]]
+            return i[:count], j[:count], s[:count]
         size = count

@@ -9,6 +9,7 @@ itself, not only its action.
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.linalg import lapack
 
@@ -43,14 +44,14 @@ class GrandResistance:
         return self.matrix.shape[0] // NDOF
 
     def blocks(self):
-        """(R_FU, R_FE, R_SU, R_SE): the 6N rigid-body and 5N strain partitions."""
+        """(R_FU, R_FE, R_SU, R_SE): the 6N rigid-body and 5N strain partitions (views of
+        one reordered copy; R_SU = R_FE^T)."""
         n = self.n_particles
         idx = np.arange(NDOF * n).reshape(n, NDOF)
-        rigid = idx[:, :6].ravel()
-        strain = idx[:, 6:].ravel()
-        m = self.matrix
-        return (m[np.ix_(rigid, rigid)], m[np.ix_(rigid, strain)],
-                m[np.ix_(strain, rigid)], m[np.ix_(strain, strain)])
+        order = np.concatenate([idx[:, :6].ravel(), idx[:, 6:].ravel()])
+        m = self.matrix[np.ix_(order, order)]
+        r = 6 * n
+        return m[:r, :r], m[:r, r:], m[r:, :r], m[r:, r:]
 
 
 def spd_inverse(matrix):
@@ -61,7 +62,16 @@ def spd_inverse(matrix):
     inv, info = lapack.dpotri(chol, lower=False, overwrite_c=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed (info {info})")
-    return np.ascontiguousarray(np.triu(inv) + np.triu(inv, 1).T)
+    _mirror_upper(inv)
+    return np.ascontiguousarray(inv)
+
+
+@numba.njit(cache=True)
+def _mirror_upper(a):
+    """Copies the upper triangle of a square matrix onto its lower triangle, in place."""
+    for i in range(a.shape[0]):
+        for j in range(i):
+            a[i, j] = a[j, i]
 
 
 def check_overlaps(pairs, radii, max_overlap):
