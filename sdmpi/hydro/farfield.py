@@ -342,24 +342,26 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
 #   M_ij = (2/V) sum_k [cos(k.r_ij) A_k + sin(k.r_ij) B_k],  r_ij = x_i - x_j,
 # A_k = (b_i b_j^T) on the U-U and (Omega,E)-(Omega,E) entries, B_k = +-(b_i b_j^T) on
 # the U-(Omega,E) (+) and (Omega,E)-U (-) entries (the sum over +-k of the Gram form
-# Re[Z Z^H], Z_i = b_i exp(i k.x_i)). Over all pairs i <= j this is two matrix
-# products (pairs x k) @ (k x entries), N^2 n_k 121 flops: a quarter of those of the
-# Gram form as a rank-4 n_k update of the 11N x 11N matrix. The radius factors
-# f_a(a_i) f_b(a_j), f = 1 - c a^2 k^2 (c = 1/6 U, 0 Omega, 1/10 E), are folded into
-# A_k, B_k when all radii are equal, and otherwise expanded in powers of k^2.
+# Re[Z Z^H], Z_i = b_i exp(i k.x_i)). Unscaled by radii, A_k is symmetric and B_k
+# antisymmetric, so 42 + 24 of the 121 entries are independent. Over all pairs i <= j the
+# sum is two matrix products (pairs x k) @ (k x independent entries), N^2 n_k 66 flops:
+# an eighth of those of the Gram form as a rank-4 n_k update of the 11N x 11N matrix.
+# The radius factors f_a(a_i) f_b(a_j), f = 1 - c a^2 k^2 (c = 1/6 U, 0 Omega,
+# 1/10 E), are folded into A_k, B_k when all radii are equal, and otherwise expanded in
+# powers of k^2 (three products per part).
 
 _ROW_C = np.array([1 / 6] * 3 + [0.0] * 3 + [1 / 10] * 5)  # Faxen coefficient per row
 _EVEN = np.arange(NDOF) < 3  # U rows (real); Omega and E rows carry a factor i
-#: (row, column) entries of the cosine (same parity) and sine (mixed parity) parts
-_COS_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(NDOF) if _EVEN[a] == _EVEN[b]])
-_SIN_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(NDOF) if _EVEN[a] != _EVEN[b]])
-_SIN_SIGN = np.where(_EVEN[_SIN_ENTRIES[:, 0]], 1.0, -1.0)
+#: independent (row, column) entries: cosine part a <= b of equal parity, sine part
+#: U row a, Omega/E column b (B_ba = -B_ab)
+_COS_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(a, NDOF) if _EVEN[a] == _EVEN[b]])
+_SIN_ENTRIES = np.array([(a, b) for a in range(3) for b in range(3, NDOF)])
 _PAIR_CHUNK = 2048  # pairs per matrix product (bounds the work arrays)
 
 
 @numba.njit(cache=True)
-def _wave_tensors(kvec, xi, basis, cos_entries, sin_entries, sin_sign, tcos, tsin):
-    """tcos[k, e] = (b b^T)[entry e] and tsin[k, e] = sign_e (b b^T)[entry e] for unit
+def _wave_tensors(kvec, xi, basis, cos_entries, sin_entries, tcos, tsin):
+    """tcos[k, e], tsin[k, e] = (b b^T)[entry e] of the cosine and sine entries, for unit
     radius factors (see the pair form above)."""
     b = np.empty((NDOF, 2))
     q = np.empty(3)
@@ -399,7 +401,7 @@ def _wave_tensors(kvec, xi, basis, cos_entries, sin_entries, sin_sign, tcos, tsi
             tcos[kk, e] = b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1]
         for e in range(sin_entries.shape[0]):
             r, c = sin_entries[e, 0], sin_entries[e, 1]
-            tsin[kk, e] = sin_sign[e] * (b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1])
+            tsin[kk, e] = b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1]
 
 
 @numba.njit(cache=True)
@@ -413,25 +415,31 @@ def _pair_phases(phase_re, phase_im, pi, pj, cos_out, sin_out):
 
 
 @numba.njit(cache=True)
-def _scatter_pairs(pi, pj, vcos, vsin, cos_entries, sin_entries, mob):
-    """Adds the pair blocks (entries of the cosine and sine parts) as M_ij and M_ji = M_ij^T."""
+def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entries, mob):
+    """Adds the pair blocks as M_ij and M_ji = M_ij^T, from the values of each
+    independent entry (a, b) at (a, b) and at (b, a) of M_ij."""
     for p in range(pi.shape[0]):
         ri, rj = NDOF * pi[p], NDOF * pj[p]
         for half in range(2):
-            vals = vcos if half == 0 else vsin
+            v_ab = cos_ab if half == 0 else sin_ab
+            v_ba = cos_ba if half == 0 else sin_ba
             entries = cos_entries if half == 0 else sin_entries
             for e in range(entries.shape[0]):
                 a, b = entries[e, 0], entries[e, 1]
-                mob[ri + a, rj + b] += vals[p, e]
+                mob[ri + a, rj + b] += v_ab[p, e]
+                if a != b:
+                    mob[ri + b, rj + a] += v_ba[p, e]
                 if pi[p] != pj[p]:
-                    mob[rj + b, ri + a] += vals[p, e]
+                    mob[rj + b, ri + a] += v_ab[p, e]
+                    if a != b:
+                        mob[rj + a, ri + b] += v_ba[p, e]
 
 
 def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
     """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N)."""
     n, nk = len(pos), len(kvec)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
-    _wave_tensors(kvec, xi, BASIS, _COS_ENTRIES, _SIN_ENTRIES, _SIN_SIGN, tcos, tsin)
+    _wave_tensors(kvec, xi, BASIS, _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
     tcos *= 2.0 / volume
     tsin *= 2.0 / volume
     ksq = np.einsum("ij,ij->i", kvec, kvec)[:, None]
@@ -450,15 +458,20 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
         cos_k, sin_k = np.empty((len(ci), nk)), np.empty((len(ci), nk))
         _pair_phases(phase_re, phase_im, ci, cj, cos_k, sin_k)
-        vals = {}
-        for part, trig in (("cos", cos_k), ("sin", sin_k)):
+        vals = []  # (entry values at (a, b), at (b, a)) of the cosine and sine parts
+        for part, trig, sign in (("cos", cos_k, 1.0), ("sin", sin_k, -1.0)):
             t = tensors[part]
-            vals[part] = trig @ t
-            if not equal:  # f_a(a_i) f_b(a_j) = 1 - (c_a a_i^2 + c_b a_j^2) k^2 + c_a c_b a_i^2 a_j^2 k^4
-                ai2, aj2 = radii[ci, None] ** 2, radii[cj, None] ** 2
-                vals[part] -= (c_row[part] * ai2 + c_col[part] * aj2) * (trig @ (ksq * t))
-                vals[part] += c_row[part] * c_col[part] * ai2 * aj2 * (trig @ (ksq * ksq * t))
-        _scatter_pairs(ci, cj, vals["cos"], vals["sin"], _COS_ENTRIES, _SIN_ENTRIES, mob)
+            g0 = trig @ t
+            if equal:
+                vals += [g0, sign * g0]
+                continue
+            # f_a(a_i) f_b(a_j) = 1 - (c_a a_i^2 + c_b a_j^2) k^2 + c_a c_b a_i^2 a_j^2 k^4
+            g1, g2 = trig @ (ksq * t), trig @ (ksq * ksq * t)
+            ai2, aj2 = radii[ci, None] ** 2, radii[cj, None] ** 2
+            ca, cb = c_row[part], c_col[part]
+            g0 += ca * cb * ai2 * aj2 * g2
+            vals += [g0 - (ca * ai2 + cb * aj2) * g1, sign * (g0 - (cb * ai2 + ca * aj2) * g1)]
+        _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob)
 
 
 def _gauss_moment(p, xi):
