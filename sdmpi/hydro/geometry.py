@@ -70,6 +70,15 @@ class Lattice:
 
 
 @numba.njit(cache=True)
+def _image_range(d0, reach, length, periodic):
+    """(lo, hi): the integers n with |d0 + n length| < reach lie in [lo, hi] (0 alone if
+    not periodic)."""
+    if not periodic:
+        return 0, 0
+    return math.ceil((-reach - d0) / length), math.floor((reach - d0) / length)
+
+
+@numba.njit(cache=True)
 def _scan_pairs(pos, radii, cell, periodic, reach_abs, reach_rel, out_i, out_j, out_s):
     """Fills (up to their length) the pairs (i <= j) and lattice translations
     n0 L1 + n1 L2 + n2 L3 with |x_j + shift - x_i| < reach_abs + reach_rel (a_i + a_j);
@@ -87,28 +96,20 @@ def _scan_pairs(pos, radii, cell, periodic, reach_abs, reach_rel, out_i, out_j, 
             dx0 = pos[j, 0] - pos[i, 0]
             dy0 = pos[j, 1] - pos[i, 1]
             dz0 = pos[j, 2] - pos[i, 2]
-            lo2, hi2 = 0, 0
-            if periodic:
-                lo2, hi2 = math.ceil((-reach - dz0) / lz), math.floor((reach - dz0) / lz)
+            lo2, hi2 = _image_range(dz0, reach, lz, periodic)
             for n2 in range(lo2, hi2 + 1):
                 dz = dz0 + n2 * lz
                 rem_z = r2 - dz * dz
                 if rem_z <= 0.0:
                     continue
-                lo1, hi1 = 0, 0
-                if periodic:
-                    ry = math.sqrt(rem_z)
-                    lo1, hi1 = math.ceil((-ry - dy0) / ly), math.floor((ry - dy0) / ly)
+                lo1, hi1 = _image_range(dy0, math.sqrt(rem_z), ly, periodic)
                 for n1 in range(lo1, hi1 + 1):
                     dy = dy0 + n1 * ly
                     rem_y = rem_z - dy * dy
                     if rem_y <= 0.0:
                         continue
                     dxy = dx0 + n1 * tilt
-                    lo0, hi0 = 0, 0
-                    if periodic:
-                        rx = math.sqrt(rem_y)
-                        lo0, hi0 = math.ceil((-rx - dxy) / lx), math.floor((rx - dxy) / lx)
+                    lo0, hi0 = _image_range(dxy, math.sqrt(rem_y), lx, periodic)
                     for n0 in range(lo0, hi0 + 1):
                         dx = dxy + n0 * lx
                         if dx * dx >= rem_y:
