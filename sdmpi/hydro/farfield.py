@@ -40,6 +40,8 @@ from .basis import BASIS
 from .geometry import Lattice, find_pairs
 
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
+#: default relative accuracy of the Ewald sums (every entry point)
+DEFAULT_EWALD_TOL = 1e-6
 
 
 # ---------------------------------------------------------------------------------
@@ -529,7 +531,7 @@ class EwaldParameters:
     kcut: float
 
     @classmethod
-    def choose(cls, lattice, n_particles, tol=1e-8, xi=None, cost_ratio=25.0):
+    def choose(cls, lattice, tol=DEFAULT_EWALD_TOL, xi=None, cost_ratio=25.0):
         """Parameters for relative accuracy tol. Unless given, xi balances the
         real-space cost (pairs within r_c ~ N^2 r_c^3 / V, each a numba kernel) against
         the reciprocal cost (N^2 k_c^3 V, each a BLAS rank update); cost_ratio is the
@@ -590,14 +592,14 @@ class RadialGrid:
         return cls(cls.START, h, values)
 
 
-def plan_far_field(positions, radii, lattice=None, tol=1e-8, xi=None):
+def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=None):
     """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid)."""
     if lattice is None:
         images = find_pairs(positions, radii, None, np.inf, 0.0)
         return FarFieldPlan(None, images, np.zeros((0, 3)), _cached_radial_table(0.0),
                             RadialGrid.build(0.0, 0.0, tol),
                             {a: self_mobility(a) for a in np.unique(radii)}, np.inf)
-    par = EwaldParameters.choose(lattice, len(positions), tol=tol, xi=xi)
+    par = EwaldParameters.choose(lattice, tol=tol, xi=xi)
     images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
     # the grid reaches past r_c for the small displacements a plan is reused for
     grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
@@ -605,7 +607,7 @@ def plan_far_field(positions, radii, lattice=None, tol=1e-8, xi=None):
                         grid, {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
 
 
-def far_field_mobility(positions, radii, box=None, strain=0.0, tol=1e-8, xi=None, plan=None):
+def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD_TOL, xi=None, plan=None):
     """The (11N, 11N) far-field grand mobility M_inf, symmetric positive definite for
     non-overlapping spheres.
 

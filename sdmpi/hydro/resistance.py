@@ -13,12 +13,9 @@ import numba
 import numpy as np
 from scipy.linalg import lapack
 
-from .farfield import NDOF, FarFieldPlan, far_field_mobility, plan_far_field
+from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, plan_far_field
 from .geometry import Lattice, find_pairs
 from .lubrication import DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_matrix
-
-#: default relative accuracy of the Ewald sums
-DEFAULT_EWALD_TOL = 1e-6
 
 
 @dataclass
