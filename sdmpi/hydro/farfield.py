@@ -512,13 +512,14 @@ def self_mobility(radius, xi=None):
 # ---------------------------------------------------------------------------------
 
 
-def _truncation_parameter(tol):
-    """s with exp(-s^2) s^6 = tol: the reach, in units of 1/xi (real space) and 2 xi
-    (reciprocal space), at which the slowest-decaying kernel (the 4th derivative of
-    r erfc(xi r) times Faxen Laplacians) has fallen to tol relative to its scale."""
+def _truncation_parameter(tol, power=6):
+    """s with exp(-s^2) s^power = tol. With power 6: the reach, in units of 1/xi (real
+    space) and 2 xi (reciprocal space), at which the slowest-decaying kernel (the 4th
+    derivative of r erfc(xi r) times Faxen Laplacians) has fallen to tol relative to its
+    scale."""
     s = math.sqrt(-math.log(tol))
     for _ in range(50):
-        s = math.sqrt(-math.log(tol) + 6 * math.log(s))
+        s = math.sqrt(-math.log(tol) + power * math.log(s))
     return s
 
 

@@ -1,0 +1,153 @@
+"""The spectral (particle-mesh) Ewald far field against the dense Ewald sum.
+
+Reference: `far_field_mobility(..., tol=1e-10) @ x`, converged far below every tol tested,
+so the measured difference is the spectral error itself; SpectralFarField promises
+|y - M x| / |M x| <= tol. Also run as a script under ``mpirun -n 2`` (see
+test_independent_of_ranks): prints one JSON line per rank.
+"""
+
+import functools
+import hashlib
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sdmpi.dynamics.initial import compress, hard_sphere_fluid
+from sdmpi.hydro.farfield import far_field_mobility
+from sdmpi.hydro.geometry import Lattice
+from sdmpi.hydro.spectral import SpectralFarField
+
+HERE = Path(__file__).resolve().parent
+MPIRUN = shutil.which("mpirun")
+N = 27
+
+
+@functools.lru_cache(maxsize=None)
+def configuration(phi, strain, unequal, seed=7):
+    """N hard spheres at volume fraction phi in a cube at the given Lees-Edwards strain,
+    radii 1 or drawn from [0.6, 1.4]; positions, radii, box and the dense M_inf."""
+    rng = np.random.default_rng(seed)
+    radii = rng.uniform(0.6, 1.4, N) if unequal else np.ones(N)
+    start = min(phi, 0.2)
+    pos, side = hard_sphere_fluid(N, start, rng, strain=strain, radii=radii)
+    if phi > start:
+        pos, side = compress(pos, side, phi, rng, strain=strain, radii=radii)
+    box = np.full(3, side)
+    return pos, radii, box, far_field_mobility(pos, radii, box, strain, tol=1e-10)
+
+
+CASES = [  # (phi, strain, unequal radii, tol): every strain, both densities and radii kinds
+    (0.05, 0.0, False, 1e-3),
+    (0.5, 0.0, True, 1e-4),
+    (0.5, -0.45, False, 1e-4),
+    (0.05, -0.45, True, 1e-5),
+    (0.5, 0.3, True, 1e-6),
+    (0.05, 0.3, False, 1e-6),
+    (0.5, 0.9, False, 1e-3),
+    (0.05, 0.9, True, 1e-4),
+]
+
+
+@pytest.mark.parametrize("phi, strain, unequal, tol", CASES)
+def test_matches_dense_ewald_sum(phi, strain, unequal, tol):
+    pos, radii, box, dense = configuration(phi, strain, unequal)
+    x = np.random.default_rng(1).standard_normal(11 * N)
+    op = SpectralFarField(pos, radii, Lattice(box, strain), tol=tol)
+    ref = dense @ x
+    err = np.linalg.norm(op.matvec(x) - ref) / np.linalg.norm(ref)
+    assert err <= tol, (err, op.params)
+
+
+def test_error_follows_tol():
+    """The error is not accidentally tiny: a loose tol gives a visibly larger error, so
+    the comparison above can fail (the parameters really are set by tol)."""
+    pos, radii, box, dense = configuration(0.5, 0.3, False)
+    x = np.random.default_rng(2).standard_normal(11 * N)
+    ref = dense @ x
+    errs = [np.linalg.norm(SpectralFarField(pos, radii, Lattice(box, 0.3), tol=t).matvec(x) - ref)
+            / np.linalg.norm(ref) for t in (1e-2, 1e-6)]
+    assert errs[0] > 1e-4 > 1e-6 > errs[1], errs
+
+
+def test_linear_and_symmetric():
+    """Every stage (sparse real-space blocks with M_ji = M_ij^T, spreading and its exact
+    adjoint the interpolation, a real even k-space filter, diagonal self terms) is linear
+    and symmetric by construction, so both hold to rounding (1e-12 relative)."""
+    pos, radii, box, _ = configuration(0.5, -0.45, True)
+    op = SpectralFarField(pos, radii, Lattice(box, -0.45), tol=1e-4)
+    rng = np.random.default_rng(3)
+    x1, x2 = rng.standard_normal((2, 11 * N))
+    y1, y2 = op.matvec(x1), op.matvec(x2)
+    scale = np.linalg.norm(y1) * np.linalg.norm(x2)
+    assert abs(y1 @ x2 - x1 @ y2) <= 1e-12 * scale
+    combo = op.matvec(2.5 * x1 - 0.7 * x2)
+    assert np.linalg.norm(combo - (2.5 * y1 - 0.7 * y2)) <= 1e-12 * np.linalg.norm(combo)
+
+
+def test_periodic_images_give_the_same_product():
+    """Positions moved by lattice translations (unwrapped, as a dynamics run leaves them)
+    describe the same suspension: same product up to the rounding of the wrap (1e-12)."""
+    pos, radii, box, _ = configuration(0.5, 0.9, True)
+    lattice = Lattice(box, 0.9)
+    shifts = np.random.default_rng(5).integers(-3, 4, (N, 3)) @ lattice.vectors
+    x = np.random.default_rng(6).standard_normal(11 * N)
+    y = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
+    y_images = SpectralFarField(pos + shifts, radii, lattice, tol=1e-5).matvec(x)
+    assert np.linalg.norm(y_images - y) <= 1e-12 * np.linalg.norm(y)
+
+
+def test_bad_input():
+    pos, radii, box, _ = configuration(0.05, 0.0, False)
+    lattice = Lattice(box)
+    with pytest.raises(ValueError, match="positions"):
+        SpectralFarField(pos[:, :2], radii, lattice)
+    with pytest.raises(ValueError, match="radii"):
+        SpectralFarField(pos, radii[:-1], lattice)
+    with pytest.raises(ValueError, match="radii"):
+        SpectralFarField(pos, -radii, lattice)
+    with pytest.raises(ValueError, match="lattice"):
+        SpectralFarField(pos, radii, None)
+    with pytest.raises(ValueError, match=r"tol must be in \[1e-10, 0.1\]"):
+        SpectralFarField(pos, radii, lattice, tol=0.5)
+    with pytest.raises(ValueError, match=r"x must have shape \(297,\)"):
+        SpectralFarField(pos, radii, lattice).matvec(np.zeros(10))
+
+
+def rank_check():
+    """On comm = COMM_WORLD: the largest relative difference to the one-rank product, and
+    a digest of the result (to compare across ranks)."""
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    pos, radii, box, _ = configuration(0.5, 0.3, True)
+    lattice = Lattice(box, 0.3)
+    x = np.random.default_rng(4).standard_normal(11 * N)
+    y = SpectralFarField(pos, radii, lattice, tol=1e-5, comm=comm).matvec(x)
+    y1 = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
+    return {"ranks": comm.size, "diff": float(np.abs(y - y1).max() / np.abs(y1).max()),
+            "digest": hashlib.sha256(y.tobytes()).hexdigest()}
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
+def test_independent_of_ranks():
+    """Two ranks (wave space on one, real space on the other) give the one-rank result up
+    to the order of floating-point sums (1e-13), the same bits on every rank."""
+    from test_ensemble import _env  # tests/ is on sys.path under pytest
+
+    cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, str(Path(__file__))]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=120, cwd=HERE.parent)
+    assert res.returncode == 0, res.stderr
+    rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+    assert len(rows) == 2
+    assert all(r["ranks"] == 2 and r["diff"] < 1e-13 for r in rows), rows
+    assert rows[0]["digest"] == rows[1]["digest"]
+
+
+if __name__ == "__main__":
+    print(json.dumps(rank_check()), flush=True)
