@@ -54,7 +54,7 @@ def one_solve(pos, side, timings):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--sizes", type=int, nargs="+", default=[27, 125, 343])
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=11)
     ap.add_argument("--out", default="bench/results.json")
     args = ap.parse_args()
     rng = np.random.default_rng(1)

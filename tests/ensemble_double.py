@@ -74,6 +74,8 @@ class DoubleRealisation:
             out["n_overlaps"][i] = int(np.sum(np.abs(kick) > 2.5))
             out["n_overlaps_midpoint"][i] = int(np.sum(np.abs(kick) > 3.0))
             out["min_gap"][i] = float(np.min(np.abs(kick)))
+            out["solver_iterations"][i] = out["lanczos_iterations"][i] = 0  # a direct backend
+            out["solver_residual"][i] = 0.0
             if "stress_hydrodynamic_maxwell" in out:
                 out["stress_hydrodynamic_maxwell"][i] = 0.5 * six
             if "stresslets" in out:

@@ -50,11 +50,9 @@ def compare(phi, comm=None, seed=1):
     return out
 
 
-if __name__ == "__main__":
-    from mpi4py import MPI
-
-    comm = MPI.COMM_WORLD
-    rows = [compare(float(phi), comm) for phi in sys.argv[1:]]
+def print_per_rank(rows, comm):
+    """Marks whether every rank's rows have the same digests, then prints (rank 0) one
+    JSON line of rows per rank."""
     digests = comm.allgather([r.pop("digest") for r in rows])
     for r in rows:
         r["same_on_all_ranks"] = all(d == digests[0] for d in digests)
@@ -63,3 +61,9 @@ if __name__ == "__main__":
     if comm.rank == 0:  # one writer: ranks' lines would interleave
         for rank_rows in every:
             print(json.dumps(rank_rows), flush=True)
+
+
+if __name__ == "__main__":
+    from mpi4py import MPI
+
+    print_per_rank([compare(float(phi), MPI.COMM_WORLD) for phi in sys.argv[1:]], MPI.COMM_WORLD)

@@ -363,9 +363,12 @@ def all_backends(monkeypatch):
     monkeypatch.setattr("sdmpi.config.loader.IMPLEMENTED_BACKENDS", ("dense", "petsc-dense", "petsc-krylov"))
 
 
-def test_unimplemented_backend_is_refused():
-    with pytest.raises(JobError, match="solver.backend.*not implemented"):
-        parse_job('[solver]\nbackend = "petsc-krylov"\n')
+def test_every_backend_is_implemented():
+    for name in ("dense", "petsc-dense", "petsc-krylov", "auto"):
+        assert parse_job(f'[solver]\nbackend = "{name}"\n').solver.backend == name
+    parse_job('[solver]\nbackend = "auto"\n', ["ensemble.ranks_per_task=2"])
+    with pytest.raises(JobError, match="ensemble.ranks_per_task"):
+        parse_job("", ["ensemble.ranks_per_task=2"])  # dense runs on one rank
 
 
 def test_hash_changes_with_any_value(all_backends):
@@ -453,10 +456,10 @@ def test_cli_subprocess_exit_code_and_writes_nothing(tmp_path, content, code):
 
 def test_initial_configuration_and_repulsion_range_checked():
     with pytest.raises(JobError) as err:
-        parse_job("[system]\nn_particles = 30\nphi = [0.3, 0.55]\n")
+        parse_job("[system]\nn_particles = 30\nphi = [0.3, 0.61]\n")
     text = str(err.value)
     assert "system.n_particles = 30" in text and "perfect cube" in text and "27" in text
-    assert "system.phi[1] = 0.55" in text and "0.5236" in text
+    assert "system.phi[1] = 0.61" in text and "phi < 0.6" in text
     with pytest.raises(JobError, match=r"interparticle.tau = 5.*tau >= 13.8"):
         parse_job('[interparticle]\nkind = "repulsion"\nf0 = 1.0\ntau = 5.0\n')
 

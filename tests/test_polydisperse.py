@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from sdmpi.config import JobError, canonical_text, enumerate_tasks, load_job, parse_job
+from sdmpi.config.schema import START_PHI_LIMIT
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.initial import box_side, compress, hard_sphere_fluid, min_gap_ratio
 
@@ -81,9 +82,8 @@ def test_canonical_text_round_trip():
     ("[]", 27, "[0.1]", ["system.size_classes", "must not be empty"]),
     ("[{radius = 1.0, fraction = 0.999}, {radius = 0.5, fraction = 0.001}]", 8, "[0.1]",
      ["system.size_classes[1]", "gets no sphere among N = 8"]),
-    (BIDISPERSE, 27, "[0.05, 0.2]",
-     ["system.phi[1] = 0.2", "largest diameter", "0.1164", "3 of radius 1, 24 of radius 0.5",
-      "0 < phi < 0.1163"]),
+    (BIDISPERSE, 27, "[0.05, 0.62]",
+     ["system.phi[1] = 0.62", "compressed hard-sphere fluid", "0 < phi < 0.6"]),
     (BIDISPERSE, 30, "[0.1]", ["system.n_particles = 30", "perfect cube"]),
 ])
 def test_validation_errors(classes, n, phi, expected):
@@ -137,11 +137,12 @@ def test_bidisperse_compression_has_no_overlaps():
     assert side == pytest.approx(box_side(radii, 0.3), rel=1e-12)
 
 
-def test_lattice_limit_enforced_by_generator():
+def test_start_limit_enforced_by_generator():
+    # above the lattice limit the start is compressed (tests/test_polydisperse_start.py),
+    # up to START_PHI_LIMIT
     radii = np.array([1.0] + [0.5] * 7)
-    limit = math.pi / 6 * np.mean(radii ** 3)
-    with pytest.raises(ValueError, match="largest diameter"):
-        hard_sphere_fluid(8, limit * 1.01, np.random.default_rng(0), radii=radii)
+    with pytest.raises(ValueError, match="compressed"):
+        hard_sphere_fluid(8, START_PHI_LIMIT, np.random.default_rng(0), radii=radii)
 
 
 def test_monodisperse_positions_bit_for_bit():

@@ -59,6 +59,10 @@ seed 001 uses). For figures, running averages (1/t) int_0^t of every quantity fr
 (start-up included) are kept per realisation (:attr:`Reduction.running`).
 Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
 
+Monolayers (``system.geometry = "monolayer"``, sdmpi.dynamics.monolayer) store stresses per
+layer volume 2 a L^2, so their eta is seed 001's eq. 6 and the ``phi`` column holds the
+areal fraction; realisations stopped on an overlap (``integration.overlap_stop``)
+contribute their samples before the stop, with a note.
 Partial runs are reduced from what is committed; every incomplete task is named in
 :attr:`Reduction.notes`, and a task with no whole period (no sample) after the discarded
 start-up contributes nothing. Files that are not intact run files raise
@@ -78,7 +82,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Job
+from ..config import Job, units
 from ..config.schema import toml_name
 from .errors import Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
@@ -96,6 +100,15 @@ STEADY_QUANTITIES = ("eta", "N1", "N2", "Pi")
 #: half-width of the 95% confidence interval; dof of the intervals last
 VISCOSITY_COLUMNS = ("phi", "rate", "component", "n_realisations") + tuple(
     c for q in STEADY_QUANTITIES for c in (q, f"{q}_err", f"{q}_ci95")) + ("dof",)
+#: SI columns appended when the job has a [physical] section (sdmpi.config.units):
+#: oscillatory omega (rad/s), moduli (Pa), eta' (Pa s); steady shear rate (1/s), Peclet
+#: number 6 pi eta_m a^3 gamma_dot / kT, eta (Pa s) and the shear stress eta x gamma_dot (Pa)
+PHYSICAL_COLUMNS = {
+    "oscillatory": ("omega_rad_per_s", "G_prime_Pa", "G_prime_err_Pa", "G_dprime_Pa",
+                    "G_dprime_err_Pa", "eta_prime_Pa_s", "eta_prime_err_Pa_s"),
+    "steady": ("rate_per_s", "Pe", "eta_Pa_s", "eta_err_Pa_s", "eta_ci95_Pa_s",
+               "shear_stress_Pa"),
+}
 #: confidence level of the *_ci95 columns
 CONFIDENCE = 0.95
 #: at most this many points per running-average curve (Reduction.running)
@@ -168,7 +181,14 @@ class Reduction:
 
     @property
     def columns(self) -> tuple:
-        return MODULI_COLUMNS if self.kind == "oscillatory" else VISCOSITY_COLUMNS
+        base = MODULI_COLUMNS if self.kind == "oscillatory" else VISCOSITY_COLUMNS
+        return base + (PHYSICAL_COLUMNS[self.kind] if self.scales is not None else ())
+
+    @property
+    def scales(self):
+        """The SI values of the reduced units (:class:`sdmpi.config.units.Scales`), or
+        None when the job has no [physical] section."""
+        return units.scales(self.job)
 
     def rows(self) -> list[dict]:
         """The table, one dict per (group, component) in the order of :attr:`columns`
@@ -195,6 +215,8 @@ class Reduction:
                         row[f"{name}_err"] = float(e.err[g, c, q])
                         row[f"{name}_ci95"] = float(half[q])
                     row["dof"] = int(e.dof[g, c, 0])
+                if self.scales is not None:
+                    row.update(physical_columns(row, self.kind, self.scales))
                 out.append(row)
         return out
 
@@ -223,6 +245,21 @@ def medium_moduli(job: Job, omega):
         g1, g2 = maxwell_moduli(omega, [m.eta for m in modes], [m.lam for m in modes])
         return float(g1), float(g2)
     return 0.0, float(omega)
+
+
+def physical_columns(row: dict, kind: str, scales) -> dict:
+    """The SI columns (:data:`PHYSICAL_COLUMNS`) of one table row in reduced units."""
+    stress, eta, rate = scales.stress, scales.viscosity, 1.0 / scales.time
+    if kind == "oscillatory":
+        return {"omega_rad_per_s": row["omega"] * rate,
+                **{f"{q}_Pa": row[q] * stress for q in ("G_prime", "G_prime_err", "G_dprime",
+                                                        "G_dprime_err")},
+                "eta_prime_Pa_s": row["eta_prime"] * eta,
+                "eta_prime_err_Pa_s": row["eta_prime_err"] * eta}
+    return {"rate_per_s": row["rate"] * rate, "Pe": scales.peclet(row["rate"]),
+            "eta_Pa_s": row["eta"] * eta, "eta_err_Pa_s": row["eta_err"] * eta,
+            "eta_ci95_Pa_s": row["eta_ci95"] * eta,
+            "shear_stress_Pa": row["eta"] * row["rate"] * stress}
 
 
 def confidence_half_width(err, dof, level=CONFIDENCE):
@@ -434,6 +471,8 @@ def reduce_runs(paths) -> Reduction:
                 for g, task in enumerate(tasks):
                     done = int(s.progress[task.task_id])
                     stress = _read_xy(f, task, done, names, columns_read)
+                    stress, stop_note = _until_stop(stress, s.path, task)
+                    notes += [stop_note] if stop_note else []
                     x = task_series(job, task, stress)
                     if running is not None and done:
                         _running_into(running["values"][g, :, :, col], job, stress, keep)
@@ -471,6 +510,20 @@ def reduce_runs(paths) -> Reduction:
                      ("G_prime", "G_dprime") if kind == "oscillatory" else STEADY_QUANTITIES,
                      ens, stacked, np.array(file_index), np.array(realisation), task_id,
                      committed, planned, tuple(notes), running)
+
+
+def _until_stop(stress, path, task):
+    """The samples before a stop on an overlap (monolayers, sdmpi.dynamics.monolayer: every
+    sample from the stop on is NaN) and a note on the stop (None: no stop)."""
+    bad = np.isnan(stress).any(axis=tuple(a for a in range(stress.ndim) if a != 1))
+    if not bad.any():
+        return stress, None
+    stop = int(np.argmax(bad))
+    return stress[:, :stop], (
+        f"{path}: task {task.task_id} (phi = {task.phi:g}, realisation {task.realisation}) "
+        f"stopped on an overlap deeper than integration.overlap_stop at step {stop} "
+        f"(t = {stop * task.dt:.4g}); {max(stop - task.discard_steps, 0)} samples after the "
+        f"start-up used")
 
 
 def _running_into(out, job: Job, stress, keep):

@@ -8,7 +8,9 @@ jobs give ``viscosity.csv`` instead, one row per (phi, rate, component), columns
 each of ``eta`` (relative viscosity), ``N1``, ``N2`` (normal-stress differences) and
 ``Pi`` (particle pressure), all in units of eta_m gamma_dot, the mean, ``*_err`` (one
 standard error) and ``*_ci95`` (half-width of the 95% confidence interval, Student t),
-and last ``dof`` (see :mod:`.reduce` for definitions and sign conventions).
+and last ``dof`` (see :mod:`.reduce` for definitions and sign conventions). Jobs with
+a ``[physical]`` section get the SI columns :data:`.reduce.PHYSICAL_COLUMNS` appended
+(rates in 1/s, Pe, moduli and stresses in Pa, viscosities in Pa s).
 
 ``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1):
 
@@ -42,7 +44,12 @@ from .reduce import COMPONENTS
 
 UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/t_D",
          "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m", "eta": "eta_m",
-         "N1": "eta_m gamma_dot", "N2": "eta_m gamma_dot", "Pi": "eta_m gamma_dot"}
+         "N1": "eta_m gamma_dot", "N2": "eta_m gamma_dot", "Pi": "eta_m gamma_dot",
+         # SI columns of jobs with a [physical] section (.reduce.PHYSICAL_COLUMNS)
+         "omega_rad_per_s": "rad/s", "G_prime_Pa": "Pa", "G_prime_err_Pa": "Pa",
+         "G_dprime_Pa": "Pa", "G_dprime_err_Pa": "Pa", "eta_prime_Pa_s": "Pa s",
+         "eta_prime_err_Pa_s": "Pa s", "rate_per_s": "1/s", "Pe": "1", "eta_Pa_s": "Pa s",
+         "eta_err_Pa_s": "Pa s", "eta_ci95_Pa_s": "Pa s", "shear_stress_Pa": "Pa"}
 
 
 def _fmt(x) -> str:

@@ -1,6 +1,6 @@
 """Canonical text of a resolved job, and its hash.
 
-The canonical text is TOML: every section in schema order, every applicable key in
+The canonical text is TOML: every non-empty section in schema order, every applicable key in
 schema order with its resolved value (defaults included, keys that do not apply left
 out), floats written with ``repr`` (shortest round-trip form). Parsing it gives back the
 same :class:`Job`, so it is what the run file stores, and two jobs are the same job
@@ -72,13 +72,12 @@ def canonical_text(job: Job, *, exclude: frozenset[str] = frozenset()) -> str:
     """The canonical TOML text of ``job``, without the keys named in ``exclude``."""
     lines = [f"# {FORMAT}"]
     for section, _ in SECTIONS:
-        lines.append(f"\n[{section}]")
         values = getattr(job, section)
-        for f in dataclasses.fields(values):
-            name = toml_name(f)
-            value = getattr(values, f.name)
-            if value is not None and f"{section}.{name}" not in exclude:
-                lines.append(f"{name} = {toml_literal(value)}")
+        keys = [f"{toml_name(f)} = {toml_literal(getattr(values, f.name))}"
+                for f in dataclasses.fields(values)
+                if getattr(values, f.name) is not None and f"{section}.{toml_name(f)}" not in exclude]
+        if keys:  # sections without applicable keys (e.g. an unused [physical]) are left out
+            lines += [f"\n[{section}]"] + keys
     return "\n".join(lines) + "\n"
 
 

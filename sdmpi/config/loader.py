@@ -18,8 +18,9 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import units
 from .canonical import toml_literal
-from .schema import SECTIONS, Choice, Job, Text, toml_name
+from .schema import SECTIONS, START_PHI_LIMIT, Choice, Job, Physical, Text, toml_name
 
 _MISSING = object()
 
@@ -139,6 +140,8 @@ class _Pass:
     set_paths: frozenset             # "section.key" given by --set
     invalid: set = field(default_factory=set)      # keys / sections that failed
     context: dict = field(default_factory=dict)    # section -> {attribute: value} so far
+    derived: dict = field(default_factory=dict)    # reduced key -> [physical] key(s) it came from
+    supplied: set = field(default_factory=set)     # reduced keys whose [physical] source failed
 
 
 def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
@@ -149,7 +152,8 @@ def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
     for name, value in raw.items():
         if name not in sections:
             problems.append(_unknown(name, value, sections, None))
-    for section, cls in SECTIONS:
+    # [physical] first: it sets reduced keys of the other sections (_apply_physical)
+    for section, cls in sorted(SECTIONS, key=lambda item: item[0] != "physical"):
         table = raw.get(section, {})
         if not isinstance(table, dict):
             problems.append(Problem(section, "must be a table", table,
@@ -158,10 +162,13 @@ def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
             table = {}
         st.context[section] = {}  # filled key by key: later keys may depend on earlier ones
         _resolve_table(table, cls, section, st, st.context[section])
+        if section == "physical":
+            _apply_physical(raw, st)
     job = Job(**{s: cls(**st.context[s]) for s, cls in SECTIONS})
     for deps, check in CROSS_CHECKS:
         if not any(d in st.invalid or d.split(".")[0] in st.invalid for d in deps):
             problems.extend(check(job))
+    problems[:] = [_mark_derived(p, st.derived) for p in problems]
     return job
 
 
@@ -192,7 +199,7 @@ def _resolve_table(table, cls, prefix, st: _Pass, out: dict) -> dict:
             out[f.name] = None
         elif name not in table:
             if meta["default"] is None and applies and not meta["optional"] \
-                    and name not in misspelt:
+                    and name not in misspelt and path not in st.supplied:
                 when = f" when {condition}" if condition else ""
                 example = toml_literal(meta["example"])
                 st.problems.append(Problem(path, f"is required{when}",
@@ -365,6 +372,110 @@ def _mark_origin(problem: Problem, set_paths) -> Problem:
     return dataclasses.replace(problem, origin="--set")
 
 
+# --------------------------------------------------------------------------- physical units
+
+
+def _apply_physical(raw: dict, st: _Pass) -> None:
+    """Convert the [physical] keys (sdmpi.config.units) into the reduced keys they set,
+    written into ``raw`` before those sections are checked, so that the usual checks
+    (range, applicability, cross-key) see them; their problems name the [physical] key as
+    origin. A reduced key given as well must hold the same value (the canonical text
+    lists both), else both keys are named. Needs radius and viscosity, and temperature
+    (t_D) or, in non-Brownian steady shear, shear_rate (time unit 1/gamma_dot)."""
+    phys = st.context["physical"]
+    given = [toml_name(f) for f in dataclasses.fields(Physical) if phys[f.name] is not None]
+    failed = [p for p in st.invalid if p == "physical" or p.startswith("physical.")]
+    named = set(given) | {p.split(".")[-1] for p in failed}
+    targets = {units.CONVERTED.get(k, "interparticle.hamaker") for k in named
+               if k in units.CONVERTED or k == "particle_permittivity"}
+    if not given or failed:
+        _unconverted(st, targets)
+        return
+    brownian = raw.get("brownian", {}).get("enabled", True) \
+        if isinstance(raw.get("brownian", {}), dict) else None
+    protocol = raw.get("shear", {}).get("protocol", "oscillatory") \
+        if isinstance(raw.get("shear", {}), dict) else None
+    if not isinstance(brownian, bool) or protocol not in ("oscillatory", "steady", "none"):
+        _unconverted(st, targets)  # reported by their own checks
+        return
+    problems = []
+
+    def require(name, why, example):
+        if phys[name] is None and all(p.path != f"physical.{name}" for p in problems):
+            problems.append(Problem(f"physical.{name}", f"is required {why}",
+                                    allowed=f"e.g. {name} = {example}"))
+
+    require("radius", "with any other [physical] key: it is the length unit a", 37.5)
+    require("viscosity", "with any other [physical] key: it is the viscosity unit eta_m", 0.1)
+    if protocol == "steady" and not brownian:
+        require("shear_rate", "in non-Brownian steady shear, whose time unit is 1/gamma_dot",
+                100.0)
+    else:
+        require("temperature", "for the time unit t_D = 6 pi eta_m a^3 / kT", 298.15)
+    optical = [k for k in units.OPTICAL_KEYS if k != "medium_permittivity" and phys[k] is not None]
+    if optical:
+        for name, example in zip(units.OPTICAL_KEYS, (2.72, 1.85, 1.65, 1.36, 1.43e15)):
+            require(name, f"with {', '.join('physical.' + k for k in optical)}: the Hamaker "
+                    "constant of seed 003 eq. 6 needs all of "
+                    + ", ".join(units.OPTICAL_KEYS), example)
+        require("temperature", "for the Hamaker constant of seed 003 eq. 6 (its kT term)", 298.15)
+        if phys["hamaker"] is not None:
+            problems.append(Problem("physical.hamaker", "conflicts with physical."
+                                    f"{optical[0]} (the Hamaker constant from eq. 6)",
+                                    phys["hamaker"], allowed="one of physical.hamaker or the "
+                                    "eq.-6 keys " + ", ".join(units.OPTICAL_KEYS)))
+    if phys["surface_potential"] is not None:
+        require("medium_permittivity", "with physical.surface_potential (the double layer's "
+                "strength 4 pi eps_r eps_0 a psi0^2)", 80.0)
+    if problems:
+        st.problems.extend(problems)
+        st.invalid.update(p.path for p in problems)
+        _unconverted(st, targets)
+        return
+    physical = Physical(**phys)
+    scales = units.make_scales(physical, brownian, protocol)
+    for name, (target, value) in units.reduced_values(physical, scales).items():
+        section, key_name = target.split(".")
+        table = raw.setdefault(section, {})
+        if not isinstance(table, dict):
+            continue  # reported when the section is checked
+        source = "physical." + name
+        if key_name in table:
+            if not _same_value(table[key_name], value):
+                st.problems.append(Problem(
+                    target, f"conflicts with {source} = {toml_literal(phys[name])}, which "
+                    f"sets it to {toml_literal(value)}", table[key_name],
+                    allowed=f"one of {target} (reduced units) or {source} (physical units)"))
+                st.invalid.add(target)
+            continue
+        table[key_name] = list(value) if isinstance(value, tuple) else value
+        st.derived[target] = source
+
+
+def _unconverted(st: _Pass, targets) -> None:
+    """Reduced keys that a failed [physical] key should have set: not reported as
+    missing, and the cross-key checks that read them are skipped."""
+    st.supplied |= targets
+    st.invalid |= targets
+
+
+def _same_value(given, value) -> bool:
+    """A reduced key as given equals the value converted from [physical] (to 1e-9)."""
+    given = given if isinstance(given, list) else [given]
+    value = value if isinstance(value, tuple) else (value,)
+    return len(given) == len(value) and all(
+        _is_number(g) and math.isclose(g, v, rel_tol=1e-9) for g, v in zip(given, value))
+
+
+def _mark_derived(problem: Problem, derived: dict) -> Problem:
+    """Name the [physical] key as the origin of a problem with a key it set."""
+    source = next((s for t, s in derived.items()
+                   if problem.path == t or problem.path.startswith(t + "[")), None)
+    if source is None or problem.origin:
+        return problem
+    return dataclasses.replace(problem, origin=source)
+
+
 # --------------------------------------------------------------------------- cross-key checks
 
 
@@ -410,7 +521,7 @@ def _ranks(job):
     if job.ensemble.ranks_per_task > 1 and job.solver.backend == "dense":
         return [Problem("ensemble.ranks_per_task", 'the "dense" backend runs a task on '
                         "one rank", job.ensemble.ranks_per_task,
-                        allowed='1, or solver.backend = "petsc-dense" or "petsc-krylov"')]
+                        allowed='1, or solver.backend = "petsc-dense", "petsc-krylov" or "auto"')]
     return []
 
 
@@ -459,8 +570,12 @@ def _time_step(job):
 
 def _initial_configuration(job):
     """The hard-sphere generator starts from a simple cubic lattice (sdmpi.dynamics.initial)
-    spaced for the largest diameter: phi < (pi/6) sum_i a_i^3 / N (pi/6 if monodisperse)."""
+    spaced for the largest diameter, compressed when phi is above the lattice's limit
+    (pi/6) sum_i a_i^3 / N: phi < START_PHI_LIMIT. Monolayers start from a square lattice
+    instead (:func:`_monolayer_start`)."""
     system = job.system
+    if system.geometry == "monolayer":
+        return _monolayer_start(job)
     n = system.n_particles
     problems = []
     if round(n ** (1 / 3)) ** 3 != n:
@@ -468,26 +583,57 @@ def _initial_configuration(job):
         problems.append(Problem("system.n_particles", "the initial configuration starts from a "
                                 "simple cubic lattice, so N must be a perfect cube", n,
                                 allowed=f"a cube: {cubes}, ..."))
-    if _size_classes(job):
-        return problems  # reported by _size_classes; the limit needs valid classes
-    limit = system.lattice_phi_limit
     for k, phi in enumerate(system.phi):
-        if phi >= limit:
-            if system.size_classes is None:
-                problems.append(Problem(f"system.phi[{k}]", "a simple cubic lattice start "
-                                        "holds at most pi/6", phi, allowed="0 < phi < 0.5236"))
-            else:
-                problems.append(Problem(
-                    f"system.phi[{k}]", "a simple cubic lattice start spaced for the largest "
-                    f"diameter (2) holds at most (pi/6) sum_i a_i^3 / N = {limit:.4f} with "
-                    f"these size classes ({_counts_text(system)})", phi,
-                    allowed=f"0 < phi < {math.floor(limit * 1e4) / 1e4:.4f}"))
+        if phi >= START_PHI_LIMIT:
+            problems.append(Problem(f"system.phi[{k}]", "the initial configuration is a "
+                                    "compressed hard-sphere fluid, made up to "
+                                    f"phi = {START_PHI_LIMIT} (denser ones jam)", phi,
+                                    allowed=f"0 < phi < {START_PHI_LIMIT}"))
     return problems
 
 
-def _counts_text(system) -> str:
-    return ", ".join(f"{m} of radius {r:g}" for r, m in zip(system.class_radii,
-                                                           system.class_counts))
+def _monolayer_start(job):
+    """The monolayer start (sdmpi.dynamics.initial.hard_disk_monolayer): m x m square
+    lattice sites, m = ceil(sqrt N), spaced L/m > 2, so phi < pi N / (4 m^2)."""
+    system = job.system
+    m = math.isqrt(system.n_particles - 1) + 1
+    limit = math.pi * system.n_particles / (4 * m * m)
+    return [Problem(f"system.phi[{k}]", f"the monolayer start fills {m} x {m} square-lattice "
+                    f"sites spaced for the diameter, which holds N = {system.n_particles} disks "
+                    f"up to the areal fraction pi N / (4 m^2) = {limit:.4f}", phi,
+                    allowed=f"0 < phi < {math.floor(limit * 1e4) / 1e4:.4f}, or N = {m * m}")
+            for k, phi in enumerate(system.phi) if phi >= limit]
+
+
+def _monolayer(job):
+    """Monolayers are seed 001's case: non-Brownian steady shear of equal spheres in a
+    Newtonian medium, hard (with the minimum-gap rule) or with the short-range repulsion;
+    the layer's z-images stay outside the lubrication cut-off."""
+    system = job.system
+    if system.geometry != "monolayer":
+        return []
+    why = "monolayers are non-Brownian steady shear of equal spheres (seed 001)"
+    problems = []
+    for path, value, ok, allowed in (
+            ("shear.protocol", job.shear.protocol, job.shear.protocol == "steady", '"steady"'),
+            ("brownian.enabled", job.brownian.enabled, not job.brownian.enabled, "false"),
+            ("medium.kind", job.medium.kind, job.medium.kind == "newtonian", '"newtonian"'),
+            ("system.size_classes", system.size_classes, system.size_classes is None,
+             "absent (equal spheres)"),
+            ("interparticle.kind", job.interparticle.kind,
+             job.interparticle.kind in ("none", "repulsion"), '"none" or "repulsion"')):
+        if not ok:
+            problems.append(Problem(path, why, value, allowed=f'{allowed}, or system.geometry = "bulk"'))
+    cutoff = job.hydrodynamics.lubrication_cutoff
+    side = math.sqrt(system.n_particles * math.pi / max(system.phi))
+    need = (2.0 + cutoff) / side
+    if system.layer_spacing * side < 2.0 + cutoff:
+        problems.append(Problem("system.layer_spacing", f"the layer's z-images ({system.layer_spacing:g} "
+                                f"x L = {system.layer_spacing * side:.3g} a away at phi = "
+                                f"{max(system.phi):g}) must lie beyond the lubrication cut-off "
+                                f"(centre distance 2 + {cutoff:g})", system.layer_spacing,
+                                allowed=f"layer_spacing >= {need:.4g}"))
+    return problems
 
 
 def _size_classes(job):
@@ -541,23 +687,63 @@ def _force_range(job):
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
     if inter.kind not in ("vdw", "dlvo"):
         return []
-    if inter.cap_gap >= cutoff:
-        return [Problem("interparticle.cap_gap", "must be smaller than "
-                        f"hydrodynamics.lubrication_cutoff (= {cutoff:g})", inter.cap_gap,
-                        allowed=f"0 < cap_gap < {cutoff:g}")]
-    # the formulas live with the force laws (imported here only for these kinds)
+    smallest = min(job.system.class_radii)  # the cut-off gap is cut-off x mean radius
+    if inter.cap_gap >= cutoff * smallest:
+        of = "" if smallest == 1.0 else f" x the smallest radius {smallest:g}"
+        return [Problem("interparticle.cap_gap", "must be smaller than the cut-off gap "
+                        f"hydrodynamics.lubrication_cutoff (= {cutoff:g}){of}", inter.cap_gap,
+                        allowed=f"0 < cap_gap < {cutoff * smallest:g}")]
+    # the formulas live with the force laws: a layering exception (config -> dynamics),
+    # imported here only for these kinds, rather than a second copy of the force laws
     from ..dynamics.forces import TAIL, tail_ratios
     problems = []
-    for path, ratio in tail_ratios(job).items():
-        if abs(ratio) > TAIL:
+    for path, (ratio, (a_i, a_j)) in tail_ratios(job).items():
+        if ratio > TAIL:
             what = ("the van der Waals force at the cut-off" if path.endswith("cap_gap")
                     else "the double-layer force at the cut-off")
+            if job.system.size_classes is not None:
+                what += f" (worst pair: radii {a_i:g} and {a_j:g})"
             fix = ("a smaller cap_gap" if path.endswith("cap_gap") else "a shorter debye_length")
-            problems.append(Problem(path, f"{what} is {abs(ratio):.2g} of its contact value; "
+            problems.append(Problem(path, f"{what} is {ratio:.2g} of its contact value; "
                                     f"the force is shifted to vanish at the lubrication cut-off "
                                     f"(= {cutoff:g}), which needs <= {TAIL:g}",
                                     getattr(inter, path.split(".")[1]),
                                     allowed=f"{fix}, or a larger hydrodynamics.lubrication_cutoff"))
+    return problems
+
+
+def _frictional(job):
+    """Frictional contacts (sdmpi.dynamics.contacts): non-Brownian, the repulsion decayed
+    within the lubrication cut-off, and a time step the explicit contact springs allow."""
+    inter, hyd = job.interparticle, job.hydrodynamics
+    if inter.kind != "frictional":
+        return []
+    from ..dynamics.contacts import SQUEEZE, sliding_mobility
+    problems = []
+    if job.brownian.enabled:
+        problems.append(Problem("brownian.enabled", "frictional contacts are a non-Brownian "
+                                "model (the Brownian midpoint would cross the contact springs)",
+                                True, allowed='false with interparticle.kind = "frictional"'))
+    reach = 12 * math.log(10) * inter.repulsion_length
+    if reach > hyd.lubrication_cutoff:
+        problems.append(Problem("interparticle.repulsion_length", "the repulsion must decay "
+                                "(to 1e-12) within the lubrication cut-off (= "
+                                f"{hyd.lubrication_cutoff:g}), whose pairs it acts on",
+                                inter.repulsion_length, allowed="repulsion_length <= "
+                                f"{hyd.lubrication_cutoff / (12 * math.log(10)):.4g}, or a "
+                                "larger hydrodynamics.lubrication_cutoff"))
+    dt = max(job.time_step(w) for w in job.frequencies)
+    for path, limit, why in (
+            ("interparticle.k_t", 1 / (sliding_mobility(hyd.min_gap) * dt),
+             f"sliding mobility {sliding_mobility(hyd.min_gap):.3g} at hydrodynamics.min_gap"),
+            ("interparticle.k_n", 1 / (SQUEEZE * hyd.min_gap * dt),
+             f"normal mobility {SQUEEZE:g} x hydrodynamics.min_gap at contact")):
+        value = getattr(inter, path.split(".")[1])
+        if value > limit:
+            problems.append(Problem(path, f"is too stiff for the time step dt = {dt:.3g}: the "
+                                    f"explicit step needs dt x stiffness x mobility <= 1 ({why})",
+                                    value, allowed=f"{path.split('.')[1]} <= {limit:.4g}, or a "
+                                    "smaller integration.dt"))
     return problems
 
 
@@ -571,7 +757,7 @@ def _forces_need_pairs(job):
 
 
 #: backends implemented in this version (the others are named by the job schema)
-IMPLEMENTED_BACKENDS = ("dense", "petsc-dense")
+IMPLEMENTED_BACKENDS = ("dense", "petsc-dense", "petsc-krylov", "auto")
 
 
 def _maxwell_forces(job):
@@ -605,11 +791,19 @@ CROSS_CHECKS = (
     (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes",
       "system.size_classes") + _INTEGRATION, _time_step),
     (("system.n_particles", "system.size_classes"), _size_classes),
-    (("system.n_particles", "system.phi", "system.size_classes"), _initial_configuration),
+    (("system.n_particles", "system.phi", "system.size_classes", "system.geometry"),
+     _initial_configuration),
+    (("system.geometry", "system.n_particles", "system.phi", "system.layer_spacing",
+      "system.size_classes", "shear.protocol", "brownian.enabled", "medium.kind",
+      "interparticle.kind", "hydrodynamics.lubrication_cutoff"), _monolayer),
     (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
     (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
-      "hydrodynamics.lubrication_cutoff"), _force_range),
+      "hydrodynamics.lubrication_cutoff", "system.size_classes"), _force_range),
     (("interparticle.kind", "hydrodynamics.lubrication"), _forces_need_pairs),
+    (("interparticle.kind", "interparticle.mu", "interparticle.k_n", "interparticle.k_t",
+      "interparticle.f_r0", "interparticle.repulsion_length", "brownian.enabled",
+      "hydrodynamics.lubrication_cutoff", "hydrodynamics.min_gap", "shear.protocol",
+      "shear.omega") + _INTEGRATION, _frictional),
     (("solver.backend",), _backend),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
 )

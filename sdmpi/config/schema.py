@@ -23,6 +23,9 @@ import math
 from dataclasses import dataclass, field
 
 TWO_PI = 2.0 * math.pi
+#: volume fractions of the initial configurations: below the lattice limit a lattice
+#: start, above it a compressed one (sdmpi.dynamics.initial), up to this
+START_PHI_LIMIT = 0.6
 
 
 # --------------------------------------------------------------------------- allowed values
@@ -137,6 +140,9 @@ MAXWELL = ("medium", "kind", ("maxwell",))
 REPULSION = ("interparticle", "kind", ("repulsion",))
 VDW_OR_DLVO = ("interparticle", "kind", ("vdw", "dlvo"))
 DLVO = ("interparticle", "kind", ("dlvo",))
+FRICTIONAL = ("interparticle", "kind", ("frictional",))
+BULK = ("system", "geometry", ("bulk",))
+MONOLAYER = ("system", "geometry", ("monolayer",))
 
 
 @dataclass(frozen=True)
@@ -166,7 +172,10 @@ class SizeClass:
 class System:
     """[system]: the particles. Spheres of radius 1, or of several size classes (radii
     relative to the largest), in a cubic periodic box of side L = (sum_i 4 pi a_i^3 / (3 phi))^(1/3); one task group
-    per volume fraction.
+    per volume fraction. Monolayers (geometry = "monolayer", seed 001): N spheres of
+    radius 1 with centres in one plane, in a square L x L cell, L = (N pi / phi)^(1/2) with
+    phi the areal fraction, replicated in the plane and every layer_spacing x L in z
+    (sdmpi.dynamics.monolayer).
 
     Size classes: the class counts N_k are N x_k rounded by largest remainder (ties to the
     earlier class), x_k = (f_k/a_k^3) / sum_j (f_j/a_j^3) the number fractions of the
@@ -176,9 +185,18 @@ class System:
 
     n_particles: int = key(27, "int", "number of spheres N per realisation",
                            allowed=Range(1, None))
-    phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions, one task group each",
+    phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions (monolayer: areal "
+                                 "fractions N pi a^2 / L^2), one task group each",
                                  allowed=Range(0.0, 0.64, lo_open=True, hi_open=True))
-    box: str = key("cubic", "str", "box shape", allowed=Choice(("cubic",)))
+    geometry: str = key("bulk", "str", "bulk: spheres in a cubic periodic box; monolayer: "
+                        "centres in one plane z = const, in-plane motion, periodic in the "
+                        "plane, non-Brownian steady shear only (seed 001)",
+                        allowed=Choice(("bulk", "monolayer")), controls="system.geometry")
+    box: str | None = key("cubic", "str", "box shape", allowed=Choice(("cubic",)), only_if=BULK)
+    layer_spacing: float | None = key(
+        2.0, "float", "monolayer: distance Lz between the layer and its periodic images "
+        "in z (3D fluid around a 2D-periodic layer; seed 001 used 100)", unit="L (in-plane side)",
+        allowed=Range(1.0, 1000.0), only_if=MONOLAYER)
     size_classes: tuple[SizeClass, ...] | None = key(
         None, "tables", "discrete size classes [{radius = ..., fraction = ...}, ...]; radii "
         "in units of the largest (= 1, the length unit), fractions = volume shares summing "
@@ -304,6 +322,10 @@ class Integration:
                            allowed=Range(0.0, None, lo_open=True), only_if=STEADY_OR_NONE)
     n_steps: int | None = key(10000, "int", "time steps per task", allowed=Range(1, None),
                               only_if=STEADY_OR_NONE)
+    overlap_stop: float | None = key(
+        0.02, "float", "monolayer: a realisation stops (its later samples are NaN) when two "
+        "spheres overlap by more than this (seed 001: 2% of a radius)", unit="a",
+        allowed=Range(0.0, 1.0, lo_open=True), only_if=MONOLAYER)
     discard_steps: int | None = key(1000, "int", "leading steps left out of averages; "
                                     "< n_steps", allowed=Range(0, None),
                                     only_if=STEADY_OR_NONE)
@@ -319,12 +341,14 @@ class Interparticle:
     spheres (seed 003 eqs. 4-5), constant below cap_gap; dlvo: vdw plus the electrostatic
     double-layer repulsion psi^2 R ln(1 + exp(-h/debye_length)) (Derjaguin, constant low
     potential; R = a_i a_j/(a_i + a_j)). vdw and dlvo forces are shifted to vanish at the
-    lubrication cut-off. Force unit 6 pi eta_m a^2/(time unit): kT/a (Brownian) or
+    lubrication cut-off. frictional: contact springs k_n, k_t with Coulomb friction mu and
+    the critical-load repulsion f_r0 exp(-h/repulsion_length) (Mari et al., J. Rheol. 58,
+    1693 (2014); sdmpi.dynamics.contacts), non-Brownian only. Force unit 6 pi eta_m a^2/(time unit): kT/a (Brownian) or
     6 pi eta_m a^2 gamma_dot (non-Brownian steady shear); energy unit = force unit x a
     (kT, or 6 pi eta_m a^3 gamma_dot). See sdmpi.dynamics.forces."""
 
     kind: str = key("none", "str", "interparticle force",
-                    allowed=Choice(("none", "repulsion", "vdw", "dlvo")),
+                    allowed=Choice(("none", "repulsion", "vdw", "dlvo", "frictional")),
                     controls="interparticle.kind")
     f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2); seed 001: "
                            "F0 = 1/(2 gamma*) in non-Brownian jobs",
@@ -351,6 +375,30 @@ class Interparticle:
         "energy unit (= (e psi0/kT)^2 a/l_B in a Brownian job, l_B the Bjerrum length)",
         unit="sqrt(energy unit / a)", allowed=Range(0.0, None, lo_open=True), only_if=DLVO,
         example=10.0)
+    mu: float | None = key(None, "float", "Coulomb friction coefficient of the contacts, "
+                           "|F_t| <= mu |F_n| (0: frictionless contacts)",
+                           allowed=Range(0.0, None), only_if=FRICTIONAL, example=0.5)
+    k_n: float | None = key(None, "float", "normal contact stiffness (overlap ~ contact "
+                            "force / k_n; keep it below ~0.02 a)", unit="force unit / a",
+                            allowed=Range(0.0, None, lo_open=True), only_if=FRICTIONAL,
+                            example=1000.0)
+    k_t: float | None = key(None, "float", "tangential contact stiffness; the explicit step "
+                            "needs k_t dt m_t <= 1, m_t ~ 0.7 (sliding mobility at "
+                            "min_gap 1e-3)", unit="force unit / a",
+                            allowed=Range(0.0, None, lo_open=True), only_if=FRICTIONAL,
+                            example=500.0)
+    f_r0: float | None = key(None, "float", "critical load: the repulsion at contact; the "
+                             "shear rate in units of f_r0 / (6 pi eta_m a^2) is 1/f_r0",
+                             unit="force unit", allowed=Range(0.0, None, lo_open=True),
+                             only_if=FRICTIONAL, example=1.0)
+    repulsion_length: float | None = key(None, "float", "decay length lambda of the "
+                                         "repulsion f_r0 exp(-h/lambda); 27.6 lambda must be "
+                                         "below the lubrication cut-off", unit="a",
+                                         allowed=Range(0.0, None, lo_open=True),
+                                         only_if=FRICTIONAL, example=0.05)
+    max_contacts: int | None = key(12, "int", "contacts stored per particle (checkpointed "
+                                   "history; a particle's contacts with larger-numbered ones)",
+                                   allowed=Range(1, 64), only_if=FRICTIONAL)
 
 
 @dataclass(frozen=True)
@@ -367,8 +415,11 @@ class Ensemble:
 class Solver:
     """[solver]: the linear-algebra backend for the resistance problem."""
 
-    backend: str = key("dense", "str", "dense = LAPACK Cholesky on one rank",
-                       allowed=Choice(("dense", "petsc-dense", "petsc-krylov")))
+    backend: str = key("dense", "str", "dense = LAPACK Cholesky on one rank; petsc-dense = "
+                       "ScaLAPACK Cholesky over the task's ranks; petsc-krylov = matrix-free "
+                       "mixed-form GMRES and Lanczos Brownian forces (large N); auto = dense "
+                       "(petsc-dense on several ranks) below 300 particles, else petsc-krylov",
+                       allowed=Choice(("dense", "petsc-dense", "petsc-krylov", "auto")))
     tolerance: float = key(1e-8, "float", "relative residual of iterative solves "
                            "(petsc-krylov; direct backends ignore it)",
                            allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))
@@ -399,6 +450,62 @@ class Output:
 
 
 @dataclass(frozen=True)
+class Physical:
+    """[physical]: optional physical-unit input (sdmpi.config.units). The scales radius,
+    viscosity and temperature fix the reduced units (a, eta_m, t_D = 6 pi eta_m a^3/kT;
+    1/gamma_dot in non-Brownian steady shear, which needs shear_rate instead of
+    temperature); the other keys are converted once, by the loader, into the reduced key
+    named in their doc, which must then be absent (or equal, as in the canonical text).
+    Outputs gain SI columns (sdmpi reduce) and the run file the conversion factors."""
+
+    radius: float | None = key(None, "float", "radius a of the largest spheres (the length "
+                               "unit); needed with any other [physical] key", unit="nm",
+                               allowed=Range(0.0, None, lo_open=True), optional=True)
+    viscosity: float | None = key(None, "float", "medium zero-shear viscosity eta_m; "
+                                  "needed with any other [physical] key", unit="Pa s",
+                                  allowed=Range(0.0, None, lo_open=True), optional=True)
+    temperature: float | None = key(None, "float", "temperature T (kT, t_D, the Peclet number, "
+                                    "eq. 6)", unit="K", allowed=Range(0.0, None, lo_open=True),
+                                    optional=True)
+    shear_rate: float | None = key(None, "float", "shear rate; sets shear.rate (= Pe = "
+                                   "gamma_dot t_D, or 1 in non-Brownian jobs)", unit="1/s",
+                                   allowed=Range(0.0, None, lo_open=True), optional=True)
+    omega: tuple[float, ...] | None = key(None, "floats", "angular frequencies; set shear.omega",
+                                          unit="rad/s", allowed=Range(0.0, None, lo_open=True),
+                                          optional=True)
+    hamaker: float | None = key(None, "float", "Hamaker constant (seed 003: 7.5e-21); sets "
+                                "interparticle.hamaker", unit="J",
+                                allowed=Range(0.0, None, lo_open=True), optional=True)
+    cap_gap: float | None = key(None, "float", "van der Waals cap gap (seed 003: 0.4); sets "
+                                "interparticle.cap_gap", unit="nm",
+                                allowed=Range(0.0, None, lo_open=True), optional=True)
+    debye_length: float | None = key(None, "float", "Debye length; sets "
+                                     "interparticle.debye_length", unit="nm",
+                                     allowed=Range(0.0, None, lo_open=True), optional=True)
+    surface_potential: float | None = key(
+        None, "float", "surface potential psi0 (needs medium_permittivity); sets "
+        "interparticle.surface_potential = sqrt(4 pi eps_r eps_0 a psi0^2 / kT)", unit="mV",
+        allowed=Range(None, None), optional=True)
+    particle_permittivity: float | None = key(
+        None, "float", "static dielectric constant e1 of the particles: with the next four "
+        "keys and temperature, the Hamaker constant of seed 003 eq. 6 (Israelachvili eq. "
+        "13.16) sets interparticle.hamaker", allowed=Range(1.0, None), optional=True)
+    medium_permittivity: float | None = key(None, "float", "static dielectric constant e3 of "
+                                            "the medium (eq. 6; double layer)",
+                                            allowed=Range(1.0, None), optional=True)
+    particle_refractive_index: float | None = key(None, "float", "refractive index n1 of the "
+                                                  "particles (eq. 6)", allowed=Range(1.0, None),
+                                                  optional=True)
+    medium_refractive_index: float | None = key(None, "float", "refractive index n3 of the "
+                                                "medium (eq. 6)", allowed=Range(1.0, None),
+                                                optional=True)
+    absorption_frequency: float | None = key(None, "float", "main UV absorption frequency "
+                                             "nu_e (eq. 6; ~3e15 for many materials)",
+                                             unit="1/s", allowed=Range(0.0, None, lo_open=True),
+                                             optional=True)
+
+
+@dataclass(frozen=True)
 class Job:
     """A validated job: one attribute per TOML section (same names as in the file)."""
 
@@ -413,6 +520,7 @@ class Job:
     solver: Solver = field(default_factory=Solver)
     hydrodynamics: Hydrodynamics = field(default_factory=Hydrodynamics)
     output: Output = field(default_factory=Output)
+    physical: Physical = field(default_factory=Physical)
 
     # ---- derived quantities (one place for the time-step arithmetic)
 

@@ -184,6 +184,9 @@ def force_law(job):
         return None
     if inter.kind == "repulsion":
         return Repulsion(FORCE_UNIT * inter.f0, inter.tau)
+    if inter.kind == "frictional":  # the repulsion; the contact springs: contacts.contact_model
+        from .contacts import CriticalLoadRepulsion  # contacts imports this module
+        return CriticalLoadRepulsion(FORCE_UNIT * inter.f_r0, inter.repulsion_length)
     vdw = VanDerWaals(FORCE_UNIT * inter.hamaker, inter.cap_gap, cutoff)
     if inter.kind == "vdw":
         return vdw
@@ -194,16 +197,23 @@ def force_law(job):
 
 
 def tail_ratios(job):
-    """|F(cut-off)| / |F(contact)| of each truncated part of the job's law (equal spheres
-    of radius 1): {"interparticle.<key>": ratio} for the loader's check against TAIL."""
+    """|F(cut-off)| / |F(contact)| of each truncated part of the job's law, for the pair
+    of size classes where it is largest (the cut-off gap is cut-off x the pair's mean
+    radius, the van der Waals cap a fixed gap, so the ratio depends on both radii):
+    {"interparticle.<key>": (ratio, (a_i, a_j))} for the loader's check against TAIL."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    out = {}
+    radii = job.system.class_radii
+    pairs = [(a, b) for k, a in enumerate(radii) for b in radii[k:]]
+    laws = {}
     if inter.kind in ("vdw", "dlvo"):
-        law = VanDerWaals(1.0, inter.cap_gap)
-        out["interparticle.cap_gap"] = float(law.magnitude(cutoff) / law.magnitude(inter.cap_gap))
+        laws["interparticle.cap_gap"] = (VanDerWaals(1.0, inter.cap_gap), inter.cap_gap)
     if inter.kind == "dlvo":
-        layer = DoubleLayer(1.0, inter.debye_length)
-        out["interparticle.debye_length"] = float(layer.magnitude(cutoff) / layer.magnitude(0.0))
+        laws["interparticle.debye_length"] = (DoubleLayer(1.0, inter.debye_length), 0.0)
+    out = {}
+    for path, (law, contact) in laws.items():
+        ratios = [(float(abs(law.magnitude(cutoff * 0.5 * (a + b), a, b)
+                             / law.magnitude(contact, a, b))), (a, b)) for a, b in pairs]
+        out[path] = max(ratios)
     return out
 
 

@@ -1,4 +1,5 @@
-"""Initial configurations: equilibrium hard-sphere fluids in a cubic periodic box.
+"""Initial configurations: equilibrium hard-sphere fluids in a cubic periodic box, and
+hard-disk monolayers (`hard_disk_monolayer`).
 
 Spheres of equal or unequal radii a_i start on a simple cubic lattice spaced for the
 largest diameter (dense enough up to phi = (pi/6) sum_i a_i^3 / (N a_max^3), pi/6 = 0.524
@@ -8,6 +9,9 @@ rejected on overlap, |x_i - x_j| < a_i + a_j; Metropolis et al. 1953), which sam
 distribution for the given volume fraction. Denser random packings (up to phi ~ 0.62) come
 from `compress`: alternating MC sweeps with affine box shrinks limited by the closest
 pair, a slow Lubachevsky-Stillinger-like compression (Lubachevsky & Stillinger 1990).
+`hard_sphere_fluid` uses it for volume fractions the lattice cannot hold (dense
+polydisperse suspensions, monodisperse phi >= pi/6): lattice + MC at LATTICE_FILL of the
+lattice limit, compression to phi, then MC at phi (phi < ``START_PHI_LIMIT``).
 Equal radii take exactly the arithmetic (and random stream) of the monodisperse code
 before size classes existed, so old seeds give the same positions bit for bit.
 """
@@ -16,6 +20,11 @@ import math
 
 import numba
 import numpy as np
+
+from ..config.schema import START_PHI_LIMIT
+
+#: dense starts: the lattice is filled to this share of its limit before compressing
+LATTICE_FILL = 0.9
 
 
 def cubic_box(n_particles, phi, radius=1.0):
@@ -53,7 +62,8 @@ def _min_image(dx, side, strain):
 
 
 @numba.njit(cache=True)
-def _mc_sweeps(pos, side, radii, step, sweeps, seed, strain):
+def _mc_sweeps(pos, side, radii, step, sweeps, seed, strain, dims=3):
+    """MC sweeps moving the first ``dims`` coordinates (2: in the plane z = const)."""
     np.random.seed(seed)
     n = pos.shape[0]
     accepted = 0
@@ -62,7 +72,7 @@ def _mc_sweeps(pos, side, radii, step, sweeps, seed, strain):
     for _ in range(sweeps):
         for i in range(n):
             for c in range(3):
-                trial[c] = pos[i, c] + step * (2.0 * np.random.random() - 1.0)
+                trial[c] = pos[i, c] + (step * (2.0 * np.random.random() - 1.0) if c < dims else 0.0)
             ok = True
             for j in range(n):
                 if j == i:
@@ -87,28 +97,68 @@ def hard_sphere_fluid(n_particles, phi, rng, sweeps=200, radius=1.0, strain=0.0,
     Spheres have the common ``radius``, or the per-particle ``radii`` (N,) when given
     (then L comes from their total volume, :func:`box_side`). n_particles must be a
     perfect cube (lattice start: layers L/m > 2 a_max apart in y, so no overlap at any
-    strain) and phi < (pi/6) sum_i a_i^3 / (N a_max^3) (pi/6 for equal spheres). Unequal
+    strain), which holds phi < (pi/6) sum_i a_i^3 / (N a_max^3) (pi/6 for equal spheres). Unequal
     spheres take the lattice sites in an order drawn from ``rng`` (equal ones in raster
-    order, drawing nothing). The MC step is tuned to ~40% acceptance."""
+    order, drawing nothing). The MC step is tuned to ~40% acceptance. At or above the
+    lattice limit (phi < START_PHI_LIMIT) the lattice is filled to LATTICE_FILL x the
+    limit, equilibrated, compressed (:func:`compress`) and equilibrated again at phi by
+    ``sweeps`` more sweeps; RuntimeError if the compression jams."""
     m = round(n_particles ** (1 / 3))
     if m ** 3 != n_particles:
         raise ValueError(f"n_particles must be a perfect cube for a lattice start, got {n_particles}")
     radii = _radii(n_particles, radius, radii)
     a_max = float(radii.max())
     limit = math.pi / 6 * float(np.mean((radii / a_max) ** 3))
-    if not 0 < phi < limit:
-        raise ValueError(f"phi must be in (0, {limit:.4f}) for a lattice start spaced for the "
-                         f"largest diameter (pi/6 <(a/a_max)^3>), got {phi}")
-    side = box_side(radii, phi)
+    if not 0 < phi < START_PHI_LIMIT:
+        raise ValueError(f"phi must be in (0, {START_PHI_LIMIT}) (a lattice start below the "
+                         f"lattice limit pi/6 <(a/a_max)^3> = {limit:.4f} for a spacing of the "
+                         f"largest diameter, a compressed one above it), got {phi}")
+    start = phi if phi < limit else LATTICE_FILL * limit
+    side = box_side(radii, start)
     grid = (np.arange(m) + 0.5) * side / m
     pos = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
     if np.any(radii != radii[0]):
         pos = pos[rng.permutation(n_particles)]
-    step = 0.5 * (side / m - 2 * a_max) + 0.01
+    _equilibrate(pos, side, radii, 0.5 * (side / m - 2 * a_max) + 0.01, sweeps, rng, strain)
+    if start < phi:
+        pos, side = compress(pos, side, phi, rng, radius=radius, strain=strain, radii=radii)
+        _equilibrate(pos, side, radii, 0.05 * a_max, sweeps, rng, strain)
+    return pos, side
+
+
+def _equilibrate(pos, side, radii, step, sweeps, rng, strain, dims=3):
+    """MC sweeps in 10 blocks, the step tuned to ~40% acceptance after each block."""
     seed = int(rng.integers(2 ** 31))
     for block in range(10):
-        rate = _mc_sweeps(pos, side, radii, step, max(sweeps // 10, 1), seed + block, strain)
+        rate = _mc_sweeps(pos, side, radii, step, max(sweeps // 10, 1), seed + block, strain, dims)
         step *= min(max(rate / 0.4, 0.5), 2.0)
+
+
+def square_side(n_particles, phi_a):
+    """Side L of the square cell holding n unit disks at areal fraction phi_a."""
+    return math.sqrt(n_particles * math.pi / phi_a)
+
+
+def hard_disk_monolayer(n_particles, phi_a, rng, z=0.0, sweeps=200, strain=0.0):
+    """Random non-overlapping monolayer of unit spheres, centres in the plane z, in a square
+    cell of side L = :func:`square_side` (periodic in x and y): positions (N, 3) and L.
+
+    Start: N of the m x m sites of a square lattice, m = ceil(sqrt N), spaced L/m > 2 (so
+    phi_a < pi N / (4 m^2), = pi/4 when N = m^2; a random choice of sites when N < m^2),
+    then hard-disk Metropolis MC in the plane (as :func:`hard_sphere_fluid`, 2D moves),
+    which samples the equilibrium hard-disk fluid at phi_a (seed 001: random starts), with
+    Lees-Edwards images at the given strain (rows L/m > 2 apart in y: no overlap at any
+    strain at the start)."""
+    m = math.isqrt(n_particles - 1) + 1
+    side = square_side(n_particles, phi_a)
+    if side / m <= 2.0:
+        raise ValueError(f"phi_a must be below pi N/(4 m^2) = {math.pi * n_particles / (4 * m * m):.4f} "
+                         f"for the {m} x {m} lattice start of N = {n_particles}, got {phi_a}")
+    sites = np.arange(m * m) if n_particles == m * m else np.sort(rng.permutation(m * m)[:n_particles])
+    grid = (np.arange(m) + 0.5) * side / m
+    pos = np.column_stack([grid[sites // m], grid[sites % m], np.full(n_particles, float(z))])
+    _equilibrate(pos, side, np.ones(n_particles), 0.5 * (side / m - 2.0) + 0.01, sweeps, rng, strain,
+                 dims=2)
     return pos, side
 
 

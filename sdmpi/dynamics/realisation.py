@@ -32,6 +32,10 @@ Hard spheres: lubrication keeps overlaps rare; those produced by a finite step a
 counted and removed by the potential-free correction of `forces.remove_overlaps` before
 the step's hydrodynamics (seed 000 sec. III, Bossis & Brady 1984). An optional pair
 repulsion (`forces.Repulsion`, seed 001) adds F_P.
+
+Frictional contacts (`contacts`, interparticle.kind = "frictional", non-Brownian): overlaps
+are contacts, not corrected; their spring forces and torques join F_P (and its stress),
+their stress is also sampled alone, and their tangential stretches are state.
 """
 
 import math
@@ -41,11 +45,12 @@ import numpy as np
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
-from ..hydro.resistance import grand_resistance
-from ..hydro.solvers import make_solver
+from ..hydro.solvers import assemble, make_solver, noise_shape, resolve_backend, solver_stats
+from .contacts import contact_model
 from .forces import force_law, pair_forces, remove_overlaps
 from .initial import hard_sphere_fluid
 from .media import MaxwellFilter
+from .monolayer import Monolayer
 from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
 
 #: kT in sdmpi's reduced units (a = 1, eta_m = 1, D0 = 1)
@@ -89,7 +94,14 @@ def sample_fields(job):
         "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
         "n_overlaps_midpoint": ((), "i4", "1", "overlapping pairs corrected at the Brownian midpoint"),
         "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
+        "solver_iterations": ((), "i4", "1", "Krylov iterations of the step's solves (0: direct backend)"),
+        "solver_residual": ((), "f8", "1", "largest relative residual of the step's iterative solves"),
+        "lanczos_iterations": ((), "i4", "1", "Lanczos iterations of the step's Brownian forces"),
     }
+    if job.interparticle.kind == "frictional":
+        fields["stress_contact"] = ((6,), "f8", su, "contact springs' part of stress_interparticle")
+        fields["n_contacts"] = ((), "i4", "1", "touching pairs (gap < 0)")
+        fields["n_sliding"] = ((), "i4", "1", "touching pairs at the Coulomb limit")
     if job.medium.kind == "maxwell":
         fields["stress_hydrodynamic_maxwell"] = ((6,), "f8", su, "hydrodynamic stress filtered by the Maxwell modes")
     if job.output.per_particle:
@@ -108,17 +120,25 @@ class Realisation:
         # same realisation, the solves are collective); None: this rank alone
         self.job, self.task, self.comm = job, task, comm
         self.force_law = force_law(job)
+        self.contacts = contact_model(job)
         seq = np.random.SeedSequence(job.job.seed, spawn_key=(task.task_id,))
         self.rng = np.random.Generator(np.random.PCG64(seq))
         n = job.system.n_particles
         self.protocol = protocol_of(job, task)
         # radii in a (the largest radius): all 1, or job.system.size_classes class by class
         self.radii = np.array(job.system.radii, dtype=float)
-        pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0),
-                                      radii=self.radii)
+        # seed 001 monolayers (sdmpi.dynamics.monolayer): their own box, start and volume
+        self.monolayer = Monolayer(job, task.phi) if job.system.geometry == "monolayer" else None
+        if self.monolayer is None:
+            pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0),
+                                          radii=self.radii)
+            self.box = np.full(3, side)
+        else:
+            pos, self.box = self.monolayer.start(self.rng), self.monolayer.box
         self.n_particles = n
-        self.box = np.full(3, side)
-        self.volume = float(np.prod(self.box))
+        self.backend = resolve_backend(job.solver.backend, n, comm)  # "auto" resolved by N
+        self._solvers = []  # the solvers of the current step (their statistics)
+        self.volume = float(np.prod(self.box)) if self.monolayer is None else self.monolayer.volume
         self.positions = Lattice(self.box, self.protocol.strain(0.0)).wrap(pos)
         self.kT = KT_REDUCED if job.brownian.enabled else 0.0
         self.dt = task.dt
@@ -147,6 +167,11 @@ class Realisation:
         if self.maxwell is not None:
             fields["modes"] = (self.modes.shape, "f8")
             fields["source_prev"] = ((n, 5), "f8")
+        if self.contacts is not None:
+            fields["contact_partners"] = (self.contacts.partners.shape, "i8")
+            fields["contact_stretch"] = (self.contacts.stretch.shape, "f8")
+        if self.monolayer is not None:
+            fields["stopped_at"] = ((1,), "i8")
         return fields
 
     def get_state(self):
@@ -156,6 +181,11 @@ class Realisation:
         if self.maxwell is not None:
             state["modes"] = self.modes.copy()
             state["source_prev"] = self.source_prev.copy()
+        if self.contacts is not None:
+            state["contact_partners"] = self.contacts.partners.copy()
+            state["contact_stretch"] = self.contacts.stretch.copy()
+        if self.monolayer is not None:
+            state["stopped_at"] = np.array([self.monolayer.stopped_at], dtype=np.int64)
         return state
 
     def set_state(self, state):
@@ -166,6 +196,11 @@ class Realisation:
         if self.maxwell is not None:
             self.modes = np.array(state["modes"], dtype=float)
             self.source_prev = np.array(state["source_prev"], dtype=float)
+        if self.contacts is not None:
+            self.contacts.partners[:] = state["contact_partners"]
+            self.contacts.stretch[:] = state["contact_stretch"]
+        if self.monolayer is not None:
+            self.monolayer.stopped_at = int(state["stopped_at"][0])
 
     def advance(self, n):
         """The next n samples (dict of arrays with leading axis n); steps n times."""
@@ -181,7 +216,8 @@ class Realisation:
 
     def _resistance(self, positions, strain, plan=None):
         try:
-            return grand_resistance(positions, self.radii, self.box, strain, plan=plan, **self._hydro)
+            return assemble(self.backend, positions, self.radii, self.box, strain, plan=plan,
+                            comm=self.comm, **self._hydro)
         except np.linalg.LinAlgError as err:
             raise RuntimeError(
                 f"task {self.task.task_id}, step {self.step}: the hydrodynamic matrices lost "
@@ -207,21 +243,34 @@ class Realisation:
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
         lattice = Lattice(self.box, strain)
-        pos, n_overlaps, overlap_gap = self._separate(lattice.wrap(self.positions), lattice)
+        if self.monolayer is not None:  # seed 001: overlaps counted and kept; a deep one stops the run
+            pos = lattice.wrap(self.positions)
+            n_overlaps, overlap_gap = self.monolayer.overlaps(pos, self.radii, lattice)
+            if self.monolayer.stops(k, overlap_gap, self.task.task_id):
+                self.step += 1
+                return self.monolayer.stopped_sample(self.sample_fields(), t0, strain, rate)
+        elif self.contacts is None:
+            pos, n_overlaps, overlap_gap = self._separate(lattice.wrap(self.positions), lattice)
+        else:  # frictional contacts: overlaps are the springs' compression, not corrected
+            pos, n_overlaps, overlap_gap = lattice.wrap(self.positions), 0, np.inf
         self._midpoint_overlaps = 0
         res = self._resistance(pos, strain)
         min_gap = min(overlap_gap, res.pairs.min_gap)
         n = self.n_particles
-        solver = make_solver(self.job.solver.backend, res, self.comm)
+        solver = self._solver(res)
         e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
 
         u_flow = solver.velocities(np.zeros((n, 6)), e5)
         s_h = solver.stresslets(u_flow, e5)
         velocity = u_flow
         forces, virial = pair_forces(self.force_law, res.pairs, n, self.radii)
+        torques, contact_sample = np.zeros((n, 3)), {}
+        if self.contacts is not None:
+            contact, contact_sample = self._contact_forces(res, solver)
+            forces, torques, virial = forces + contact.forces, contact.torques, virial + contact.virial
         stress_p = np.zeros(6)
         if self.force_law is not None:
-            f6 = np.hstack([forces, np.zeros((n, 3))])
+            f6 = np.hstack([forces, torques])
             u_force = solver.velocities(f6, np.zeros((n, 5)))
             velocity = velocity + u_force
             stress_p = bulk_stress(solver.stresslets(u_force, np.zeros((n, 5))), self.volume) \
@@ -236,7 +285,7 @@ class Realisation:
                   "stress_hydrodynamic": bulk_stress(s_h, self.volume),
                   "stress_brownian": stress_b, "stress_interparticle": stress_p,
                   "n_overlaps": n_overlaps, "n_overlaps_midpoint": self._midpoint_overlaps,
-                  "min_gap": min_gap}
+                  "min_gap": min_gap, **contact_sample, **self._solver_sample()}
         if self.maxwell is not None:
             if k > 0:
                 self.maxwell.update(self.modes, self.source_prev, s_h)
@@ -245,15 +294,45 @@ class Realisation:
         if self.job.output.per_particle:
             sample["stresslets"] = s_h
 
+        if self.contacts is not None:
+            self.contacts.advance(velocity, rate, self.dt)
+        if self.monolayer is not None:
+            velocity = self.monolayer.in_plane(velocity)
         strain1 = self.protocol.strain(t1)
         new = pos + self.dt * velocity[:, :3] + affine_displacement(pos, strain, strain1)
         self.positions = Lattice(self.box, strain1).wrap(new)
         self.step += 1
         return sample
 
+    def _contact_forces(self, res, solver):
+        """The contact springs' forces (`contacts.ContactForces`) and their sample fields:
+        their stress -(1/V) sum (x F_C + R_SU R_FU^-1 (F_C, T_C)) and the contact counts."""
+        n = self.n_particles
+        contact = self.contacts.forces(res.pairs, self.radii)
+        u_c = solver.velocities(np.hstack([contact.forces, contact.torques]), np.zeros((n, 5)))
+        stress = bulk_stress(solver.stresslets(u_c, np.zeros((n, 5))), self.volume) \
+            - symmetric_six(contact.virial) / self.volume
+        return contact, {"stress_contact": stress, "n_contacts": contact.n_contacts,
+                         "n_sliding": contact.n_sliding}
+
+    def _solver(self, res):
+        """The step's backend for a resistance (kept for its statistics)."""
+        solver = make_solver(self.backend, res, self.comm, self.job.solver.tolerance)
+        self._solvers.append(solver)
+        return solver
+
+    def _solver_sample(self):
+        """Iterations and largest residual of this step's solvers (sample fields); the
+        solvers are released."""
+        stats = [solver_stats(s) for s in self._solvers]
+        self._solvers = []
+        return {"solver_iterations": sum(s["iterations"] for s in stats),
+                "solver_residual": max(s["residual"] for s in stats),
+                "lanczos_iterations": sum(s["lanczos"] for s in stats)}
+
     def _brownian(self, res, solver, strain):
         """Brownian velocities and stresslets of this step (see `midpoint_brownian`)."""
-        z = self.rng.standard_normal((self.n_particles, 6))
+        z = self.rng.standard_normal(noise_shape(solver))
 
         def at_midpoint(pos, plan):
             # a half step may overlap spheres: separate them as at step starts (counted)
@@ -261,20 +340,21 @@ class Realisation:
             self._midpoint_overlaps = found
             return self._resistance(pos, strain, plan=plan)
 
-        return midpoint_brownian(res, solver, z, self.kT, self.dt, at_midpoint, self.job.solver.backend,
-                                 self.comm)
+        return midpoint_brownian(res, solver, z, self.kT, self.dt, at_midpoint, self._solver)
 
 
-def midpoint_brownian(res, solver, z, kT, dt, resistance_at, backend="dense", comm=None):
-    """Fixman midpoint step (module docstring) for the noise z (N, 6): returns the
-    Brownian velocities R_FU^-1(x*) F_B (N, 6), whose mean is kT div R_FU^-1, and the
-    Brownian stresslets (N, 5), whose mean is -kT div(R_SU R_FU^-1); F_B = sqrt(2 kT/dt) C z.
-    resistance_at(positions, plan) assembles R at the mid configuration."""
-    zero = np.zeros((len(z), 5))
+def midpoint_brownian(res, solver, z, kT, dt, resistance_at, solver_at=None):
+    """Fixman midpoint step (module docstring) for the noise z (`solvers.noise_shape`;
+    (N, 6) for the direct backends): returns the Brownian velocities R_FU^-1(x*) F_B (N, 6),
+    whose mean is kT div R_FU^-1, and the Brownian stresslets (N, 5), whose mean is
+    -kT div(R_SU R_FU^-1); F_B = sqrt(2 kT/dt) C z (C C^T = R_FU, or any F_B of that
+    covariance). resistance_at(positions, plan) assembles R at the mid configuration,
+    solver_at(resistance) builds its solver (default: dense)."""
+    zero = np.zeros((res.n_particles, 5))
     force = math.sqrt(2 * kT / dt) * solver.brownian_forces(z)
     u_start = solver.velocities(force, zero)
     mid = resistance_at(res.positions + 0.5 * dt * u_start[:, :3], res.plan)
-    solver_mid = make_solver(backend, mid, comm)
+    solver_mid = make_solver("dense", mid) if solver_at is None else solver_at(mid)
     u_mid = solver_mid.velocities(force, zero)
     return u_mid, solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
 

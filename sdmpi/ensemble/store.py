@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 
 from ..config import JobError, Task, enumerate_tasks, job_hash, parse_job, resume_hash
+from ..config import units
 from .faults import fault
 
 FORMAT = "sdmpi-run"
@@ -91,6 +92,9 @@ def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versi
             "time_unit": job.time_unit, "stress_unit": STRESS_UNITS[job.time_unit],
             "component_order": COMPONENT_ORDER, "versions": versions, "created": created,
             "n_tasks": len(tasks)})
+        scales = units.scales(job)
+        if scales is not None:  # [physical]: SI value of each reduced unit
+            f.attrs["physical_units"] = json.dumps(scales.as_dict())
         progress = f.create_dataset("progress", (len(tasks),), "i8", fillvalue=0,
                                     track_times=False)
         progress.attrs["description"] = "samples committed per task (valid up to)"

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+import scipy.sparse
 
 from .basis import BASIS
 from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
@@ -161,8 +162,58 @@ def lubrication_matrix(positions, radii, pairs, out=None):
         out = np.zeros((NDOF * n, NDOF * n))
     elif out.shape != (NDOF * n, NDOF * n) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ValueError("lubrication_matrix: out must be a C-contiguous float64 (11N, 11N) array")
+    for pi, pj, res in pair_blocks(radii, pairs):
+        _scatter_pairs(pi, pj, res, out)
+    return out
+
+
+def lubrication_sparse(positions, radii, pairs, factors=False):
+    """The near-field correction of `lubrication_matrix` as a scipy BSR matrix
+    (11 x 11 blocks): the same pair blocks, summed into the blocks (i, i), (i, j),
+    (j, i), (j, j) that the pairs touch. With factors, also the lower Cholesky factors
+    C_p (npairs, 12, 12) of each pair's rigid-body (FU) part, C_p C_p^T = (R_2B - R_2B,inf)_FU,
+    in the pair order of `pair_blocks` with its (i, j), for Brownian forces."""
+    n = positions.shape[0]
+    pi, pj = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
+    # block slots: diagonal blocks first (one per particle), then the distinct (i, j), i != j
+    off = pi != pj
+    keys = np.unique(np.concatenate([pi[off] * n + pj[off], pj[off] * n + pi[off]]))
+    rows = np.concatenate([np.arange(n), keys // n])
+    cols = np.concatenate([np.arange(n), keys % n])
+    order = np.lexsort((cols, rows))
+    slot_of = np.empty(len(order), dtype=np.int64)
+    slot_of[order] = np.arange(len(order))
+    data = np.zeros((len(order), NDOF, NDOF))
+    all_pi, all_pj, chol = [], [], []
+    for ci, cj, res in pair_blocks(radii, pairs):
+        s_ij = np.where(ci == cj, ci, n + np.searchsorted(keys, ci * n + cj))
+        s_ji = np.where(ci == cj, ci, n + np.searchsorted(keys, cj * n + ci))
+        _scatter_slots(slot_of[ci], slot_of[s_ij], slot_of[s_ji], slot_of[cj], res, data)
+        if factors:
+            all_pi.append(ci)
+            all_pj.append(cj)
+            chol.append(np.linalg.cholesky(res[:, _RIGID_PAIR][:, :, _RIGID_PAIR]))
+    indptr = np.searchsorted(rows[order], np.arange(n + 1))
+    matrix = scipy.sparse.bsr_matrix((data, cols[order], indptr), shape=(NDOF * n, NDOF * n))
+    if not factors:
+        return matrix
+    if not chol:
+        return matrix, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 12, 12))
+    return matrix, np.concatenate(all_pi), np.concatenate(all_pj), np.concatenate(chol)
+
+
+#: the 12 rigid-body rows of a pair's 22x22 block (U, Omega of either sphere)
+_RIGID_PAIR = np.r_[0:6, NDOF:NDOF + 6]
+#: pairs per chunk of `pair_blocks` (22x22 floats each: ~8 MB per chunk)
+_CHUNK = 2048
+
+
+def pair_blocks(radii, pairs):
+    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
+    columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
+    exact ones (module docstring); together all pairs once."""
     if len(pairs.i) == 0:
-        return out
+        return
     radii = np.asarray(radii, dtype=float)
     pi0, pj0 = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
     dx0 = np.ascontiguousarray(pairs.dx, dtype=float)
@@ -180,17 +231,15 @@ def lubrication_matrix(positions, radii, pairs, out=None):
     lam = a2 / a1
     tab, tables = _STORE.lookup(lam, xi)
     fast = tab >= 0
-    if fast.any():
-        if fast.all():
-            sel = slice(None)
-        else:
-            sel = np.flatnonzero(fast)
-        _tabulated_kernel(dx[sel], a1[sel], a2[sel], pi[sel], pj[sel], tab[sel], *tables, out)
+    sel = np.flatnonzero(fast)
+    for c in range(0, len(sel), _CHUNK):
+        part = sel[c:c + _CHUNK]
+        res = np.empty((len(part), 2 * NDOF, 2 * NDOF))
+        _tabulated_kernel(dx[part], a1[part], a2[part], tab[part], *tables, res)
+        yield pi[part], pj[part], res
     if not fast.all():
         slow = np.flatnonzero(~fast)  # as given (not reordered): same as lubrication_matrix_exact
-        res = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
-        _scatter_pairs(pi0[slow], pj0[slow], res, out)
-    return out
+        yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
 
 
 def pair_corrections(dx, a1, a2):
@@ -355,15 +404,14 @@ _STORE = _TableStore()
 
 
 @numba.njit(cache=True)
-def _tabulated_kernel(dx, a1, a2, pi, pj, tab, data, offset, k_lo, n_rows, out):
-    """Adds R_2B - R_2B,inf of every pair (interpolated scalars, `_fill_pair_work`
-    tensors) into the blocks (i,i), (i,j), (j,i), (j,j) of out."""
+def _tabulated_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, res):
+    """res[p] = R_2B - R_2B,inf of every pair (interpolated scalars, `_fill_pair_work`
+    tensors)."""
     npt = _TAB_NPT
     half = npt // 2
     denom = _TAB_DENOM
     inv_h = 1.0 / _TAB_H
     bm = _basis5()
-    R = np.empty((2 * NDOF, 2 * NDOF))
     sc = np.empty((4, NDOF))
     w = np.empty(npt)
     d = np.empty(3)
@@ -395,8 +443,7 @@ def _tabulated_kernel(dx, a1, a2, pi, pj, tab, data, offset, k_lo, n_rows, out):
                 for m in range(npt):
                     acc += w[m] * data[row + m, col]
                 sc[b, f] = acc * unscale
-        _fill_pair_work(d, a1[p], a2[p], sc, bm, R, work)
-        _add_pair(pi[p], pj[p], R, out)
+        _fill_pair_work(d, a1[p], a2[p], sc, bm, res[p], work)
 
 
 @numba.njit(cache=True)
@@ -416,3 +463,16 @@ def _scatter_pairs(pi, pj, res, out):
     """Adds each pair's 22x22 matrix res[p] into out (see _add_pair)."""
     for p in range(pi.shape[0]):
         _add_pair(pi[p], pj[p], res[p], out)
+
+
+@numba.njit(cache=True)
+def _scatter_slots(s_ii, s_ij, s_ji, s_jj, res, data):
+    """Adds each pair's four 11x11 blocks res[p] into the block slots data[s_..[p]]."""
+    for p in range(res.shape[0]):
+        slots = ((s_ii[p], s_ij[p]), (s_ji[p], s_jj[p]))
+        for u in range(2):
+            for v in range(2):
+                s = slots[u][v]
+                for a in range(NDOF):
+                    for b in range(NDOF):
+                        data[s, a, b] += res[p, NDOF * u + a, NDOF * v + b]

@@ -15,7 +15,9 @@ from scipy.linalg import lapack
 
 from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, plan_far_field
 from .geometry import Lattice, find_pairs
-from .lubrication import DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_matrix
+from .krylov import DenseFarField, far_field_operator
+from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_matrix,
+                          lubrication_sparse)
 
 
 @dataclass
@@ -52,15 +54,17 @@ class GrandResistance:
 
 
 def spd_inverse(matrix):
-    """Inverse of a symmetric positive definite matrix by Cholesky (potrf + potri)."""
-    chol, info = lapack.dpotrf(matrix, lower=False, clean=False, overwrite_a=False)
+    """Inverse of a symmetric positive definite C-ordered matrix by Cholesky (potrf +
+    potri), computed in its memory (the matrix is overwritten). matrix.T is the same
+    matrix in Fortran order, so LAPACK works on it without a copy."""
+    chol, info = lapack.dpotrf(matrix.T, lower=False, clean=False, overwrite_a=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info})")
     inv, info = lapack.dpotri(chol, lower=False, overwrite_c=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed (info {info})")
     _mirror_upper(inv)
-    return np.ascontiguousarray(inv)
+    return inv.T  # symmetric: its C-ordered view
 
 
 @numba.njit(cache=True)
@@ -82,14 +86,8 @@ def check_overlaps(pairs, radii, max_overlap):
                          f"{depth[p]:.3g} mean radii (allowed: up to {max_overlap})")
 
 
-def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
-                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
-                     max_overlap=None, plan=None):
-    """Assemble R. Positions are wrapped into the sheared cell, unless a plan from an
-    earlier call is given: then they are used as given with the plan's pair sets (for
-    random finite differences about that configuration). max_overlap (mean radii):
-    raise ValueError for deeper overlaps before the expensive work."""
-    radii = np.asarray(radii, dtype=float)
+def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap, max_overlap, plan):
+    """(lattice, positions, close pairs, plan) of `grand_resistance` and `split_resistance`."""
     lattice = None if box is None else Lattice(box, strain)
     if plan is None:
         pos = positions if lattice is None else lattice.wrap(positions)
@@ -103,9 +101,66 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
         pairs = close_pairs(pos, radii, None, cutoff, min_gap, images=plan.near_images)
     if max_overlap is not None:
         check_overlaps(pairs, radii, max_overlap)
+    return lattice, pos, pairs, plan
+
+
+def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
+                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
+                     max_overlap=None, plan=None):
+    """Assemble R. Positions are wrapped into the sheared cell, unless a plan from an
+    earlier call is given: then they are used as given with the plan's pair sets (for
+    random finite differences about that configuration). max_overlap (mean radii):
+    raise ValueError for deeper overlaps before the expensive work."""
+    radii = np.asarray(radii, dtype=float)
+    lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
+                                                min_gap, max_overlap, plan)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     matrix = spd_inverse(far_field_mobility(pos, radii, plan=plan.far))
     if plan.near_images is not None:
         lubrication_matrix(pos, radii, pairs, out=matrix)
     return GrandResistance(matrix, pairs, plan, pos)
+
+
+@dataclass
+class SplitResistance:
+    """R = M_inf^-1 + L without M_inf^-1 (for `krylov.KrylovSolver`): the far-field
+    mobility as an operator (`far.matvec`), the lubrication L as a sparse (11N x 11N)
+    BSR matrix, and per lubrication pair (pair_i, pair_j) the Cholesky factor pair_chol
+    (npairs, 12, 12) of its rigid-body block (Brownian forces)."""
+
+    far: object
+    lubrication: object
+    pair_i: np.ndarray
+    pair_j: np.ndarray
+    pair_chol: np.ndarray
+    pairs: PairList
+    plan: HydroPlan
+    positions: np.ndarray
+    radii: np.ndarray
+
+    @property
+    def n_particles(self):
+        return self.positions.shape[0]
+
+
+def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
+                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
+                     max_overlap=None, plan=None, far_field=None, comm=None):
+    """The matrix-free form of `grand_resistance` (same arguments and pair sets): the
+    far field by the operator `far_field` (`krylov.far_field_operator`: "spectral",
+    "dense", None: by N; built on the MPI communicator comm), the
+    lubrication sparse (`lubrication.lubrication_sparse`)."""
+    radii = np.asarray(radii, dtype=float)
+    lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
+                                                min_gap, max_overlap, plan)
+    far = far_field_operator(far_field, pos, radii, lattice, ewald_tol, comm, plan.far)
+    if isinstance(far, DenseFarField):
+        plan.far = far.plan
+    if plan.near_images is None:  # the pairs are overlaps only: no lubrication
+        none = np.zeros(0, dtype=np.int64)
+        lub_pairs = close_pairs(pos, radii, images=(none, none, np.zeros((0, 3))))
+    else:
+        lub_pairs = pairs
+    lub, pi, pj, chol = lubrication_sparse(pos, radii, lub_pairs, factors=True)
+    return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii)

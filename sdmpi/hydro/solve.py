@@ -4,8 +4,9 @@ import numpy as np
 
 from .basis import from_five, to_five
 from .geometry import check_box
-from .resistance import DEFAULT_EWALD_TOL, grand_resistance
-from .solvers import make_solver
+from .krylov import DEFAULT_TOL
+from .resistance import DEFAULT_EWALD_TOL
+from .solvers import assemble, make_solver, resolve_backend
 
 #: overlaps deeper than this fraction of the pair's mean radius are rejected
 MAX_OVERLAP = 0.05
@@ -49,7 +50,7 @@ def check_inputs(positions, box, radii, strain, forces, torques, rate_of_strain)
 
 def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torques=None,
                    rate_of_strain=None, lubrication=True, solver="dense",
-                   ewald_tol=DEFAULT_EWALD_TOL, comm=None):
+                   ewald_tol=DEFAULT_EWALD_TOL, comm=None, tolerance=DEFAULT_TOL):
     """Velocities and stresslets of N rigid spheres (Stokes units: viscosity 1).
 
     positions (N, 3); box (3,) periodic Lees-Edwards box at `strain`, or None for
@@ -60,13 +61,17 @@ def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torqu
     U = F/(6 pi a), Omega = T/(8 pi a^3), S = (20/3) pi a^3 E_inf.
     Overlaps deeper than MAX_OVERLAP mean radii raise ValueError; shallower ones and
     touching pairs are regularised (see `lubrication`).
-    solver: a backend of `sdmpi.hydro.solvers.BACKENDS` ("dense", "petsc-dense"); comm:
-    the MPI communicator a PETSc backend solves on, collective over it (default: this
-    rank alone, as outside mpirun)."""
+    solver: one of `sdmpi.hydro.solvers.CHOICES` ("dense", "petsc-dense", "petsc-krylov",
+    "auto"); comm: the MPI communicator a PETSc backend solves on, collective over it
+    (default: this rank alone, as outside mpirun); tolerance: relative residual of the
+    iterative solves (petsc-krylov)."""
     pos, box, radii, strain, forces, torques, einf = check_inputs(
         positions, box, radii, strain, forces, torques, rate_of_strain)
-    res = grand_resistance(pos, radii, box, strain, lubrication, ewald_tol, max_overlap=MAX_OVERLAP)
-    backend = make_solver(solver, res, comm)
+    if not 0.0 < tolerance < 1.0:
+        raise ValueError(f"tolerance must be in (0, 1), got {tolerance}")
+    name = resolve_backend(solver, pos.shape[0], comm)
+    res = assemble(name, pos, radii, box, strain, lubrication, ewald_tol, max_overlap=MAX_OVERLAP, comm=comm)
+    backend = make_solver(name, res, comm, tolerance)
     n = pos.shape[0]
     e5 = np.broadcast_to(to_five(einf), (n, 5))
     vel = backend.velocities(np.hstack([forces, torques]), e5)

@@ -14,11 +14,24 @@ drives, R_FU^-1 C z = C^-T z, have covariance R_FU^-1 (fluctuation-dissipation).
 (`petsc_dense.PetscDenseSolver`) distributes R_FU over an MPI communicator and factorises
 it by ScaLAPACK through PETSc; it is imported only when asked for. Every backend is
 built as backend(resistance, comm): the communicator of the ranks that solve together
-(None: one rank; `dense` ignores it).
+(None: one rank; `dense` ignores it). `petsc-krylov` (`krylov.KrylovSolver`) solves
+iteratively without forming R: it is built from a `resistance.SplitResistance`
+(`assemble` picks the form a backend needs) with a tolerance, draws other noise than
+z (N, 6) (`noise_shape`) and counts its iterations (`solver_stats`). `auto` is not a
+backend but a rule (`resolve_backend`): dense below AUTO_KRYLOV_MIN_N particles
+(petsc-dense on several ranks), petsc-krylov from there on.
 """
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
+
+from .krylov import DEFAULT_TOL
+from .resistance import grand_resistance, split_resistance
+
+#: `auto` picks petsc-krylov from this many particles on (bench/bench_krylov.py, one rank,
+#: phi = 0.45, Brownian step: dense 0.29 s at N = 125 and 4.7 s at N = 343, petsc-krylov
+#: 2.3 s at N = 343)
+AUTO_KRYLOV_MIN_N = 300
 
 
 class DenseSolver:
@@ -55,14 +68,60 @@ def _petsc_dense(resistance, comm=None):
     return PetscDenseSolver(resistance, comm)
 
 
-BACKENDS = {"dense": DenseSolver, "petsc-dense": _petsc_dense}
+def _petsc_krylov(resistance, comm=None, tolerance=DEFAULT_TOL):
+    from .krylov import KrylovSolver
+
+    return KrylovSolver(resistance, comm, tolerance)
 
 
-def make_solver(name, resistance, comm=None):
-    """The backend `name` for a GrandResistance, solving on the MPI communicator `comm`
-    (None: this rank alone; collective over comm for the PETSc backends)."""
+BACKENDS = {"dense": DenseSolver, "petsc-dense": _petsc_dense, "petsc-krylov": _petsc_krylov}
+#: backends built from a SplitResistance (the others from a GrandResistance)
+MATRIX_FREE = ("petsc-krylov",)
+#: what a `solver` argument may name
+CHOICES = (*BACKENDS, "auto")
+
+
+def resolve_backend(name, n_particles, comm=None):
+    """The backend `name` stands for: itself, or for "auto" dense (one rank) or
+    petsc-dense (comm of several ranks) below AUTO_KRYLOV_MIN_N particles, else
+    petsc-krylov."""
+    if name not in CHOICES:
+        raise ValueError(f"solver must be one of {list(CHOICES)}, got {name!r}")
+    if name != "auto":
+        return name
+    if n_particles >= AUTO_KRYLOV_MIN_N:
+        return "petsc-krylov"
+    return "dense" if comm is None or comm.size == 1 else "petsc-dense"
+
+
+def assemble(name, *args, comm=None, **kwargs):
+    """The resistance backend `name` needs: `grand_resistance(*args, **kwargs)`, or for
+    the matrix-free backends `split_resistance(*args, comm=comm, **kwargs)`."""
+    if name in MATRIX_FREE:
+        return split_resistance(*args, comm=comm, **kwargs)
+    return grand_resistance(*args, **kwargs)
+
+
+def make_solver(name, resistance, comm=None, tolerance=DEFAULT_TOL):
+    """The backend `name` for a resistance from `assemble(name, ...)`, solving on the MPI
+    communicator `comm` (None: this rank alone; collective over comm for the PETSc
+    backends); tolerance: relative residual of the iterative backends."""
     try:
         backend = BACKENDS[name]
     except KeyError:
         raise ValueError(f"solver must be one of {sorted(BACKENDS)}, got {name!r}") from None
+    if name in MATRIX_FREE:
+        return backend(resistance, comm, tolerance)
     return backend(resistance, comm)
+
+
+def noise_shape(solver):
+    """Shape of the standard normal noise `solver.brownian_forces` takes: (N, 6) unless
+    the backend declares its own (noise_shape)."""
+    return getattr(solver, "noise_shape", (solver.n, 6))
+
+
+def solver_stats(solver):
+    """Iterations (Krylov, Lanczos) and the largest relative residual of the solves so
+    far: zero for the direct backends."""
+    return getattr(solver, "stats", {"iterations": 0, "residual": 0.0, "lanczos": 0})

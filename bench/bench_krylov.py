@@ -1,0 +1,154 @@
+"""Benchmark: Brownian SD steps with the petsc-krylov backend at phi = 0.45 on a
+sub-communicator of `--ranks` ranks (ranks_per_task), against dense (one rank) where
+dense is affordable. Not part of the test suite; numbers go to bench/krylov.json (merged
+per (backend, N, ranks)) and the log-log cost plot to bench/krylov_cost.png.
+
+Per run: one realisation of the demo job (oscillatory shear, Brownian, phi = 0.45,
+N spheres, dt = 5e-4 t_D, solver.tolerance 1e-8 by default, far field by N as in
+`krylov`: dense below 400 particles, spectral from there on), one
+warm-up step (numba compilation, PETSc set-up), then `--steps` timed steps. Recorded:
+wall time per step (max over ranks), Krylov and Lanczos iterations per step, peak
+resident memory summed over the ranks (ru_maxrss), the far-field operator used.
+Each (N, ranks) runs in its own process group so that peak memory is per size.
+
+  python bench/bench_krylov.py --sizes 343 1000 --ranks 2          # launches mpirun
+  python bench/bench_krylov.py --sizes 125 343 --backend dense --ranks 1
+  python bench/bench_krylov.py --plot                                # plot from the JSON
+"""
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+OUT = HERE / "krylov.json"
+PLOT = HERE / "krylov_cost.png"
+
+
+def measure(n, backend, steps, tolerance):
+    """One realisation stepped on COMM_WORLD; returns the row (on every rank)."""
+    from mpi4py import MPI
+
+    from sdmpi.config import enumerate_tasks, load_job
+    from sdmpi.dynamics import Realisation
+    from sdmpi.hydro.krylov import DENSE_FAR_FIELD_MAX_N
+
+    comm = MPI.COMM_WORLD
+    job = load_job(str(ROOT / "jobs" / "demo.toml"), overrides=[
+        f"system.n_particles={n}", "system.phi=[0.45]", f"solver.backend='{backend}'",
+        f"solver.tolerance={tolerance}", f"ensemble.ranks_per_task={comm.size}",
+        "ensemble.realisations=1", "shear.omega=[6.283185307179586]",
+        "integration.steps_per_period=2000"])  # dt = 5e-4 t_D, the seed's largest
+    t0 = time.perf_counter()
+    real = Realisation(job, enumerate_tasks(job)[0], comm if comm.size > 1 else None)
+    t_init = time.perf_counter() - t0
+    real.advance(1)  # warm-up
+    comm.Barrier()
+    times, its, lanczos = [], [], []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        sample = real.advance(1)
+        times.append(comm.allreduce(time.perf_counter() - t0, op=MPI.MAX))
+        its.append(int(sample["solver_iterations"][0]))
+        lanczos.append(int(sample["lanczos_iterations"][0]))
+    rss = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20  # KiB -> GiB
+    far = "-" if backend != "petsc-krylov" else ("dense" if n < DENSE_FAR_FIELD_MAX_N else "spectral")
+    return {"backend": backend, "n": n, "ranks": comm.size, "phi": 0.45, "tolerance": tolerance,
+            "far_field": far, "seconds_per_step": float(np.median(times)),
+            "seconds_per_step_all": times, "iterations_per_step": its,
+            "lanczos_per_step": lanczos, "peak_rss_gib_total": rss, "init_seconds": t_init,
+            "dt": real.dt, "load_average_1min": os.getloadavg()[0]}
+
+
+def merge(rows):
+    data = json.loads(OUT.read_text()) if OUT.exists() else {"rows": []}
+    keys = {(r["backend"], r["n"], r["ranks"]) for r in rows}
+    data["rows"] = [r for r in data["rows"] if (r["backend"], r["n"], r["ranks"]) not in keys] + rows
+    data["rows"].sort(key=lambda r: (r["backend"], r["ranks"], r["n"]))
+    data["machine"] = {"cpus": os.cpu_count(), "python": platform.python_version(),
+                       "note": "2 cores shared with other jobs: times include contention"}
+    kry = sorted((r for r in data["rows"] if r["backend"] == "petsc-krylov" and r["ranks"] == 2),
+                 key=lambda r: r["n"])
+    data.pop("cost_exponent_first_to_last", None)
+    # d log(time) / d log(N) between consecutive sizes (petsc-krylov, 2 ranks), with the
+    # load averages the two were measured at (the machine is shared)
+    data["cost_exponents_2_ranks"] = [
+        {"from": a["n"], "to": b["n"],
+         "exponent": float(np.log(b["seconds_per_step"] / a["seconds_per_step"]) / np.log(b["n"] / a["n"])),
+         "load_averages": [a.get("load_average_1min"), b.get("load_average_1min")]}
+        for a, b in zip(kry, kry[1:])]
+    OUT.write_text(json.dumps(data, indent=1) + "\n")
+    return data
+
+
+def plot(data):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    groups = {}
+    for r in data["rows"]:
+        groups.setdefault((r["backend"], r["ranks"]), []).append(r)
+    for (backend, ranks), rows in sorted(groups.items()):
+        rows.sort(key=lambda r: r["n"])
+        ax.loglog([r["n"] for r in rows], [r["seconds_per_step"] for r in rows], "o-",
+                  label=f"{backend}, {ranks} rank(s)")
+    kry = groups.get(("petsc-krylov", 2))
+    if kry:
+        n0, t0 = kry[0]["n"], kry[0]["seconds_per_step"]
+        ns = np.array([n0, max(r["n"] for r in kry)])
+        ax.loglog(ns, t0 * (ns / n0) ** 1.5, "k--", lw=0.8, label="N^1.5")
+    ax.set_xlabel("N (phi = 0.45)")
+    ax.set_ylabel("wall time per Brownian step [s]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(PLOT, dpi=120)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[])
+    parser.add_argument("--ranks", type=int, default=2)
+    parser.add_argument("--backend", default="petsc-krylov")
+    parser.add_argument("--steps", type=int, default=3)
+    parser.add_argument("--tolerance", type=float, default=1e-8)
+    parser.add_argument("--plot", action="store_true")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker:
+        from mpi4py import MPI
+
+        row = measure(args.sizes[0], args.backend, args.steps, args.tolerance)
+        if MPI.COMM_WORLD.rank == 0:
+            print("ROW " + json.dumps(row), flush=True)
+        return
+    for n in args.sizes:
+        cmd = [sys.executable, __file__, "--worker", "--sizes", str(n), "--backend", args.backend,
+               "--steps", str(args.steps), "--tolerance", str(args.tolerance)]
+        if args.ranks > 1:
+            cmd = [shutil.which("mpirun"), "--oversubscribe", "-n", str(args.ranks), *cmd]
+        res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+        if res.returncode != 0:
+            sys.exit(f"N = {n}: failed\n{res.stderr[-3000:]}")
+        row = json.loads(next(line[4:] for line in res.stdout.splitlines() if line.startswith("ROW ")))
+        print(json.dumps({k: v for k, v in row.items() if not k.endswith("_all")}), flush=True)
+        merge([row])
+    if args.plot or args.sizes:
+        plot(json.loads(OUT.read_text()))
+
+
+if __name__ == "__main__":
+    main()

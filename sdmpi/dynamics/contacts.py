@@ -1,0 +1,238 @@
+"""Frictional contacts with a critical-load repulsion: the shear-thickening model of
+Seto, Mari, Morris & Denn, Phys. Rev. Lett. 111, 218301 (2013) and Mari, Seto, Morris &
+Denn, J. Rheol. 58, 1693 (2014), on top of SD's lubrication (minimum-gap rule).
+
+Pair i, j with radii a_i, a_j, n the unit vector from i to j, h = |x_j - x_i| - a_i - a_j
+the surface gap (in a; negative = overlap = contact). Forces on j (those on i are opposite):
+
+* repulsion (:class:`CriticalLoadRepulsion`, electrostatic-like, the "critical load"):
+  F_R = F_R0 exp(-h/lambda) n for h > 0 and F_R0 n for h <= 0, with U = F_R0 lambda
+  exp(-h/lambda) (h > 0; continued linearly below) so that F_R = -dU/dh. It acts on every
+  lubrication pair (applied by `forces.pair_forces`), so lambda must decay to 1e-12 of
+  F_R0 within the lubrication cut-off.
+* normal spring (h < 0): F_n = k_n |h| n, U = k_n h^2 / 2.
+* tangential spring (h < 0): F_t = -k_t xi, with the tangential stretch xi integrated from
+  the sliding velocity of j's surface relative to i's at the contact point,
+      d xi/dt = u_s = (I - n n) [U_j - U_i - (l_i Omega_i + l_j Omega_j) x n],
+  (U, Omega total rigid-body velocities, the imposed flow included), kept tangent (turned
+  into the plane normal to the current n, its length kept) and reset to 0 when the pair
+  separates (h >= 0).
+* Coulomb friction: |F_t| <= mu |F_n| with F_n the spring's normal force (the repulsion
+  does not load the friction); where k_t |xi| > mu k_n |h| the stretch is scaled back to
+  mu k_n |h| / k_t (the contact slides). The stiffnesses do not depend on the radii.
+* torques: the tangential force acts at the contact point, l_i n from i's centre and
+  -l_j n from j's: T_i = l_i n x (k_t xi), T_j = l_j n x (k_t xi), with the lever arms
+  l = a r / (a_i + a_j) (r the centre distance) that divide the overlap in proportion to
+  the radii, so that l_i + l_j = r: the pair's forces and torques then carry no net
+  angular momentum, sum (x x F + T) = 0, and a rigid rotation of the pair does not slide.
+
+Stress: with the existing interparticle path, -(1/V) sum (x F + R_SU R_FU^-1 (F, T)), the
+virial summed over pairs as dx (F on j), dx = x_j - x_i (its symmetric part).
+
+Units: the job's force unit 6 pi eta_m a^2 gamma_dot (non-Brownian steady shear, time
+1/gamma_dot), so the shear rate in the papers' unit F_R0/(6 pi eta_m a^2) is 1/f_r0 and
+a stress sigma in F_R0/a^2 is eta_r / (6 pi f_r0); stiffnesses in force unit / a. Here,
+as in `forces`, strengths are multiplied by FORCE_UNIT = 6 pi into Stokes units.
+
+Time step (explicit Euler, as the rest of the step): a spring k between two spheres
+relaxes at the rate k m, m the pair's relative mobility along the spring; the step is
+stable for dt k m < 2 and free of overshoot for dt k m <= 1, which the loader requires of
+the touching pair of unit spheres at the minimum gap h_min (job units): normal
+m_n = SQUEEZE h_min (leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units),
+sliding m_t = :func:`sliding_mobility` (h_min), O(1) since tangential lubrication is only
+logarithmic (free spheres: 3.5 = 2 from translation + 1.5 from the rotation the torques
+cause). Many-contact networks can relax faster than one pair: watch min_gap (the deepest
+overlap) in the samples.
+
+History: contacts are stored per particle, at most ``max_contacts`` partners in the row
+of the smaller index (partner -1 = empty slot), with their stretch as seen from that
+particle (the larger index's contact point relative to the smaller's): fixed-shape
+arrays for the checkpointed state. A contact's stretch is updated at the end of each step
+(after the velocities are known) and turned tangent at the start of the next.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .forces import FORCE_UNIT
+
+#: the normal relative mobility of touching unit spheres at minimum gap h_min is about
+#: SQUEEZE x h_min (job units; leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units)
+SQUEEZE = 4.0
+
+
+def sliding_mobility(min_gap):
+    """Sliding velocity of the contact points of two touching unit spheres at gap min_gap
+    per unit tangential force pair with its torques (job units): 1/(0.245 + 0.165
+    ln(1/min_gap)), a fit to `solve_mobility` (0.568, 0.726, 1.002 at 1e-4, 1e-3, 1e-2;
+    within 1% for 1e-4..3e-2, 3% at 0.1)."""
+    return 1.0 / (0.245 + 0.165 * math.log(1.0 / min_gap))
+
+
+@dataclass(frozen=True)
+class CriticalLoadRepulsion:
+    """F(h) = F0 exp(-h/length) for h > 0, F0 for h <= 0 (Mari et al. 2014); F = -dU/dh
+    with U = F0 length exp(-h/length), continued linearly for h < 0. Radii unused."""
+
+    f0: float
+    length: float
+
+    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+        return self.f0 * np.exp(-np.maximum(gap, 0.0) / self.length)
+
+    def potential(self, gap, a_i=1.0, a_j=1.0):
+        gap = np.asarray(gap, float)
+        return self.f0 * (self.length * np.exp(-np.maximum(gap, 0.0) / self.length)
+                          - np.minimum(gap, 0.0))
+
+    @property
+    def reach(self):
+        """Gap beyond which F < 1e-12 F0."""
+        return 12 * math.log(10) * self.length
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """Contact springs and friction in Stokes units: k_n, k_t (force / a), mu."""
+
+    mu: float
+    k_n: float
+    k_t: float
+
+    def springs(self, n, gap, stretch):
+        """Contact forces on j (P, 3) for contacting pairs with unit vectors n (P, 3) from
+        i to j, gaps < 0 (P,) and tangential stretches (P, 3) already tangent. Returns
+        (forces on j, the Coulomb-limited stretch, sliding (P,) bool)."""
+        normal = self.k_n * -gap
+        length = np.linalg.norm(stretch, axis=1)
+        limit = self.mu * normal / self.k_t
+        sliding = length > limit
+        scale = np.where(sliding, limit / np.where(sliding, length, 1.0), 1.0)
+        stretch = stretch * scale[:, None]
+        return normal[:, None] * n - self.k_t * stretch, stretch, sliding
+
+
+def tangent(stretch, n):
+    """Stretches (P, 3) turned into the planes normal to n (P, 3), lengths kept."""
+    t = stretch - np.sum(stretch * n, axis=1)[:, None] * n
+    old, new = np.linalg.norm(stretch, axis=1), np.linalg.norm(t, axis=1)
+    return t * np.where(new > 0, old / np.where(new > 0, new, 1.0), 0.0)[:, None]
+
+
+def sliding_velocity(n, arm_i, arm_j, v_i, v_j):
+    """u_s (P, 3) of j's contact point relative to i's, tangential part: lever arms l_i,
+    l_j (P,), v_i, v_j (P, 6) total (U, Omega) of i and of j's image."""
+    rel = v_j[:, :3] - v_i[:, :3] - np.cross(arm_i[:, None] * v_i[:, 3:] + arm_j[:, None] * v_j[:, 3:], n)
+    return rel - np.sum(rel * n, axis=1)[:, None] * n
+
+
+@numba.njit(cache=True)
+def _lookup(lo, hi, partner, stretch, out):
+    """out[p] = the stored stretch of pair (lo[p], hi[p]), 0 if it is a new contact."""
+    for p in range(lo.shape[0]):
+        out[p, :] = 0.0
+        for k in range(partner.shape[1]):
+            if partner[lo[p], k] == hi[p]:
+                out[p, :] = stretch[lo[p], k, :]
+                break
+
+
+@numba.njit(cache=True)
+def _store(lo, hi, xi, partner, stretch):
+    """Fill the (cleared) tables with the contacts. Returns (-1, 0), or (p, 1) if pair p
+    found its row full, (p, 2) if its row already holds the partner (two images)."""
+    count = np.zeros(partner.shape[0], dtype=np.int64)
+    for p in range(lo.shape[0]):
+        row = lo[p]
+        for k in range(count[row]):
+            if partner[row, k] == hi[p]:
+                return p, 2
+        if count[row] == partner.shape[1]:
+            return p, 1
+        partner[row, count[row]] = hi[p]
+        stretch[row, count[row], :] = xi[p, :]
+        count[row] += 1
+    return -1, 0
+
+
+@dataclass
+class ContactForces:
+    """Contact forces (N, 3), torques (N, 3), virial sum dx F_on_j (3, 3), counts."""
+
+    forces: np.ndarray
+    torques: np.ndarray
+    virial: np.ndarray
+    n_contacts: int
+    n_sliding: int
+
+
+class FrictionalContacts:
+    """The contact springs of one realisation and their history (module docstring):
+    ``forces`` at the start of a step, then ``advance`` with the step's velocities."""
+
+    def __init__(self, law, n_particles, max_contacts):
+        self.law = law
+        self.partners = np.full((n_particles, max_contacts), -1, dtype=np.int64)
+        self.stretch = np.zeros((n_particles, max_contacts, 3))
+        self._contacts = None
+
+    def forces(self, pairs, radii):
+        """Contact forces of the pairs with gap < 0 (a PairList: true gaps, dx = x_j +
+        shift - x_i, possibly stretched to the minimum gap; only its direction is used)."""
+        n_particles = len(self.partners)
+        touching = np.flatnonzero(pairs.gap < 0)
+        i, j = pairs.i[touching], pairs.j[touching]
+        n = pairs.dx[touching] / np.linalg.norm(pairs.dx[touching], axis=1)[:, None]
+        gap = pairs.gap[touching]
+        dist = gap + pairs.radii_sum[touching]
+        scale = dist / pairs.radii_sum[touching]
+        arm_i, arm_j = radii[i] * scale, radii[j] * scale
+        lo, hi = np.minimum(i, j), np.maximum(i, j)
+        xi = np.empty((len(touching), 3))
+        _lookup(lo, hi, self.partners, self.stretch, xi)
+        # a stretch stored as seen from the smaller index: from j's side it is reversed
+        xi = tangent(np.where((i == lo)[:, None], xi, -xi), n)
+        f_on_j, xi, sliding = self.law.springs(n, gap, xi)
+        f_t = self.law.k_t * xi  # tangential force on i
+        forces, torques = np.zeros((n_particles, 3)), np.zeros((n_particles, 3))
+        np.add.at(forces, j, f_on_j)
+        np.add.at(forces, i, -f_on_j)
+        np.add.at(torques, i, arm_i[:, None] * np.cross(n, f_t))
+        np.add.at(torques, j, arm_j[:, None] * np.cross(n, f_t))
+        dx = dist[:, None] * n
+        self._contacts = (i, j, lo, hi, n, dx, arm_i, arm_j, xi)
+        return ContactForces(forces, torques, dx.T @ f_on_j, len(touching), int(sliding.sum()))
+
+    def advance(self, velocities, rate, dt):
+        """Integrate the stretches of the contacts found by ``forces`` over dt with the
+        step's velocities (N, 6) relative to the imposed simple shear u = rate y e_x
+        (Omega_inf = -rate/2 e_z), and store them as the history."""
+        i, j, lo, hi, n, dx, arm_i, arm_j, xi = self._contacts
+        spin = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -0.5 * rate])
+        v_i, v_j = velocities[i] + spin, velocities[j] + spin
+        v_j[:, 0] += rate * dx[:, 1]  # j's image relative to i in the imposed flow
+        xi = xi + dt * sliding_velocity(n, arm_i, arm_j, v_i, v_j)
+        xi = np.where((i == lo)[:, None], xi, -xi)
+        self.partners[:] = -1
+        self.stretch[:] = 0.0
+        bad, why = _store(lo, hi, xi, self.partners, self.stretch)
+        if why == 1:
+            raise RuntimeError(f"particle {lo[bad]} has more than interparticle.max_contacts = "
+                               f"{self.partners.shape[1]} contacts with larger-numbered "
+                               "particles; raise interparticle.max_contacts")
+        if why == 2:
+            raise RuntimeError(f"particles {lo[bad]} and {hi[bad]} touch through two periodic "
+                               "images: the box is too small for contact history")
+
+
+def contact_model(job):
+    """The contact springs of a job with interparticle.kind = "frictional" (a fresh
+    history for one realisation), else None. The repulsion is `forces.force_law`'s."""
+    inter = job.interparticle
+    if inter.kind != "frictional":
+        return None
+    law = ContactLaw(inter.mu, FORCE_UNIT * inter.k_n, FORCE_UNIT * inter.k_t)
+    return FrictionalContacts(law, job.system.n_particles, inter.max_contacts)

@@ -1,0 +1,118 @@
+"""Sheared monolayers of non-Brownian spheres (seed 001: Dratler & Schowalter, J. Fluid
+Mech. 325, 53 (1996), after Brady & Bossis, J. Fluid Mech. 155, 105 (1985)).
+
+Geometry. N spheres of radius a = 1 with centres in the plane z = Lz/2 of the box
+(L, L, Lz): a square cell of side L = (N pi / phi_a)^(1/2) at areal fraction phi_a
+(``system.phi``), periodic in x and y with the Lees-Edwards shift of the flow
+u = gamma_dot y e_x, and Lz = ``system.layer_spacing`` x L.
+
+Third direction. The layer moves in unbounded 3D fluid; the far field is summed by the
+3D Ewald sums of `sdmpi.hydro`, so the layer is replicated every Lz in z (a stack of
+layers, as in the seed, which put its z-images 100 L away to keep the mobility positive
+definite). With zero net force per layer (force-free spheres, pair forces) the layers
+interact only through the in-plane Fourier modes k >= 2 pi/L of their force and stresslet
+densities, whose fields decay like exp(-k Lz) between layers. Measured (phi_a = 0.4,
+N = 25, Ewald tolerance 1e-10): from Lz = 2 L to 100 L the hydrodynamic viscosity of a
+configuration changes by < 2e-9 (relative), and from 2 L to 50 L the relative velocities
+under pair forces by 8e-6; the one Lz-dependent motion is a uniform drift of the whole layer (its uniform
+translation is resisted only by the pairs' lubrication and a far-field term ~1/Lz), which
+moves no sphere relative to another. Default Lz = 2 L; the loader keeps the z-images
+beyond the lubrication cut-off.
+
+In-plane motion. The configuration and the flow are symmetric under the reflection
+z -> Lz - z, which maps the grand resistance onto itself, so R couples the mirror-even
+components (U_x, U_y, Omega_z, and E_xx, E_yy, E_zz, E_xy) only among themselves: the
+out-of-plane velocity U_z and the rotations about in-plane axes, Omega_x and Omega_y, of
+the full FTS solution vanish (measured ~1e-17, tests/test_monolayer.py), and the in-plane
+ones equal the solution of the seed's reduced 3N x 3N problem (its eq. 2: F_x, F_y, T_z).
+sdmpi solves the full problem and sets the mirror-odd velocities to 0 so that rounding
+never moves a centre out of the plane. Brownian noise would excite them; Brownian
+monolayers are refused by the loader.
+
+Viscosity (seed eq. 6). The seed's relative viscosity is
+eta = 1 + 3 phi_a <S*_xy> + (interparticle terms), S* = S/(6 pi eta_m a^3 gamma_dot):
+the particle stress of the layer is its stresslet (and virial) per unit area divided by
+the layer thickness 2a, Sigma = (1/(2 a L^2)) sum (S - x F_P). So a monolayer's samples
+use the volume 2 a L^2 (not L^2 Lz), and `sdmpi reduce` turns them into the seed's eta,
+eta_h (row ``hydrodynamic``) and eta_p (row ``interparticle``) unchanged, with the column
+``phi`` holding phi_a. Dilute limit: S_xy = (10/3) pi a^3 eta_m gamma_dot per sphere gives
+eta = 1 + (5/3) phi_a.
+
+Overlaps (seed sec. 3, Bossis & Brady, J. Chem. Phys. 80, 5141 (1984)). Pairs closer
+than the gap epsilon = ``hydrodynamics.min_gap``, overlapping ones included, get the
+lubrication of that gap (`sdmpi.hydro.lubrication`) but are not moved (unlike the bulk's
+potential-free correction); ``n_overlaps`` counts the overlapping pairs (periodic images
+count once) and ``min_gap`` the deepest, at each step. When an overlap exceeds
+``integration.overlap_stop`` (seed sec. 4: 2% of a radius) the realisation stops: it
+warns, keeps its last configuration, and every later sample is NaN (counts -1), which
+`sdmpi reduce` takes as the end of that realisation's data.
+
+Repulsion (seed eq. 9, `forces.Repulsion`): F(h) = F0 tau e^(-tau h)/(1 + e^(-tau h)),
+gamma* = 6 pi eta_m a^2 gamma_dot / (2 F0). In the job's force unit
+6 pi eta_m a^2 gamma_dot, ``interparticle.f0`` = 1/(2 gamma*) (the seed's gamma* = 1 is
+f0 = 0.5).
+"""
+
+import logging
+import math
+
+import numpy as np
+
+from ..hydro.lubrication import close_pairs
+from .initial import hard_disk_monolayer, square_side
+
+#: velocity components (of the 6 per sphere: U, Omega) that are odd under z -> -z
+MIRROR_ODD = (2, 3, 4)
+
+log = logging.getLogger(__name__)
+
+
+class Monolayer:
+    """The monolayer of one task: box, normalising volume, start, in-plane constraint,
+    overlap counting and the overlap stop (module docstring)."""
+
+    def __init__(self, job, phi_a):
+        n = job.system.n_particles
+        side = square_side(n, phi_a)
+        self.n_particles, self.phi_a = n, phi_a
+        self.box = np.array([side, side, job.system.layer_spacing * side])
+        #: the layer's volume 2 a L^2 that normalises its stresses (seed eq. 6)
+        self.volume = 2.0 * side * side
+        self.overlap_stop = job.integration.overlap_stop
+        #: the step at which the run stopped on an overlap, -1 while running
+        self.stopped_at = -1
+
+    def start(self, rng):
+        """Random non-overlapping start in the plane z = Lz/2, (N, 3)."""
+        return hard_disk_monolayer(self.n_particles, self.phi_a, rng, z=0.5 * self.box[2])[0]
+
+    @staticmethod
+    def in_plane(velocity):
+        """(N, 6) velocities with the mirror-odd components U_z, Omega_x, Omega_y set to 0."""
+        out = velocity.copy()
+        out[:, MIRROR_ODD] = 0.0
+        return out
+
+    @staticmethod
+    def overlaps(positions, radii, lattice):
+        """Overlapping pairs (count) and the smallest surface gap among them (inf: none)."""
+        pairs = close_pairs(positions, radii, lattice, cutoff=0.0)
+        return len(pairs.i), pairs.min_gap
+
+    def stops(self, step, min_gap, task_id):
+        """True once the run has stopped: now, if an overlap is deeper than overlap_stop."""
+        if self.stopped_at < 0 and -min_gap > self.overlap_stop:
+            self.stopped_at = step
+            log.warning(f"task {task_id}: stopped at step {step}: two spheres overlap by "
+                        f"{-min_gap:.3g} a > integration.overlap_stop = {self.overlap_stop:g} "
+                        f"(seed 001); the remaining samples are NaN")
+        return self.stopped_at >= 0
+
+    @staticmethod
+    def stopped_sample(fields, time, strain, rate):
+        """A sample after the stop: time, strain and rate, every other value NaN (-1 for
+        counts)."""
+        sample = {k: np.full(shape, -1 if np.dtype(dt).kind == "i" else math.nan, dtype=dt)
+                  for k, (shape, dt, _, _) in fields.items()}
+        sample.update(time=time, strain=strain, rate=rate)
+        return sample

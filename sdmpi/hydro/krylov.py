@@ -1,0 +1,414 @@
+"""`petsc-krylov`: the FTS resistance problem solved matrix-free, in mixed (saddle-point) form.
+
+No inverse of the far-field mobility M = M_inf is formed. With the resistance
+R = M^-1 + L (L the sparse lubrication correction, `lubrication.lubrication_sparse`), the
+generalized velocity V = P_u^T U' + P_e^T (-e_inf) (11 per particle: U', Omega', -E_inf)
+and the auxiliary unknown lambda = M^-1 V, the problem (F, L, -S) = R V becomes
+(Sierou & Brady, J. Fluid Mech. 448, 115 (2001); Fiore & Swan, J. Fluid Mech. 878, 544
+(2019), "fast SD"):
+
+    M lambda - P_u^T U' = P_e^T (-e_inf)
+    P_u lambda + L_uu U' = F - L_ue (-e_inf)            (viscosity 1)
+
+solved for (lambda, U') by left-preconditioned GMRES in PETSc (a shell matrix: the far
+field as a product `matvec`, L_uu a PETSc AIJ matrix). The stresslets follow without
+another solve: -S = P_e (lambda + L V).
+
+Preconditioner: the same block system with M replaced by its self (diagonal) part D
+(isolated-sphere 11x11 blocks), solved exactly by block elimination,
+
+    y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
+
+where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is applied
+through its sparse Cholesky factor (MUMPS through PETSc, the whole G on every rank: the
+iteration counts do not depend on the number of ranks; incomplete Cholesky, as in fast
+SD, stalls here on clusters of pairs at the minimum gap). Near-contact pairs, which make
+R ill-conditioned, are in G exactly: the iterations only see the far field's
+many-body part M - D.
+
+Brownian forces with covariance R_FU = P_u M^-1 P_u^T + L_uu, without a dense root:
+
+    F_B = P_u M^-1/2 z_1 + sum_pairs Q_p^T C_p z_p,   C_p C_p^T = (R_2B - R_2B,inf)_FU,p,
+
+M^-1/2 z_1 by the Lanczos method for matrix functions (Saad 1992; Ando, Chow, Saad &
+Skolnick, J. Chem. Phys. 137, 064106 (2012)), the near field exactly pair by pair (each
+pair's 12x12 rigid-body correction is positive definite; Q_p places it on the pair's
+particles). The noise is z_1 (11N) followed by z_p (12 per pair): `noise_shape`.
+
+Parallel layout over the communicator: particles split in contiguous ranges; every PETSc
+vector holds this rank's particles, (lambda, U') laid out [11 per particle, then 6 per
+particle]. The far-field product takes and returns whole (11N,) vectors (gathered); the
+sparse products and the preconditioner are local or PETSc-distributed. Inputs and outputs
+of the interface are replicated numpy arrays; every method is collective.
+
+Far field: an object with matvec((11N,)) -> M (11N,) from `far_field_operator`:
+"spectral" (`spectral.SpectralFarField`, particle-mesh Ewald, O(N log N); the default in
+a periodic box from DENSE_FAR_FIELD_MAX_N particles on) or "dense" (the Ewald matrix of
+`farfield`: small N, unbounded fluid).
+"""
+
+import atexit
+import weakref
+
+import numpy as np
+import scipy.sparse
+
+from .farfield import NDOF, far_field_mobility, plan_far_field, self_mobility
+
+#: default relative residual of the saddle-point solves and the Lanczos square roots
+DEFAULT_TOL = 1e-8
+#: iteration limits (a solve that does not converge within them raises)
+MAX_ITERATIONS = 2000
+LANCZOS_MAX_ITERATIONS = 500
+#: GMRES restart length
+GMRES_RESTART = 200
+#: the preconditioner's solve with G: sparse Cholesky (MUMPS) of the whole G on every
+#: rank (redundant). Measured (N = 343, phi = 0.45): ICC(0) stalls (> 600 iterations)
+#: on configurations with clusters of pairs at the minimum gap, ICC(1) and the exact
+#: factor take 50-52; block Jacobi per rank would drop the lubrication of the pairs
+#: across the split (5-10x the iterations on 2 ranks)
+OPTIONS_PREFIX = "sdmpi_krylov_schur_"
+INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "redundant", "redundant_ksp_type": "preonly",
+                 "redundant_pc_type": "cholesky", "redundant_pc_factor_mat_solver_type": "mumps"}
+#: far-field operators by name (see far_field_operator)
+FAR_FIELDS = ("dense", "spectral")
+#: the default far field is dense below this many particles (faster there; its matrix
+#: is 11N x 11N: 140 MB at N = 400), spectral from there on (bench/bench_krylov.py)
+DENSE_FAR_FIELD_MAX_N = 400
+
+
+class KrylovError(RuntimeError):
+    """An iterative solve did not reach its tolerance."""
+
+
+#: solvers alive, destroyed before PETSc finalizes at exit: PETSc would otherwise reset
+#: their python contexts after the interpreter is gone (segmentation fault at exit)
+_LIVE = weakref.WeakSet()
+
+
+@atexit.register  # Python exit handlers run before petsc4py's C-level PetscFinalize
+def _destroy_live():
+    for solver in list(_LIVE):
+        solver.destroy()
+
+
+class DenseFarField:
+    """M_inf as a dense Ewald matrix (`farfield.far_field_mobility`) applied by products;
+    every rank holds all of it (tests and small N)."""
+
+    def __init__(self, positions, radii, lattice, tol, plan=None):
+        # plan: a `farfield.FarFieldPlan` to reuse (small displacements), else made here
+        self.plan = plan_far_field(positions, radii, lattice, tol) if plan is None else plan
+        self.matrix = far_field_mobility(positions, radii, plan=self.plan)
+
+    def matvec(self, x):
+        return self.matrix @ x
+
+
+def far_field_operator(kind, positions, radii, lattice, tol, comm=None, plan=None):
+    """The far-field mobility operator `kind` ("dense" or "spectral"; FAR_FIELDS; None:
+    spectral in a periodic lattice from DENSE_FAR_FIELD_MAX_N particles on, else dense)
+    at the given positions; "spectral" needs a periodic lattice. plan: a
+    `farfield.FarFieldPlan` for "dense"."""
+    if kind is None:
+        kind = "dense" if lattice is None or len(positions) < DENSE_FAR_FIELD_MAX_N else "spectral"
+    if kind == "dense":
+        return DenseFarField(positions, radii, lattice, tol, plan)
+    if kind == "spectral":
+        if lattice is None:
+            raise ValueError("far_field: \"spectral\" needs a periodic box (got box=None); use \"dense\"")
+        from .spectral import SpectralFarField
+
+        return SpectralFarField(positions, radii, lattice, tol=tol, comm=comm)
+    raise ValueError(f"far_field must be one of {FAR_FIELDS}, got {kind!r}")
+
+
+def lanczos_inverse_sqrt(apply, z, dot, tol=DEFAULT_TOL, max_iterations=LANCZOS_MAX_ITERATIONS):
+    """A^-1/2 z for a symmetric positive definite A by the Lanczos method (with full
+    reorthogonalisation): after k steps, A^-1/2 z ~ |z| V_k T_k^-1/2 e_1 (V_k the
+    orthonormal Krylov basis, T_k the tridiagonal Lanczos matrix). Stops when the
+    estimate changes by less than tol (relative) between steps. apply and dot act on
+    this rank's part of distributed vectors (dot sums over ranks).
+    Returns (A^-1/2 z, iterations)."""
+    beta0 = np.sqrt(dot(z, z))
+    if beta0 == 0.0:
+        return np.zeros_like(z), 0
+    basis = np.zeros((32, len(z)))  # rows: the Krylov basis (grown as needed)
+    basis[0] = z / beta0
+    alphas, betas = [], []
+    coef_prev = np.zeros(0)
+    for k in range(1, max_iterations + 1):
+        w = apply(basis[k - 1])
+        alphas.append(dot(w, basis[k - 1]))
+        for _ in range(2):  # full reorthogonalisation (classical Gram-Schmidt twice)
+            w = w - dot(basis[:k], w) @ basis[:k]
+        t = np.diag(alphas) + np.diag(betas, 1) + np.diag(betas, -1)
+        evals, evecs = np.linalg.eigh(t)
+        if evals.min() <= 0.0:
+            raise KrylovError("Lanczos: the far-field mobility is not positive definite")
+        coef = evecs @ (evecs[0] / np.sqrt(evals))
+        change = np.linalg.norm(coef - np.concatenate([coef_prev, [0.0]]))
+        if change <= tol * np.linalg.norm(coef):
+            break
+        coef_prev = coef
+        beta = np.sqrt(dot(w, w))
+        if beta <= 1e-14 * abs(alphas[-1]):  # invariant subspace: exact
+            break
+        betas.append(beta)
+        if k == len(basis):
+            basis = np.concatenate([basis, np.zeros_like(basis)])
+        basis[k] = w / beta
+    else:
+        raise KrylovError(f"Lanczos: A^-1/2 z not converged to {tol:g} in {max_iterations} iterations")
+    return beta0 * (coef @ basis[:k]), k
+
+
+class _Context:
+    """A PETSc python context of a KrylovSolver, holding it by a weak reference (no
+    cycle solver -> PETSc object -> context -> solver: the solver and its far field are
+    freed as soon as the caller drops them)."""
+
+    def __init__(self, solver):
+        self.s = weakref.proxy(solver)
+
+
+class _Saddle(_Context):
+    """PETSc shell matrix of the mixed system (module docstring)."""
+
+    def mult(self, mat, x, y):
+        s = self.s
+        xa = x.getArray(readonly=True)
+        lam, u = xa[:s.nl11], xa[s.nl11:]
+        out = y.getArray()
+        m_lam = s.far_rows(lam)
+        m_lam.reshape(-1, NDOF)[:, :6] -= u.reshape(-1, 6)
+        out[:s.nl11] = m_lam
+        s.u_in.setArray(u)
+        s.l_uu.mult(s.u_in, s.u_out)
+        out[s.nl11:] = lam.reshape(-1, NDOF)[:, :6].ravel() + s.u_out.getArray(readonly=True)
+
+
+class _NearFieldPreconditioner(_Context):
+    """PETSc shell preconditioner: the block elimination with M -> D (module docstring)."""
+
+    def apply(self, pc, r, z):
+        s = self.s
+        ra = r.getArray(readonly=True)
+        f, g = ra[:s.nl11].reshape(-1, NDOF), ra[s.nl11:]
+        d_f = np.einsum("pij,pj->pi", s.d_inv, f)
+        s.u_in.setArray(g - d_f[:, :6].ravel())
+        s.inner.solve(s.u_in, s.u_out)
+        y = s.u_out.getArray(readonly=True).copy()
+        rhs = f.copy()
+        rhs[:, :6] += y.reshape(-1, 6)
+        out = z.getArray()
+        out[:s.nl11] = np.einsum("pij,pj->pi", s.d_inv, rhs).ravel()
+        out[s.nl11:] = y
+
+
+class _FarField(_Context):
+    """PETSc shell matrix of M alone (stresslets for velocities not from a solve)."""
+
+    def mult(self, mat, x, y):
+        y.getArray()[:] = self.s.far_rows(x.getArray(readonly=True))
+
+
+class _SelfPreconditioner(_Context):
+    """PETSc shell preconditioner D^-1 (block diagonal) for M."""
+
+    def apply(self, pc, r, z):
+        s = self.s
+        z.getArray()[:] = np.einsum("pij,pj->pi", s.d_inv, r.getArray(readonly=True).reshape(-1, NDOF)).ravel()
+
+
+class KrylovSolver:
+    """The `petsc-krylov` backend for a `resistance.SplitResistance` on the MPI
+    communicator comm (None: this rank alone); tol: relative residual of every solve
+    (and of the Lanczos square roots). Interface as `solvers.DenseSolver`, plus
+    noise_shape and stats (iterations, largest relative residual, Lanczos iterations)."""
+
+    name = "petsc-krylov"
+
+    def __init__(self, resistance, comm=None, tol=DEFAULT_TOL):
+        from .petsc_dense import _keepalive, _mpi_comm, load_petsc
+
+        PETSc = load_petsc()
+        _LIVE.add(self)
+        self._PETSc = PETSc
+        self.comm = _mpi_comm(comm)
+        _keepalive(PETSc, self.comm)
+        self.tol = float(tol)
+        self.far = resistance.far
+        self.n = n = resistance.n_particles
+        size, rank = self.comm.size, self.comm.rank
+        splits = np.linspace(0, n, size + 1).round().astype(int)
+        self.p0, self.p1 = p0, p1 = splits[rank], splits[rank + 1]
+        self.counts11 = NDOF * np.diff(splits)
+        self.counts6 = 6 * np.diff(splits)
+        nl = p1 - p0
+        self.nl11 = NDOF * nl
+        self.noise_shape = (NDOF * n + 12 * len(resistance.pair_i),)
+        self.pair_i, self.pair_j, self.pair_chol = resistance.pair_i, resistance.pair_j, resistance.pair_chol
+        self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
+
+        # this rank's block rows of the lubrication matrix, split into rigid (6 per
+        # particle) and strain (5) rows
+        bsr = resistance.lubrication
+        lo, hi = bsr.indptr[p0], bsr.indptr[p1]
+        lub = scipy.sparse.bsr_matrix((bsr.data[lo:hi], bsr.indices[lo:hi], bsr.indptr[p0:p1 + 1] - lo),
+                                      shape=(NDOF * nl, NDOF * n)).tocsr()
+        local = np.arange(nl)[:, None]
+        self.l_u = lub[(NDOF * local + np.arange(6)).ravel()]
+        self.l_e = lub[(NDOF * local + np.arange(6, NDOF)).ravel()]
+        rigid = (NDOF * np.arange(n)[:, None] + np.arange(6)).ravel()
+        l_uu = self.l_u[:, rigid].tocsr()
+        # far-field self blocks (isolated spheres) and the Schur complement G
+        radii = resistance.radii[p0:p1]
+        inv = {a: np.linalg.inv(self_mobility(a)) for a in np.unique(radii)}
+        self.d_inv = np.array([inv[a] for a in radii]).reshape(nl, NDOF, NDOF)
+        d_uu = scipy.sparse.block_diag(list(self.d_inv[:, :6, :6]), format="csr") if nl else \
+            scipy.sparse.csr_matrix((0, 0))
+        shift = scipy.sparse.csr_matrix((d_uu.data, d_uu.indices + 6 * p0, d_uu.indptr), shape=l_uu.shape)
+        schur = (l_uu + shift).tocsr()
+        self.l_uu = self._aij(l_uu)
+        self.schur = self._aij(schur)
+        self.u_in, self.u_out = self.l_uu.createVecs()
+
+        self.inner = PETSc.KSP().create(comm=self.comm)
+        self.inner.setOperators(self.schur)
+        self.inner.setOptionsPrefix(OPTIONS_PREFIX)
+        options = PETSc.Options(OPTIONS_PREFIX)
+        for key, value in INNER_OPTIONS.items():
+            options.setValue(key, value)
+        self.inner.setFromOptions()
+
+        m = NDOF * n + 6 * n
+        ml = self.nl11 + 6 * nl
+        self.saddle = PETSc.Mat().createPython([(ml, m), (ml, m)], context=_Saddle(self), comm=self.comm)
+        self.saddle.setUp()
+        self.ksp = self._ksp(self.saddle, "gmres", _NearFieldPreconditioner(self))
+        self.ksp.setGMRESRestart(GMRES_RESTART)
+        self._mobility_ksp = None
+        self._last = None  # (velocities, einf, lambda rows) of the last solve
+
+    def destroy(self):
+        """Frees the PETSc objects now (otherwise when the solver is garbage collected)."""
+        for obj in (self.ksp, self._mobility_ksp, self.inner, self.saddle, self.l_uu, self.schur,
+                    self.u_in, self.u_out):
+            if obj is not None:
+                obj.destroy()
+        _LIVE.discard(self)
+
+    # ------------------------------------------------------------------ helpers
+
+    def _aij(self, csr):
+        csr.sort_indices()
+        rows = csr.shape[0]
+        mat = self._PETSc.Mat().createAIJ([(rows, 6 * self.n), (rows, 6 * self.n)],
+                                          csr=(csr.indptr.astype(np.int32), csr.indices.astype(np.int32),
+                                               csr.data), comm=self.comm)
+        mat.assemble()
+        return mat
+
+    def _ksp(self, mat, kind, precond):
+        PETSc = self._PETSc
+        ksp = PETSc.KSP().create(comm=self.comm)
+        ksp.setOperators(mat)
+        ksp.setType(kind)
+        # left preconditioning, preconditioned residual |P^-1 r| ~ the error of the
+        # solution: its relative decrease bounds the error (measured: 1-4 x tol)
+        ksp.setPCSide(PETSc.PC.Side.LEFT)
+        ksp.setNormType(PETSc.KSP.NormType.PRECONDITIONED)
+        ksp.setTolerances(rtol=self.tol, atol=0.0, max_it=MAX_ITERATIONS)
+        pc = ksp.getPC()
+        pc.setType("python")
+        pc.setPythonContext(precond)
+        return ksp
+
+    def _gather(self, local, counts):
+        if self.comm.size == 1:
+            return np.array(local, dtype=float)
+        full = np.empty(counts.sum())
+        self.comm.Allgatherv(np.ascontiguousarray(local, dtype=float), [full, counts])
+        return full
+
+    def far_rows(self, lam_local):
+        """This rank's rows of M lambda, from this rank's rows of lambda."""
+        full = self.far.matvec(self._gather(lam_local, self.counts11))
+        return full[NDOF * self.p0:NDOF * self.p1].copy()
+
+    def _run(self, ksp, rhs):
+        """Solve with ksp for this rank's part of rhs; returns this rank's solution.
+        Records the iterations and the relative preconditioned residual |P^-1 r|/|P^-1 b|."""
+        b, x = ksp.getOperators()[0].createVecs()
+        b.setArray(rhs)
+        ksp.solve(b, x)
+        reason = ksp.getConvergedReason()
+        pb = b.duplicate()
+        ksp.getPC().apply(b, pb)
+        bnorm = pb.norm()
+        residual = ksp.getResidualNorm() / bnorm if bnorm > 0 else 0.0
+        if reason < 0:
+            raise KrylovError(f"petsc-krylov: the solve did not converge (PETSc reason {reason}, "
+                              f"relative residual {residual:.3g} after {ksp.getIterationNumber()} "
+                              f"iterations, tolerance {self.tol:g})")
+        self.stats["iterations"] += ksp.getIterationNumber()
+        self.stats["residual"] = max(self.stats["residual"], residual)
+        return x.getArray().copy()
+
+    @staticmethod
+    def _generalized(velocities, einf):
+        v = np.empty((len(einf), NDOF))
+        v[:, :6] = velocities
+        v[:, 6:] = -einf
+        return v.ravel()
+
+    # ------------------------------------------------------------------ interface
+
+    def velocities(self, forces, einf):
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
+        p0, p1 = self.p0, self.p1
+        v_e = self._generalized(np.zeros((self.n, 6)), einf)
+        rhs = np.concatenate([v_e[NDOF * p0:NDOF * p1], forces[p0:p1].ravel() - self.l_u @ v_e])
+        sol = self._run(self.ksp, rhs)
+        u = self._gather(sol[self.nl11:], self.counts6).reshape(self.n, 6)
+        self._last = (u.copy(), np.array(einf, dtype=float), sol[:self.nl11])
+        return u
+
+    def stresslets(self, velocities, einf):
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
+        v = self._generalized(velocities, einf)
+        last = self._last
+        if last is not None and np.array_equal(last[0], velocities) and np.array_equal(last[1], einf):
+            lam = last[2]
+        else:  # lambda = M^-1 V by preconditioned CG
+            if self._mobility_ksp is None:
+                ml = self.nl11
+                mat = self._PETSc.Mat().createPython([(ml, NDOF * self.n), (ml, NDOF * self.n)],
+                                                     context=_FarField(self), comm=self.comm)
+                mat.setUp()
+                self._mobility_ksp = self._ksp(mat, "cg", _SelfPreconditioner(self))
+            lam = self._run(self._mobility_ksp, v[NDOF * self.p0:NDOF * self.p1])
+        minus_s = lam.reshape(-1, NDOF)[:, 6:].ravel() + self.l_e @ v
+        return -self._gather(minus_s, 5 * (self.counts11 // NDOF)).reshape(self.n, 5)
+
+    def brownian_forces(self, noise):
+        """F (N, 6) with covariance R_FU over the noise (flat, noise_shape, standard
+        normal): P_u M^-1/2 z_1 + sum_p Q_p^T C_p z_p (module docstring)."""
+        n = self.n
+        z1 = noise[:NDOF * n]
+        z2 = noise[NDOF * n:].reshape(-1, 12)
+
+        def dot(a, b):  # a @ b summed over the ranks (a: vector or rows of vectors)
+            local = np.atleast_1d(a @ b)
+            total = np.empty_like(local)
+            self.comm.Allreduce(local, total)
+            return total if np.ndim(a) > 1 else float(total[0])
+
+        far, its = lanczos_inverse_sqrt(self.far_rows, z1[NDOF * self.p0:NDOF * self.p1], dot, self.tol)
+        self.stats["lanczos"] += its
+        force = self._gather(far, self.counts11).reshape(n, NDOF)[:, :6].copy()
+        near = np.einsum("pij,pj->pi", self.pair_chol, z2)
+        np.add.at(force, self.pair_i, near[:, :6])
+        np.add.at(force, self.pair_j, near[:, 6:])
+        return force

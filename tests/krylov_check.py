@@ -1,0 +1,77 @@
+"""The petsc-krylov vs dense comparison used by tests/test_krylov.py, in process (one rank)
+and as a script under ``mpirun -n P`` (rank 0 prints one JSON line per rank).
+
+Configurations: those of petsc_check (N = 27, sheared periodic box, near-contact pairs,
+phi = 0.1 and 0.5); the far field dense or spectral (the script runs both). Brownian forces: the near-field part is checked exactly through its
+covariance (the sum of the pair factors' squares must equal the dense lubrication's FU
+block), the far-field part against the dense M^-1/2 z for one noise vector."""
+
+import hashlib
+import sys
+
+import numpy as np
+
+from petsc_check import N, STRAIN, configuration, print_per_rank
+from sdmpi.hydro.farfield import NDOF, far_field_mobility
+from sdmpi.hydro.krylov import FAR_FIELDS
+from sdmpi.hydro.lubrication import lubrication_matrix
+from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
+from sdmpi.hydro.solvers import make_solver
+
+TOL = 1e-8  # requested relative (preconditioned) residual
+#: relative error of the far-field product: rounding (dense), the Ewald tolerance (spectral)
+FAR_ERROR = {"dense": 0.0, "spectral": DEFAULT_EWALD_TOL}
+
+
+def rel(a, b):
+    return float(np.abs(a - b).max() / np.abs(a).max())
+
+
+def rigid_block(matrix, n):
+    idx = (NDOF * np.arange(n)[:, None] + np.arange(6)).ravel()
+    return matrix[np.ix_(idx, idx)]
+
+
+def compare(phi, comm=None, seed=1, far_field="dense"):
+    """Max relative differences between petsc-krylov (far field `far_field`, "dense" or
+    "spectral") on comm and dense: velocities and
+    stresslets (imposed forces and strain), the near-field covariance, the far-field
+    Brownian force; the smallest gap; the iterations."""
+    pos, side = configuration(phi, seed)
+    box = np.full(3, side)
+    res = grand_resistance(pos, np.ones(N), box, STRAIN)
+    split = split_resistance(pos, np.ones(N), box, STRAIN, far_field=far_field, comm=comm)
+    dense = make_solver("dense", res)
+    krylov = make_solver("petsc-krylov", split, comm, TOL)
+    rng = np.random.default_rng(seed + 100)
+    forces, einf = rng.standard_normal((N, 6)), rng.standard_normal((N, 5))
+    u_d, u_k = dense.velocities(forces, einf), krylov.velocities(forces, einf)
+    out = {"phi": phi, "far_field": far_field, "min_gap": float(res.pairs.min_gap),
+           "velocities": rel(u_d, u_k),
+           "stresslets": rel(dense.stresslets(u_d, einf), krylov.stresslets(u_k, einf))}
+    # Brownian: near field exactly (covariance), far field on the z_1 part of one noise
+    c = np.einsum("pij,pkj->pik", split.pair_chol, split.pair_chol)
+    near = np.zeros((N, 6, N, 6))
+    for u, pu in enumerate((split.pair_i, split.pair_j)):
+        for v, pv in enumerate((split.pair_i, split.pair_j)):
+            np.add.at(near, (pu, slice(None), pv), c[:, 6 * u:6 * u + 6, 6 * v:6 * v + 6])
+    lub_fu = rigid_block(lubrication_matrix(res.positions, np.ones(N), res.pairs), N)
+    out["near_covariance"] = rel(lub_fu, near.reshape(6 * N, 6 * N))
+    z = np.zeros(krylov.noise_shape)
+    z[:NDOF * N] = rng.standard_normal(NDOF * N)
+    w, v = np.linalg.eigh(far_field_mobility(res.positions, np.ones(N), plan=res.plan.far))
+    far = (v @ ((v.T @ z[:NDOF * N]) / np.sqrt(w))).reshape(N, NDOF)[:, :6]
+    f_b = krylov.brownian_forces(z)
+    out["brownian_far"] = rel(far, f_b)
+    out["iterations"] = krylov.stats["iterations"]
+    out["lanczos"] = krylov.stats["lanczos"]
+    out["digest"] = hashlib.sha256(np.concatenate([u_k.ravel(), f_b.ravel()]).tobytes()).hexdigest()
+    return out
+
+
+if __name__ == "__main__":
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    print_per_rank([compare(float(phi), comm, far_field=far) for phi in sys.argv[1:] for far in FAR_FIELDS],
+                   comm)

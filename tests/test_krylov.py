@@ -1,0 +1,202 @@
+"""The petsc-krylov backend (matrix-free mixed form, sparse lubrication, Lanczos Brownian
+forces) against dense: solves and Brownian terms on one rank and under mpirun -n 2, the
+midpoint drift and Brownian stress, a realisation with ranks_per_task = 2 against one
+rank, the `auto` choice and the sparse lubrication assembly."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from sdmpi.hydro import solve_mobility
+from sdmpi.hydro.petsc_dense import PetscUnavailable, load_petsc
+
+try:
+    load_petsc()
+except PetscUnavailable as err:
+    pytest.skip(f"petsc4py not available: {err}", allow_module_level=True)
+
+from krylov_check import FAR_ERROR, TOL, compare  # noqa: E402  (tests/ is on sys.path under pytest)
+from test_ensemble import _env  # noqa: E402
+from test_petsc_dense import ROOT, _run, assert_same_stream, needs_mpi, rows_on_two_ranks  # noqa: E402
+
+from sdmpi.dynamics.realisation import midpoint_brownian  # noqa: E402
+from sdmpi.hydro.krylov import lanczos_inverse_sqrt  # noqa: E402
+from sdmpi.hydro.lubrication import close_pairs, lubrication_matrix, lubrication_sparse  # noqa: E402
+from sdmpi.hydro.resistance import grand_resistance, split_resistance  # noqa: E402
+from sdmpi.hydro.solvers import make_solver, resolve_backend  # noqa: E402
+
+# Agreement with dense: the solves stop at a relative preconditioned residual TOL = 1e-8,
+# which bounds the relative error of the solution up to the preconditioner's quality
+# (measured 1-10 x TOL at phi = 0.1 and 0.5 with near-contact pairs); 100 x TOL allows
+# for that factor and still fails for any error in the equations (those give O(1e-3..1)).
+# The spectral far field is accurate to its Ewald tolerance (1e-6; measured errors of the
+# solves 1e-7..1e-6): 10 x that.
+AGREE = 100 * TOL
+# the near-field covariance is a sum of exact pair factors: rounding only
+EXACT = 1e-12
+
+
+def _check(out):
+    assert out["min_gap"] < 0.01  # near-contact pairs present
+    for key in ("velocities", "stresslets", "brownian_far"):
+        assert out[key] < AGREE + 10 * FAR_ERROR[out["far_field"]], (key, out)
+    assert out["near_covariance"] < EXACT, out
+
+
+@pytest.mark.parametrize("far_field", ["dense", "spectral"])
+@pytest.mark.parametrize("phi", [0.1, 0.5])
+def test_agrees_with_dense_one_rank(phi, far_field):
+    _check(compare(phi, far_field=far_field))
+
+
+@needs_mpi
+@pytest.mark.mpi
+def test_agrees_with_dense_two_ranks():
+    rows = rows_on_two_ranks("krylov_check.py", "0.1", "0.5")
+    assert len(rows) == 8  # 2 ranks x 2 phi x 2 far fields
+    for out in rows:
+        _check(out)
+
+
+def test_solve_mobility_every_backend():
+    """Unbounded and periodic (sheared), a near-contact pair; the isolated sphere exactly."""
+    rng = np.random.default_rng(5)
+    pos = rng.uniform(0, 6, (4, 3))
+    pos[1] = pos[0] + [0.0, 2.001, 0.0]
+    kw = dict(strain=0.2, forces=rng.standard_normal((4, 3)), torques=rng.standard_normal((4, 3)),
+              rate_of_strain=np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]]))
+    for box in ([9.0, 8.0, 10.0], None):
+        ref = solve_mobility(pos, box, solver="dense", **kw)
+        for name in ("petsc-krylov", "auto"):
+            for a, b in zip(ref, solve_mobility(pos, box, solver=name, tolerance=TOL, **kw)):
+                assert np.abs(a - b).max() < AGREE * np.abs(a).max(), (name, box)
+    u, w, s = solve_mobility([[0.0, 0.0, 0.0]], None, forces=[[1.0, 2.0, 3.0]],
+                             torques=[[0.0, 0.0, 1.0]], rate_of_strain=kw["rate_of_strain"],
+                             solver="petsc-krylov")
+    assert np.allclose(u, np.array([1.0, 2.0, 3.0]) / (6 * np.pi), rtol=1e-12)
+    assert np.allclose(w, np.array([0.0, 0.0, 1.0]) / (8 * np.pi), rtol=1e-12)
+    assert np.allclose(s, 20 / 3 * np.pi * kw["rate_of_strain"], rtol=1e-12)
+    with pytest.raises(ValueError, match="solver must be one of"):
+        solve_mobility(pos, None, solver="krylov")
+    with pytest.raises(ValueError, match="tolerance must be in"):
+        solve_mobility(pos, None, solver="petsc-krylov", tolerance=2.0)
+
+
+def test_script_holding_a_solver_exits_cleanly():
+    """PETSc finalizes at exit; a solver still alive then had its python contexts reset
+    after the interpreter was gone (segmentation fault, exit code -11) until live solvers
+    were destroyed by an exit handler."""
+    code = ("import numpy as np\n"
+            "from sdmpi.hydro.resistance import split_resistance\n"
+            "from sdmpi.hydro.solvers import make_solver\n"
+            "pos = np.array([[0.0, 0, 0], [2.1, 0, 0], [0, 3, 0]])\n"
+            "solver = make_solver('petsc-krylov', split_resistance(pos, np.ones(3)))\n"
+            "solver.velocities(np.ones((3, 6)), np.zeros((3, 5)))\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(),
+                         timeout=120, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_auto_picks_by_size():
+    class Two:
+        size = 2
+
+    assert resolve_backend("auto", 27) == "dense"
+    assert resolve_backend("auto", 27, Two()) == "petsc-dense"
+    assert resolve_backend("auto", 4096) == "petsc-krylov"
+    assert resolve_backend("petsc-dense", 4096) == "petsc-dense"
+
+
+def test_sparse_lubrication_equals_dense():
+    """Same pair blocks, summed into a BSR matrix: equal to the dense assembly to rounding
+    (self-image pairs and repeated (i, j) images included: small periodic box)."""
+    from petsc_check import STRAIN, configuration
+    from sdmpi.hydro.geometry import Lattice
+
+    pos, side = configuration(0.5)
+    lattice = Lattice(np.full(3, side), STRAIN)
+    pos = lattice.wrap(pos)
+    pairs = close_pairs(pos, np.ones(len(pos)), lattice, cutoff=6.0)
+    assert np.any(pairs.i == pairs.j)
+    dense = lubrication_matrix(pos, np.ones(len(pos)), pairs)
+    sparse = lubrication_sparse(pos, np.ones(len(pos)), pairs).toarray()
+    assert np.abs(dense - sparse).max() <= EXACT * np.abs(dense).max()
+
+
+def test_lanczos_inverse_square_root():
+    """A^-1/2 z for an SPD matrix (condition number 1e3, eigenvalues log-spaced: a hard
+    case) against its eigen-decomposition."""
+    rng = np.random.default_rng(0)
+    n = 400
+    q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    a = (q * np.logspace(0, 3, n)) @ q.T
+    z = rng.standard_normal(n)
+    exact = q @ ((q.T @ z) / np.sqrt(np.logspace(0, 3, n)))
+    got, its = lanczos_inverse_sqrt(lambda v: a @ v, z, lambda x, y: x @ y, tol=1e-8)
+    # the stopping test (change per step) tracks the error: measured 2.7e-8
+    assert np.abs(got - exact).max() < 1e-7 * np.abs(exact).max()
+    assert its < n // 2  # converged long before the Krylov space is full (measured 172)
+
+
+BOX = np.array([7.0, 7.0, 7.0])
+CONFIG = np.array([[1.0, 1.2, 0.8], [3.05, 1.2, 0.8], [2.0, 3.9, 3.5]])  # as test_dynamics
+
+
+def test_midpoint_drift_and_brownian_stress_agree_with_dense():
+    """The expectation over the noise of the midpoint estimates is a quadratic form in it;
+    the quadrature noise = +-e_k (weights 1/2) gives it exactly up to O(dt^2) and to the
+    Lanczos tolerance. petsc-krylov (noise 11N + 12 per pair) and dense (6N) must give the
+    same drift kT div R_FU^-1 and Brownian stresslet -kT div(R_SU R_FU^-1): agreement to
+    1e-4 relative (dt = 1e-7: O(dt) terms ~1e-6; solver errors ~1e-7)."""
+    kt, dt, n = 1.0, 1e-7, len(CONFIG)
+    means = {}
+    for name, assemble in (("dense", grand_resistance), ("petsc-krylov", split_resistance)):
+        def at(pos, plan=None):
+            return assemble(pos, np.ones(n), BOX, 0.1, plan=plan)
+
+        base = at(CONFIG)
+        solver = make_solver(name, base, tolerance=1e-10)
+
+        def solver_at(res):
+            return make_solver(name, res, tolerance=1e-10)
+
+        m = int(np.prod(getattr(solver, "noise_shape", (n, 6))))
+        drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
+        for k in range(m):
+            for sign in (1.0, -1.0):
+                z = np.zeros(m)
+                z[k] = sign
+                u, s = midpoint_brownian(base, solver, z.reshape(getattr(solver, "noise_shape", (n, 6))),
+                                         kt, dt, at, solver_at)
+                drift += 0.5 * u
+                stress += 0.5 * s
+        means[name] = drift, stress
+    for a, b in zip(means["dense"], means["petsc-krylov"]):
+        assert np.abs(a - b).max() < 1e-4 * np.abs(a).max()
+
+
+# ---------------------------------------------------------------- ranks_per_task = 2
+
+# on top of test_petsc_dense's short run (N = 27, phi = 0.45, one period)
+KRYLOV = ["--set", "integration.steps_per_period=20", "--set", "shear.omega=[50.26548245743669]",
+          "--set", "output.checkpoint_every=20", "--set", 'solver.backend="petsc-krylov"',
+          "--set", "solver.tolerance=1e-10"]
+
+
+@needs_mpi
+@pytest.mark.mpi
+def test_two_ranks_per_task_same_stream(tmp_path):
+    """A Brownian realisation (N = 27, phi = 0.45, 20 steps of 0.00625 t_D) with petsc-krylov
+    (spectral far field) on a 2-rank
+    sub-communicator against one rank: the same noise, solves agreeing to ~1e-9 (tolerance
+    1e-10), so the streams agree sample by sample to 1e-6 of their scale (the trajectories
+    separate slowly), and so do their means and spreads; the solver statistics are
+    recorded (iterations > 0, residual below the tolerance)."""
+    one = _run(tmp_path / "one.h5", *KRYLOV)
+    two = _run(tmp_path / "two.h5", *KRYLOV, "--set", "ensemble.ranks_per_task=2", ranks=2)
+    assert_same_stream(one, two, rtol=1e-6, mean_tol=1e-4)
+    for run in (one, two):
+        assert np.all(run["solver_iterations"] > 0) and np.all(run["lanczos_iterations"] > 0)
+        assert np.all(run["solver_residual"] < 1e-10)
