@@ -2,6 +2,7 @@
 
 import io
 import types
+from pathlib import Path
 
 from sdmpi.config import enumerate_tasks, parse_job
 from sdmpi.ensemble.farm import assign, remaining_costs
@@ -65,3 +66,27 @@ def test_progress_line():
     assert line == ("tasks 5/10 done | steps 1200/2000 (60.0%) | 20 steps/s | "
                     "elapsed 0:00:40 | ETA 0:00:40")
     assert hms(3725.4) == "1:02:05"
+
+
+
+def test_petsc_backend_without_petsc4py_is_bad_input(monkeypatch):
+    """A job whose backend needs PETSc (named, or "auto" with ranks_per_task > 1), on a
+    machine where petsc4py cannot be loaded, is refused by the checks `sdmpi run` makes
+    before it writes anything (BadInput: exit 2); dense jobs do not need PETSc."""
+    import pytest
+
+    from sdmpi.config import load_job
+    from sdmpi.ensemble import runner
+    from sdmpi.hydro import petsc_dense
+
+    def unavailable():
+        raise petsc_dense.PetscUnavailable("petsc4py cannot be imported (test)")
+
+    monkeypatch.setattr(petsc_dense, "import_petsc4py", unavailable)
+    demo = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
+    for backend, rpt in (("petsc-krylov", 1), ("petsc-dense", 2), ("auto", 2)):
+        job = load_job(demo, [f'solver.backend="{backend}"', f"ensemble.ranks_per_task={rpt}"])
+        with pytest.raises(runner.BadInput, match=f"solver.backend = '{backend}' needs PETSc"):
+            runner._check_backend(job)
+    runner._check_backend(load_job(demo))  # dense
+    runner._check_backend(load_job(demo, ['solver.backend="auto"']))  # N = 8: dense

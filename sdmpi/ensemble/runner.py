@@ -144,6 +144,7 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
     if size % rpt:
         raise BadInput(f"ensemble.ranks_per_task = {rpt} does not divide the {size} MPI "
                        f"ranks; run with a multiple of {rpt} ranks")
+    _check_backend(job)
     _check_output(out, new)
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
@@ -160,6 +161,23 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
         return Plan(canonical_text(job), mode, tuple(int(p) for p in summary.progress),
                     summary.slots, *meta)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
+
+
+def _check_backend(job) -> None:
+    """A PETSc backend (named, or what "auto" picks for this N and ranks_per_task) needs
+    petsc4py: refuse the job before anything is written if it cannot be imported."""
+    from ..hydro.solvers import AUTO_KRYLOV_MIN_N
+
+    backend, rpt = job.solver.backend, job.ensemble.ranks_per_task
+    if backend == "dense" or (backend == "auto" and rpt == 1
+                              and job.system.n_particles < AUTO_KRYLOV_MIN_N):
+        return
+    from ..hydro.petsc_dense import PetscUnavailable, import_petsc4py
+
+    try:
+        import_petsc4py()  # not load_petsc: PETSc initialisation is collective
+    except PetscUnavailable as err:
+        raise BadInput(f"solver.backend = {backend!r} needs PETSc here: {err}") from None
 
 
 def _check_output(out: Path, new: bool) -> None:

@@ -63,11 +63,9 @@ def _petsc_dir_candidates():
                                       reverse=True)]
 
 
-def load_petsc():
-    """Import petsc4py (setting PETSC_DIR if unset) and return the PETSc module."""
-    global _PETSC
-    if _PETSC is not None:
-        return _PETSC
+def import_petsc4py():
+    """The petsc4py package, imported without initialising PETSc (setting PETSC_DIR if
+    unset); PetscUnavailable if it cannot be imported. Safe on one rank alone."""
     if not os.environ.get("PETSC_DIR"):
         for cand in _petsc_dir_candidates():
             if os.path.isdir(os.path.join(cand, "lib", "python3", "dist-packages", "petsc4py")):
@@ -78,17 +76,28 @@ def load_petsc():
         if os.path.isdir(site) and site not in sys.path:
             sys.path.append(site)
     try:
-        from mpi4py import MPI  # noqa: F401  (MPI initialised by mpi4py, as everywhere in sdmpi)
         import petsc4py
-        if "petsc4py.PETSc" not in sys.modules:
-            petsc4py.init(PETSC_OPTIONS)
-        from petsc4py import PETSc
     except ImportError as err:
         raise PetscUnavailable(
             f"the PETSc backends need petsc4py, which cannot be imported ({err}); on Debian "
             "install python3-petsc4py and set PETSC_DIR=/usr/lib/petscdir/petsc3.18/"
             "x86_64-linux-gnu-real (or install petsc-dev); otherwise use "
             'solver.backend = "dense"') from err
+    return petsc4py
+
+
+def load_petsc():
+    """Import petsc4py, initialise PETSc (collective over MPI_COMM_WORLD) and return the
+    PETSc module."""
+    global _PETSC
+    if _PETSC is not None:
+        return _PETSC
+    petsc4py = import_petsc4py()
+    from mpi4py import MPI  # noqa: F401  (MPI initialised by mpi4py, as everywhere in sdmpi)
+    if "petsc4py.PETSc" not in sys.modules:
+        petsc4py.init(PETSC_OPTIONS)
+    from petsc4py import PETSc
+
     _PETSC = PETSc
     return PETSc
 
