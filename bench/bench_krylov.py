@@ -21,13 +21,12 @@ import json
 import os
 import platform
 import resource
-import shutil
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from workers import emit, run_worker  # bench/ is on sys.path when run as a script
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -133,17 +132,11 @@ def main():
 
         row = measure(args.sizes[0], args.backend, args.steps, args.tolerance)
         if MPI.COMM_WORLD.rank == 0:
-            print("ROW " + json.dumps(row), flush=True)
+            emit([row])
         return
     for n in args.sizes:
-        cmd = [sys.executable, __file__, "--worker", "--sizes", str(n), "--backend", args.backend,
-               "--steps", str(args.steps), "--tolerance", str(args.tolerance)]
-        if args.ranks > 1:
-            cmd = [shutil.which("mpirun"), "--oversubscribe", "-n", str(args.ranks), *cmd]
-        res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-        if res.returncode != 0:
-            sys.exit(f"N = {n}: failed\n{res.stderr[-3000:]}")
-        row = json.loads(next(line[4:] for line in res.stdout.splitlines() if line.startswith("ROW ")))
+        (row,) = run_worker(__file__, ["--sizes", n, "--backend", args.backend, "--steps", args.steps,
+                                       "--tolerance", args.tolerance], args.ranks, cwd=ROOT)
         print(json.dumps({k: v for k, v in row.items() if not k.endswith("_all")}), flush=True)
         merge([row])
     if args.plot or args.sizes:

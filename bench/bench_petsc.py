@@ -17,12 +17,11 @@ import argparse
 import json
 import os
 import platform
-import shutil
-import subprocess
-import sys
 import time
 
 import numpy as np
+
+from workers import emit, run_worker  # bench/ is on sys.path when run as a script
 
 
 def measure(sizes, repeat):
@@ -78,19 +77,11 @@ def main():
     if args.worker:
         rows = measure(args.sizes, args.repeat)
         if rows:
-            print("ROWS " + json.dumps(rows), flush=True)
+            emit(rows)
         return
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     rows = []
     for p in args.ranks:
-        cmd = [sys.executable, __file__, "--worker", "--repeat", str(args.repeat),
-               "--sizes", *map(str, args.sizes)]
-        if p > 1:
-            cmd = [shutil.which("mpirun"), "--oversubscribe", "-n", str(p), *cmd]
-        out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True).stdout
-        rows += [r for line in out.splitlines() if line.startswith("ROWS ")
-                 for r in json.loads(line[5:])]
+        rows += run_worker(__file__, ["--repeat", args.repeat, "--sizes", *args.sizes], p)
     seen, table = set(), []
     for r in sorted(rows, key=lambda r: (r["N"], r["backend"] != "dense", r["ranks"])):
         key = (r["N"], r["backend"], r["ranks"])

@@ -24,12 +24,11 @@ import json
 import os
 import platform
 import resource
-import shutil
-import subprocess
-import sys
 import time
 
 import numpy as np
+
+from workers import emit, run_worker  # bench/ is on sys.path when run as a script
 
 PHI, STRAIN = 0.45, 0.3
 
@@ -136,19 +135,12 @@ def main():
     if args.worker:
         row = measure(args.worker, args.repeat, args.dense_max)
         if row is not None:
-            print("ROW " + json.dumps(row), flush=True)
+            emit([row])
         return
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     rows = []
     for n in args.sizes:
         for p in args.ranks:
-            cmd = [sys.executable, __file__, "--worker", str(n), "--repeat", str(args.repeat),
-                   "--dense-max", str(args.dense_max)]
-            if p > 1:
-                cmd = [shutil.which("mpirun"), "--oversubscribe", "-n", str(p), *cmd]
-            out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True).stdout
-            rows += [json.loads(line[4:]) for line in out.splitlines() if line.startswith("ROW ")]
+            rows += run_worker(__file__, [n, "--repeat", args.repeat, "--dense-max", args.dense_max], p)
             r = rows[-1]
             parts = " | ".join(" ".join(f"{k} {v:.4f}" for k, v in p.items()) for p in r["parts_cpu"])
             print(f"N={r['N']:>5} ranks={r['ranks']} setup {r['setup']:.3f} s  matvec {r['matvec']:.4f} s  "

@@ -1,0 +1,32 @@
+"""Shared by the benchmarks that measure under mpirun: each runs its own script again as
+a worker (one process group per measurement, so memory and MPI state belong to that
+run) and reads the rows the worker prints."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+#: one BLAS/OpenMP thread per rank; mpirun allowed as root (containers)
+ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+           OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+TAG = "ROWS "
+
+
+def emit(rows):
+    """Worker side: hand the rows (a list of dicts) to the launcher."""
+    print(TAG + json.dumps(rows), flush=True)
+
+
+def run_worker(script, args, ranks, cwd=None):
+    """Run `script --worker *args` on `ranks` ranks (under mpirun when > 1) and return
+    the rows it emitted; exit with its error output if it fails."""
+    cmd = [sys.executable, str(script), "--worker", *map(str, args)]
+    if ranks > 1:
+        cmd = [shutil.which("mpirun"), "--oversubscribe", "-n", str(ranks), *cmd]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=ENV, cwd=cwd)
+    if res.returncode != 0:
+        sys.exit(f"{' '.join(cmd)}: failed\n{res.stderr[-3000:]}")
+    return [row for line in res.stdout.splitlines() if line.startswith(TAG)
+            for row in json.loads(line[len(TAG):])]
