@@ -19,7 +19,8 @@ except PetscUnavailable as err:
 
 from krylov_check import FAR_ERROR, TOL, compare  # noqa: E402  (tests/ is on sys.path under pytest)
 from test_ensemble import _env  # noqa: E402
-from test_petsc_dense import ROOT, _run, assert_same_stream, needs_mpi, rows_on_two_ranks  # noqa: E402
+from test_petsc_dense import (ROOT, _run, assert_same_stream, mobility_problem, needs_mpi,  # noqa: E402
+                              rows_on_two_ranks)
 
 from sdmpi.dynamics.realisation import midpoint_brownian  # noqa: E402
 from sdmpi.hydro.krylov import lanczos_inverse_sqrt  # noqa: E402
@@ -62,11 +63,7 @@ def test_agrees_with_dense_two_ranks():
 
 def test_solve_mobility_every_backend():
     """Unbounded and periodic (sheared), a near-contact pair; the isolated sphere exactly."""
-    rng = np.random.default_rng(5)
-    pos = rng.uniform(0, 6, (4, 3))
-    pos[1] = pos[0] + [0.0, 2.001, 0.0]
-    kw = dict(strain=0.2, forces=rng.standard_normal((4, 3)), torques=rng.standard_normal((4, 3)),
-              rate_of_strain=np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]]))
+    pos, kw = mobility_problem(2.001)
     for box in ([9.0, 8.0, 10.0], None):
         ref = solve_mobility(pos, box, solver="dense", **kw)
         for name in ("petsc-krylov", "auto"):

@@ -64,12 +64,19 @@ def test_agrees_with_dense_two_ranks():
             assert out[key] < TOL, (key, out)
 
 
-def test_solve_mobility_one_rank():
+def mobility_problem(distance):
+    """Four random spheres, two of them at centre distance `distance`, and the keyword
+    arguments (strain, forces, torques, shear rate of strain) of a solve_mobility call."""
     rng = np.random.default_rng(5)
     pos = rng.uniform(0, 6, (4, 3))
-    pos[1] = pos[0] + [0.0, 2.01, 0.0]
+    pos[1] = pos[0] + [0.0, distance, 0.0]
     kw = dict(strain=0.2, forces=rng.standard_normal((4, 3)), torques=rng.standard_normal((4, 3)),
               rate_of_strain=np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]]))
+    return pos, kw
+
+
+def test_solve_mobility_one_rank():
+    pos, kw = mobility_problem(2.01)
     box = [9.0, 8.0, 10.0]
     for a, b in zip(solve_mobility(pos, box, solver="dense", **kw),
                     solve_mobility(pos, box, solver="petsc-dense", **kw)):
