@@ -136,12 +136,17 @@ def plot_moduli(red, path, phi) -> Path:
             ax.errorbar(_dodge(w, c)[ok], m[ok], yerr=[lower[ok], e[ok]], fmt=marker + "-",
                         color=colour, ms=5, lw=1, capsize=3, label=label)
         log_axes(ax, np.concatenate(shown))
-        ax.set_xlabel("ω  [1/t_D]")
-        ax.set_ylabel(f"{name}  [η_m/t_D]")
-        ax.set_title(f"{name}(ω)")
-        ax.grid(True, which="both", alpha=0.25)
-        legend_below(ax)
+        _frequency_axes(ax, f"{name}  [η_m/t_D]", f"{name}(ω)")
     return _save(fig, red, phi, path)
+
+
+def _frequency_axes(ax, ylabel, title):
+    """Labels, grid and legend of a panel against the frequency."""
+    ax.set_xlabel("ω  [1/t_D]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.25)
+    legend_below(ax)
 
 
 def _save(fig, red, phi, path) -> Path:
@@ -192,11 +197,7 @@ def plot_viscosities(red, path, phi) -> Path:
         ax.axhline(0.0, color="0.7", lw=0.6)
         ax.set_xscale("log")
         _plain_log_ticks(ax.xaxis, *ax.get_xlim())
-        ax.set_xlabel("ω  [1/t_D]")
-        ax.set_ylabel(f"{name} / η_m")
-        ax.set_title(f"{name}(ω) = {'G″' if q == 1 else 'G′'}/ω  (seed eq. 19)")
-        ax.grid(True, which="both", alpha=0.25)
-        legend_below(ax)
+        _frequency_axes(ax, f"{name} / η_m", f"{name}(ω) = {'G″' if q == 1 else 'G′'}/ω  (seed eq. 19)")
     return _save(fig, red, phi, path)
 
 
