@@ -34,7 +34,7 @@ OUT = HERE / "krylov.json"
 PLOT = HERE / "krylov_cost.png"
 
 
-def measure(n, backend, steps, tolerance):
+def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance):
     """One realisation stepped on COMM_WORLD; returns the row (on every rank)."""
     from mpi4py import MPI
 
@@ -45,7 +45,8 @@ def measure(n, backend, steps, tolerance):
     comm = MPI.COMM_WORLD
     job = load_job(str(ROOT / "jobs" / "demo.toml"), overrides=[
         f"system.n_particles={n}", "system.phi=[0.45]", f"solver.backend='{backend}'",
-        f"solver.tolerance={tolerance}", f"ensemble.ranks_per_task={comm.size}",
+        f"solver.tolerance={tolerance}", f"solver.lanczos_tolerance={lanczos_tolerance}",
+        f"hydrodynamics.ewald_tolerance={ewald_tolerance}", f"ensemble.ranks_per_task={comm.size}",
         "ensemble.realisations=1", "shear.omega=[6.283185307179586]",
         "integration.steps_per_period=2000"])  # dt = 5e-4 t_D, the seed's largest
     t0 = time.perf_counter()
@@ -63,29 +64,45 @@ def measure(n, backend, steps, tolerance):
     rss = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20  # KiB -> GiB
     far = "-" if backend != "petsc-krylov" else ("dense" if n < DENSE_FAR_FIELD_MAX_N else "spectral")
     return {"backend": backend, "n": n, "ranks": comm.size, "phi": 0.45, "tolerance": tolerance,
+            "lanczos_tolerance": lanczos_tolerance, "ewald_tolerance": ewald_tolerance,
             "far_field": far, "seconds_per_step": float(np.median(times)),
             "seconds_per_step_all": times, "iterations_per_step": its,
             "lanczos_per_step": lanczos, "peak_rss_gib_total": rss, "init_seconds": t_init,
             "dt": real.dt, "load_average_1min": os.getloadavg()[0]}
 
 
+def settings(row):
+    """(solver, Lanczos, Ewald) tolerances of a row (rows from before the Lanczos and Ewald
+    columns: Lanczos = solver tolerance, Ewald 1e-6)."""
+    return (row["tolerance"], row.get("lanczos_tolerance", row["tolerance"]), row.get("ewald_tolerance", 1e-6))
+
+
+def label(setting):
+    return "tol {:g}, Lanczos {:g}, Ewald {:g}".format(*setting)
+
+
 def merge(rows):
     data = json.loads(OUT.read_text()) if OUT.exists() else {"rows": []}
-    keys = {(r["backend"], r["n"], r["ranks"]) for r in rows}
-    data["rows"] = [r for r in data["rows"] if (r["backend"], r["n"], r["ranks"]) not in keys] + rows
-    data["rows"].sort(key=lambda r: (r["backend"], r["ranks"], r["n"]))
+
+    def key(r):
+        return r["backend"], r["n"], r["ranks"], settings(r)
+
+    new = {key(r) for r in rows}
+    data["rows"] = [r for r in data["rows"] if key(r) not in new] + rows
+    data["rows"].sort(key=lambda r: (r["backend"], r["ranks"], settings(r), r["n"]))
     data["machine"] = {"cpus": os.cpu_count(), "python": platform.python_version(),
                        "note": "2 cores shared with other jobs: times include contention"}
-    kry = sorted((r for r in data["rows"] if r["backend"] == "petsc-krylov" and r["ranks"] == 2),
-                 key=lambda r: r["n"])
-    data.pop("cost_exponent_first_to_last", None)
-    # d log(time) / d log(N) between consecutive sizes (petsc-krylov, 2 ranks), with the
-    # load averages the two were measured at (the machine is shared)
-    data["cost_exponents_2_ranks"] = [
-        {"from": a["n"], "to": b["n"],
-         "exponent": float(np.log(b["seconds_per_step"] / a["seconds_per_step"]) / np.log(b["n"] / a["n"])),
-         "load_averages": [a.get("load_average_1min"), b.get("load_average_1min")]}
-        for a, b in zip(kry, kry[1:])]
+    # d log(time) / d log(N) between consecutive sizes (petsc-krylov, 2 ranks, per
+    # setting), with the load averages the two were measured at (the machine is shared)
+    data["cost_exponents_2_ranks"] = []
+    for setting in sorted({settings(r) for r in data["rows"]}):
+        kry = sorted((r for r in data["rows"] if r["backend"] == "petsc-krylov" and r["ranks"] == 2
+                      and settings(r) == setting), key=lambda r: r["n"])
+        data["cost_exponents_2_ranks"] += [
+            {"settings": label(setting), "from": a["n"], "to": b["n"],
+             "exponent": float(np.log(b["seconds_per_step"] / a["seconds_per_step"]) / np.log(b["n"] / a["n"])),
+             "load_averages": [a.get("load_average_1min"), b.get("load_average_1min")]}
+            for a, b in zip(kry, kry[1:])]
     OUT.write_text(json.dumps(data, indent=1) + "\n")
     return data
 
@@ -99,20 +116,21 @@ def plot(data):
     fig, ax = plt.subplots(figsize=(5.5, 4))
     groups = {}
     for r in data["rows"]:
-        groups.setdefault((r["backend"], r["ranks"]), []).append(r)
-    for (backend, ranks), rows in sorted(groups.items()):
+        groups.setdefault((r["backend"], r["ranks"], settings(r)), []).append(r)
+    for (backend, ranks, setting), rows in sorted(groups.items()):
         rows.sort(key=lambda r: r["n"])
         ax.loglog([r["n"] for r in rows], [r["seconds_per_step"] for r in rows], "o-",
-                  label=f"{backend}, {ranks} rank(s)")
-    kry = groups.get(("petsc-krylov", 2))
-    if kry:
+                  label=f"{backend}, {ranks} rank(s)" + ("" if backend == "dense" else f"\n{label(setting)}"))
+    fast = [rows for (backend, ranks, _), rows in groups.items() if backend == "petsc-krylov" and ranks == 2]
+    if fast:
+        kry = min(fast, key=lambda rows: rows[-1]["seconds_per_step"])
         n0, t0 = kry[0]["n"], kry[0]["seconds_per_step"]
         ns = np.array([n0, max(r["n"] for r in kry)])
         ax.loglog(ns, t0 * (ns / n0) ** 1.5, "k--", lw=0.8, label="N^1.5")
     ax.set_xlabel("N (phi = 0.45)")
     ax.set_ylabel("wall time per Brownian step [s]")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(PLOT, dpi=120)
 
@@ -123,20 +141,27 @@ def main():
     parser.add_argument("--ranks", type=int, default=2)
     parser.add_argument("--backend", default="petsc-krylov")
     parser.add_argument("--steps", type=int, default=3)
-    parser.add_argument("--tolerance", type=float, default=1e-8)
+    parser.add_argument("--tolerance", type=float, default=1e-8, help="solver.tolerance")
+    parser.add_argument("--lanczos-tolerance", type=float, default=None,
+                        help="solver.lanczos_tolerance (default: --tolerance)")
+    parser.add_argument("--ewald-tolerance", type=float, default=1e-6,
+                        help="hydrodynamics.ewald_tolerance")
     parser.add_argument("--plot", action="store_true")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         from mpi4py import MPI
 
-        row = measure(args.sizes[0], args.backend, args.steps, args.tolerance)
+        row = measure(args.sizes[0], args.backend, args.steps, args.tolerance, args.ewald_tolerance,
+                      args.lanczos_tolerance or args.tolerance)
         if MPI.COMM_WORLD.rank == 0:
             emit([row])
         return
     for n in args.sizes:
         (row,) = run_worker(__file__, ["--sizes", n, "--backend", args.backend, "--steps", args.steps,
-                                       "--tolerance", args.tolerance], args.ranks, cwd=ROOT)
+                                       "--tolerance", args.tolerance, "--ewald-tolerance",
+                                       args.ewald_tolerance, "--lanczos-tolerance",
+                                       args.lanczos_tolerance or args.tolerance], args.ranks, cwd=ROOT)
         print(json.dumps({k: v for k, v in row.items() if not k.endswith("_all")}), flush=True)
         merge([row])
     if args.plot or args.sizes:

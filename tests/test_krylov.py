@@ -26,7 +26,7 @@ from sdmpi.dynamics.realisation import midpoint_brownian  # noqa: E402
 from sdmpi.hydro.krylov import lanczos_inverse_sqrt  # noqa: E402
 from sdmpi.hydro.lubrication import close_pairs, lubrication_matrix, lubrication_sparse  # noqa: E402
 from sdmpi.hydro.resistance import grand_resistance, split_resistance  # noqa: E402
-from sdmpi.hydro.solvers import make_solver, resolve_backend  # noqa: E402
+from sdmpi.hydro.solvers import make_solver, resolve_backend, warm_start  # noqa: E402
 
 # Agreement with dense: the solves stop at a relative preconditioned residual TOL = 1e-8,
 # which bounds the relative error of the solution up to the preconditioner's quality
@@ -135,6 +135,39 @@ def test_lanczos_inverse_square_root():
     # the stopping test (change per step) tracks the error: measured 2.7e-8
     assert np.abs(got - exact).max() < 1e-7 * np.abs(exact).max()
     assert its < n // 2  # converged long before the Krylov space is full (measured 172)
+
+
+def test_warm_start_and_lanczos_tolerance():
+    """A solve warm-started from a nearby configuration's solution (the Brownian midpoint)
+    gives the cold-start answer to the tolerance in fewer iterations; a looser Lanczos
+    tolerance gives the Brownian force to about that tolerance in fewer iterations."""
+    from petsc_check import configuration
+
+    pos, side = configuration(0.5, 1)
+    n, box = len(pos), np.full(3, side)
+    start = split_resistance(pos, np.ones(n), box, 0.2)
+    rng = np.random.default_rng(7)
+    forces = rng.standard_normal((n, 6))
+    first = make_solver("petsc-krylov", start, tolerance=1e-8)
+    first.velocities(forces, np.zeros((n, 5)))
+    # the midpoint of a step: displacements ~1e-3 a with the start's pair sets
+    mid = split_resistance(start.positions + 1e-3 * rng.standard_normal((n, 3)), np.ones(n), box,
+                           0.2, plan=start.plan)
+    cold, warm = (make_solver("petsc-krylov", mid, tolerance=1e-8) for _ in range(2))
+    warm_start(warm, first)
+    warm_start(make_solver("dense", grand_resistance(pos, np.ones(n), box, 0.2)), first)  # no-op
+    u_cold, u_warm = (s.velocities(forces, np.zeros((n, 5))) for s in (cold, warm))
+    # both stop at a relative residual 1e-8 (errors 1-10 x that, see AGREE)
+    assert np.abs(u_cold - u_warm).max() < AGREE * np.abs(u_cold).max()
+    assert warm.stats["iterations"] < cold.stats["iterations"]  # measured 30 vs 40
+
+    loose = make_solver("petsc-krylov", start, tolerance=1e-8, lanczos_tolerance=1e-3)
+    z = rng.standard_normal(first.noise_shape)
+    tight_force, loose_force = first.brownian_forces(z), loose.brownian_forces(z)
+    # the stopping test tracks the error (test_lanczos_inverse_square_root; measured
+    # 7e-4 here, 16 vs 47 iterations): 10 x tol
+    assert np.abs(tight_force - loose_force).max() < 1e-2 * np.abs(tight_force).max()
+    assert loose.stats["lanczos"] < first.stats["lanczos"]
 
 
 BOX = np.array([7.0, 7.0, 7.0])

@@ -423,6 +423,11 @@ class Solver:
     tolerance: float = key(1e-8, "float", "relative residual of iterative solves "
                            "(petsc-krylov; direct backends ignore it)",
                            allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))
+    lanczos_tolerance: float | None = key(None, "float", "relative accuracy of the Lanczos "
+                                          "square root M^-1/2 z in the Brownian forces "
+                                          "(petsc-krylov); absent: solver.tolerance",
+                                          allowed=Range(0.0, 1.0, lo_open=True, hi_open=True),
+                                          optional=True)
 
 
 @dataclass(frozen=True)

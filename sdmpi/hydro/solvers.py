@@ -68,10 +68,10 @@ def _petsc_dense(resistance, comm=None):
     return PetscDenseSolver(resistance, comm)
 
 
-def _petsc_krylov(resistance, comm=None, tolerance=DEFAULT_TOL):
+def _petsc_krylov(resistance, comm=None, tolerance=DEFAULT_TOL, lanczos_tolerance=None):
     from .krylov import KrylovSolver
 
-    return KrylovSolver(resistance, comm, tolerance)
+    return KrylovSolver(resistance, comm, tolerance, lanczos_tolerance)
 
 
 BACKENDS = {"dense": DenseSolver, "petsc-dense": _petsc_dense, "petsc-krylov": _petsc_krylov}
@@ -102,16 +102,17 @@ def assemble(name, *args, comm=None, **kwargs):
     return grand_resistance(*args, **kwargs)
 
 
-def make_solver(name, resistance, comm=None, tolerance=DEFAULT_TOL):
+def make_solver(name, resistance, comm=None, tolerance=DEFAULT_TOL, lanczos_tolerance=None):
     """The backend `name` for a resistance from `assemble(name, ...)`, solving on the MPI
     communicator `comm` (None: this rank alone; collective over comm for the PETSc
-    backends); tolerance: relative residual of the iterative backends."""
+    backends); tolerance: relative residual of the iterative backends, lanczos_tolerance:
+    accuracy of their Brownian square roots (None: tolerance)."""
     try:
         backend = BACKENDS[name]
     except KeyError:
         raise ValueError(f"solver must be one of {sorted(BACKENDS)}, got {name!r}") from None
     if name in MATRIX_FREE:
-        return backend(resistance, comm, tolerance)
+        return backend(resistance, comm, tolerance, lanczos_tolerance)
     return backend(resistance, comm)
 
 
@@ -119,6 +120,15 @@ def noise_shape(solver):
     """Shape of the standard normal noise `solver.brownian_forces` takes: (N, 6) unless
     the backend declares its own (noise_shape)."""
     return getattr(solver, "noise_shape", (solver.n, 6))
+
+
+def warm_start(solver, previous):
+    """Let solver's next velocities() solve start from the last solution of previous (a
+    solver of the same backend at a nearby configuration), where the backend iterates
+    (petsc-krylov); the direct backends ignore it."""
+    start = getattr(solver, "warm_start", None)
+    if start is not None:
+        start(previous)
 
 
 def solver_stats(solver):
