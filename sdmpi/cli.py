@@ -85,16 +85,25 @@ def summary(job) -> str:
     if s.protocol == "oscillatory":
         shear = f"oscillatory, gamma0 = {s.gamma0:g}"
     elif s.protocol == "steady":
-        shear = f"steady, rate = {s.rate:g} [1/{unit}]"
+        per_time = "gamma_dot" if unit == "1/gamma_dot" else f"1/{unit}"
+        shear = f"steady, rate = {s.rate:g} [{per_time}]"
     else:
         shear = "none (quiescent)"
+    phi = "areal fraction" if job.system.geometry == "monolayer" else "phi"
     lines = [
         f"job {job.job.name!r}: valid (hash {job_hash(job)[:16]})",
-        f"  N = {job.system.n_particles}, phi = "
+        f"  N = {job.system.n_particles}, {phi} = "
         + ", ".join(f"{p:g}" for p in job.system.phi) + f", medium {medium}",
         f"  shear {shear}; Brownian {'on' if job.brownian.enabled else 'off'}; "
         f"time unit {unit}",
     ]
+    from .config.units import scales
+
+    si = scales(job)
+    if si is not None:
+        pe = "" if s.protocol != "steady" or si.thermal_energy is None else f"; Pe = {si.peclet(s.rate):.3g}"
+        lines.append(f"  physical units: a = {si.length:.4g} m, {unit} = {si.time:.4g} s, "
+                     f"stress unit {si.stress:.4g} Pa, force unit {si.force:.4g} N{pe}")
     if job.system.size_classes:
         sysm = job.system
         lines.insert(2, "  size classes: " + ", ".join(
@@ -108,9 +117,27 @@ def summary(job) -> str:
     omegas = f"{len(s.omega)} omega x " if s.omega else ""
     lines.append(f"  tasks: {len(tasks)} = {len(job.system.phi)} phi x {omegas}"
                  f"{job.ensemble.realisations} realisations; "
-                 f"total cost {cost:.3g} (steps x N^3); backend {job.solver.backend}, "
+                 f"total cost {cost:.3g} (steps x N^3); backend {_backend(job)}, "
                  f"{job.ensemble.ranks_per_task} rank(s) per task")
     return "\n".join(lines)
+
+
+def _backend(job) -> str:
+    """The solver backend as `run` uses it ("auto" resolved), and whether PETSc, which
+    the other backends need, can be imported here (`run` refuses the job otherwise)."""
+    from .hydro.petsc_dense import PetscUnavailable, import_petsc4py
+    from .hydro.solvers import backend_for
+
+    name = job.solver.backend
+    used = backend_for(name, job.system.n_particles, job.ensemble.ranks_per_task)
+    text = name if used == name else f"{name} (here {used})"
+    if used == "dense":
+        return text
+    try:
+        import_petsc4py()
+    except PetscUnavailable as err:
+        return f"{text} - NOT RUNNABLE HERE, sdmpi run would refuse it: {err}"
+    return text
 
 
 # --------------------------------------------------------------------------- run

@@ -90,3 +90,30 @@ def test_petsc_backend_without_petsc4py_is_bad_input(monkeypatch):
             runner._check_backend(job)
     runner._check_backend(load_job(demo))  # dense
     runner._check_backend(load_job(demo, ['solver.backend="auto"']))  # N = 8: dense
+
+
+def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):
+    """`sdmpi validate` says what `run` will do: the backend "auto" resolves to, and that a
+    PETSc backend cannot run where petsc4py does not load; areal fractions for monolayers;
+    the SI scales and Peclet number of a [physical] job."""
+    from sdmpi.cli import main
+    from sdmpi.hydro import petsc_dense
+
+    jobs = Path(__file__).parents[1] / "jobs"
+    assert main(["validate", str(jobs / "demo.toml"), "--set", 'solver.backend="auto"',
+                 "--set", "system.n_particles=343"]) == 0
+    assert "backend auto (here petsc-krylov)" in capsys.readouterr().out
+
+    def unavailable():
+        raise petsc_dense.PetscUnavailable("petsc4py cannot be imported (test)")
+
+    monkeypatch.setattr(petsc_dense, "import_petsc4py", unavailable)
+    assert main(["validate", str(jobs / "demo.toml"), "--set", 'solver.backend="petsc-krylov"']) == 0
+    assert "petsc-krylov - NOT RUNNABLE HERE, sdmpi run would refuse it" in capsys.readouterr().out
+    assert main(["validate", str(jobs / "monolayer_hydro.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "areal fraction = 0.2, 0.3" in out and "rate = 1 [gamma_dot]" in out
+    assert main(["validate", str(jobs / "boehmite_epoxy.toml")]) == 0
+    out = capsys.readouterr().out
+    # a = 55 nm (the job's radius); Pe = 6 pi eta a^3 gamma_dot / kT = the reduced rate in t_D units
+    assert "physical units: a = 5.5e-08 m" in out and "Pe = 8.36" in out

@@ -166,14 +166,12 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
 def _check_backend(job) -> None:
     """A PETSc backend (named, or what "auto" picks for this N and ranks_per_task) needs
     petsc4py: refuse the job before anything is written if it cannot be imported."""
-    from ..hydro.solvers import AUTO_KRYLOV_MIN_N
-
-    backend, rpt = job.solver.backend, job.ensemble.ranks_per_task
-    if backend == "dense" or (backend == "auto" and rpt == 1
-                              and job.system.n_particles < AUTO_KRYLOV_MIN_N):
-        return
     from ..hydro.petsc_dense import PetscUnavailable, import_petsc4py
+    from ..hydro.solvers import backend_for
 
+    backend = job.solver.backend
+    if backend_for(backend, job.system.n_particles, job.ensemble.ranks_per_task) == "dense":
+        return
     try:
         import_petsc4py()  # not load_petsc: PETSc initialisation is collective
     except PetscUnavailable as err:

@@ -82,8 +82,14 @@ CHOICES = (*BACKENDS, "auto")
 
 
 def resolve_backend(name, n_particles, comm=None):
-    """The backend `name` stands for: itself, or for "auto" dense (one rank) or
-    petsc-dense (comm of several ranks) below AUTO_KRYLOV_MIN_N particles, else
+    """The backend `name` stands for on the communicator comm (None: one rank): see
+    `backend_for`."""
+    return backend_for(name, n_particles, 1 if comm is None else comm.size)
+
+
+def backend_for(name, n_particles, ranks):
+    """The backend `name` stands for with `ranks` ranks per task: itself, or for "auto"
+    dense (one rank) or petsc-dense (several) below AUTO_KRYLOV_MIN_N particles, else
     petsc-krylov."""
     if name not in CHOICES:
         raise ValueError(f"solver must be one of {list(CHOICES)}, got {name!r}")
@@ -91,7 +97,7 @@ def resolve_backend(name, n_particles, comm=None):
         return name
     if n_particles >= AUTO_KRYLOV_MIN_N:
         return "petsc-krylov"
-    return "dense" if comm is None or comm.size == 1 else "petsc-dense"
+    return "dense" if ranks == 1 else "petsc-dense"
 
 
 def assemble(name, *args, comm=None, **kwargs):
