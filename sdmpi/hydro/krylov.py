@@ -15,16 +15,17 @@ field as a product `matvec`, L_uu a PETSc AIJ matrix). The stresslets follow wit
 another solve: -S = P_e (lambda + L V).
 
 Preconditioner: the same block system with M replaced by its self (diagonal) part D
-(isolated-sphere 11x11 blocks), solved exactly by block elimination,
+(isolated-sphere 11x11 blocks), solved by block elimination,
 
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
 where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is applied
-through its sparse Cholesky factor (MUMPS through PETSc, the whole G on every rank: the
-iteration counts do not depend on the number of ranks; incomplete Cholesky, as in fast
-SD, stalls here on clusters of pairs at the minimum gap). Near-contact pairs, which make
-R ill-conditioned, are in G exactly: the iterations only see the far field's
-many-body part M - D.
+through an incomplete Cholesky factor with one level of fill, ICC(1), of the whole G on
+every rank (the iteration counts do not depend on the number of ranks). ICC(0), as in
+fast SD, stalls on clusters of pairs at the minimum gap; ICC(1) needs as few iterations
+as the exact factor at a fraction of its cost (INNER_OPTIONS). Near-contact pairs, which
+make R ill-conditioned, are thus (nearly exactly) in the preconditioner: the iterations
+mostly see the far field's many-body part M - D.
 
 Brownian forces with covariance R_FU = P_u M^-1 P_u^T + L_uu, without a dense root:
 
@@ -62,21 +63,17 @@ MAX_ITERATIONS = 2000
 LANCZOS_MAX_ITERATIONS = 500
 #: GMRES restart length
 GMRES_RESTART = 200
-#: the preconditioner's solve with G: sparse Cholesky (MUMPS) of the whole G on every
-#: rank (redundant). Measured (N = 343, phi = 0.45): ICC(0) stalls (> 600 iterations)
-#: on configurations with clusters of pairs at the minimum gap, ICC(1) and the exact
-#: factor take 50-52; block Jacobi per rank would drop the lubrication of the pairs
-#: across the split (5-10x the iterations on 2 ranks)
-#: G keeps the lubrication coupling (off-diagonal 6x6 blocks) of the particle pairs closer
-#: than this gap (mean radii); the farther pairs only add their diagonal blocks (each
-#: pair's block is positive definite, so are its diagonal blocks: G stays positive
-#: definite). Measured (N = 1000, phi = 0.45, solver tolerance 1e-6): all pairs (cut-off
-#: 2) 123 iterations per step and 20 ms per application, gap 1 126 and 10 ms, 0.5 140,
-#: 0.3 160, 0.1 208
-PRECONDITIONER_GAP = 1.0
+#: the preconditioner's solve with G: incomplete Cholesky with one level of fill, ICC(1),
+#: of the whole G on every rank (redundant: the iteration counts do not depend on the
+#: split). Measured (phi = 0.45, solver tolerance 1e-6, one solve): N = 1000 ICC(1) 42
+#: iterations at 1.6 ms per application, the exact sparse Cholesky factor (MUMPS) 42 at
+#: 7 ms (N = 4096: 100-150 ms, factorisation 7-13 s); ICC(2) 41, 3.7 ms. ICC(0) stalls
+#: (839 iterations at N = 1000) on clusters of pairs at the minimum gap; at phi = 0.55,
+#: N = 343 ICC(1) 52, Cholesky 51. Block Jacobi per rank would drop the lubrication of
+#: the pairs across the split (5-10x the iterations on 2 ranks)
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
 INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "redundant", "redundant_ksp_type": "preonly",
-                 "redundant_pc_type": "cholesky", "redundant_pc_factor_mat_solver_type": "mumps"}
+                 "redundant_pc_type": "icc", "redundant_pc_factor_levels": "1"}
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (faster there; its matrix
@@ -228,18 +225,6 @@ class _SelfPreconditioner(_Context):
         z.getArray()[:] = np.einsum("pij,pj->pi", s.d_inv, r.getArray(readonly=True).reshape(-1, NDOF)).ravel()
 
 
-def _near_blocks(l_uu, pairs, p0, n, max_gap):
-    """l_uu (this rank's rigid rows, of the particles from p0 on; columns: all 6N) without
-    the off-diagonal 6x6 blocks of the particle pairs that have no image closer than
-    max_gap (mean radii)."""
-    near = pairs.gap < max_gap * 0.5 * pairs.radii_sum
-    keys = np.unique(np.concatenate([pairs.i[near] * n + pairs.j[near], pairs.j[near] * n + pairs.i[near]]))
-    coo = l_uu.tocoo()
-    r, c = coo.row // 6 + p0, coo.col // 6
-    keep = (r == c) | np.isin(r * n + c, keys)
-    return scipy.sparse.csr_matrix((coo.data[keep], (coo.row[keep], coo.col[keep])), shape=l_uu.shape)
-
-
 class KrylovSolver:
     """The `petsc-krylov` backend for a `resistance.SplitResistance` on the MPI
     communicator comm (None: this rank alone); tol: relative residual of every solve,
@@ -283,7 +268,6 @@ class KrylovSolver:
         self.l_e = lub[(NDOF * local + np.arange(6, NDOF)).ravel()]
         rigid = (NDOF * np.arange(n)[:, None] + np.arange(6)).ravel()
         l_uu = self.l_u[:, rigid].tocsr()
-        g_uu = _near_blocks(l_uu, resistance.pairs, p0, n, PRECONDITIONER_GAP)
         # far-field self blocks (isolated spheres) and the Schur complement G
         radii = resistance.radii[p0:p1]
         inv = {a: np.linalg.inv(self_mobility(a)) for a in np.unique(radii)}
@@ -291,7 +275,7 @@ class KrylovSolver:
         d_uu = scipy.sparse.block_diag(list(self.d_inv[:, :6, :6]), format="csr") if nl else \
             scipy.sparse.csr_matrix((0, 0))
         shift = scipy.sparse.csr_matrix((d_uu.data, d_uu.indices + 6 * p0, d_uu.indptr), shape=l_uu.shape)
-        schur = (g_uu + shift).tocsr()
+        schur = (l_uu + shift).tocsr()
         self.l_uu = self._aij(l_uu)
         self.schur = self._aij(schur)
         self.u_in, self.u_out = self.l_uu.createVecs()
