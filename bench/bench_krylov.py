@@ -1,17 +1,21 @@
 """Benchmark: Brownian SD steps with the petsc-krylov backend at phi = 0.45 on a
 sub-communicator of `--ranks` ranks (ranks_per_task), against dense (one rank) where
 dense is affordable. Not part of the test suite; numbers go to bench/krylov.json (merged
-per (backend, N, ranks)) and the log-log cost plot to bench/krylov_cost.png.
+per (backend, N, ranks, tolerances)) and the log-log cost plot to bench/krylov_cost.png.
 
 Per run: one realisation of the demo job (oscillatory shear, Brownian, phi = 0.45,
-N spheres, dt = 5e-4 t_D, solver.tolerance 1e-8 by default, far field by N as in
-`krylov`: dense below 400 particles, spectral from there on), one
-warm-up step (numba compilation, PETSc set-up), then `--steps` timed steps. Recorded:
-wall time per step (max over ranks), Krylov and Lanczos iterations per step, peak
-resident memory summed over the ranks (ru_maxrss), the far-field operator used.
-Each (N, ranks) runs in its own process group so that peak memory is per size.
+N spheres, dt = 5e-4 t_D; solver.tolerance, solver.lanczos_tolerance and
+hydrodynamics.ewald_tolerance from --tolerance (1e-8), --lanczos-tolerance (= --tolerance)
+and --ewald-tolerance (1e-6); far field by N as in `krylov`: dense below 400 particles,
+spectral from there on), one warm-up step (numba compilation, PETSc set-up), then
+`--steps` timed steps. Recorded: wall time per step (max over ranks), Krylov and Lanczos
+iterations per step, peak resident memory summed over the ranks (ru_maxrss), the
+far-field operator used. Each (N, ranks) runs in its own process group so that peak
+memory is per size.
 
   python bench/bench_krylov.py --sizes 343 1000 --ranks 2          # launches mpirun
+  python bench/bench_krylov.py --sizes 343 1000 4096 --ranks 2 --tolerance 1e-6 \
+      --lanczos-tolerance 1e-4 --ewald-tolerance 1e-4              # the fast settings
   python bench/bench_krylov.py --sizes 125 343 --backend dense --ranks 1
   python bench/bench_krylov.py --plot                                # plot from the JSON
 """

@@ -230,3 +230,29 @@ def test_two_ranks_per_task_same_stream(tmp_path):
     for run in (one, two):
         assert np.all(run["solver_iterations"] > 0) and np.all(run["lanczos_iterations"] > 0)
         assert np.all(run["solver_residual"] < 1e-10)
+
+
+def test_fast_tolerances_change_the_stream_only_at_their_level():
+    """The benchmark's fast settings (solver tolerance 1e-6, Lanczos 1e-4, Ewald 1e-4)
+    against tight ones (1e-10, 1e-10, 1e-8) on the same realisation (N = 27, phi = 0.45,
+    the same noise): each sample's stresses agree to 1e-3 of their scale (measured 7e-5
+    hydrodynamic, 4e-4 Brownian: far below the sampling noise of a stress average), positions to
+    3e-5 a after 4 steps (Lanczos error 1e-4 x the Brownian displacement, ~0.09 a:
+    ~1e-5; measured 6.6e-6)."""
+    from sdmpi.config import enumerate_tasks, load_job
+    from sdmpi.dynamics import Realisation
+
+    streams = {}
+    for name, (tol, lanczos, ewald) in {"tight": (1e-10, 1e-10, 1e-8), "fast": (1e-6, 1e-4, 1e-4)}.items():
+        job = load_job(str(ROOT / "jobs" / "demo.toml"), [
+            "system.n_particles=27", "system.phi=[0.45]", 'solver.backend="petsc-krylov"',
+            f"solver.tolerance={tol}", f"solver.lanczos_tolerance={lanczos}",
+            f"hydrodynamics.ewald_tolerance={ewald}", "integration.steps_per_period=2000"])
+        real = Realisation(job, enumerate_tasks(job)[0])
+        streams[name] = real.advance(4), real.positions
+    (tight, x_tight), (fast, x_fast) = streams["tight"], streams["fast"]
+    for key in ("stress_hydrodynamic", "stress_brownian"):
+        scale = np.abs(tight[key]).max()
+        assert np.abs(tight[key] - fast[key]).max() < 1e-3 * scale, key
+    assert np.abs(x_tight - x_fast).max() < 3e-5
+    assert fast["solver_iterations"].sum() < tight["solver_iterations"].sum()
