@@ -257,27 +257,24 @@ class KrylovSolver:
         self.pair_i, self.pair_j, self.pair_chol = resistance.pair_i, resistance.pair_j, resistance.pair_chol
         self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
 
-        # this rank's block rows of the lubrication matrix, split into rigid (6 per
-        # particle) and strain (5) rows
+        # this rank's block rows of the lubrication matrix L (11 x 11 blocks), and of its
+        # rigid-body part L_uu (6 x 6 blocks)
         bsr = resistance.lubrication
         lo, hi = bsr.indptr[p0], bsr.indptr[p1]
-        lub = scipy.sparse.bsr_matrix((bsr.data[lo:hi], bsr.indices[lo:hi], bsr.indptr[p0:p1 + 1] - lo),
-                                      shape=(NDOF * nl, NDOF * n)).tocsr()
-        local = np.arange(nl)[:, None]
-        self.l_u = lub[(NDOF * local + np.arange(6)).ravel()]
-        self.l_e = lub[(NDOF * local + np.arange(6, NDOF)).ravel()]
-        rigid = (NDOF * np.arange(n)[:, None] + np.arange(6)).ravel()
-        l_uu = self.l_u[:, rigid].tocsr()
-        # far-field self blocks (isolated spheres) and the Schur complement G
+        blocks, cols, ptr = bsr.data[lo:hi], bsr.indices[lo:hi], bsr.indptr[p0:p1 + 1] - lo
+        self.lub = scipy.sparse.bsr_matrix((blocks, cols, ptr), shape=(NDOF * nl, NDOF * n))
+        l_uu = scipy.sparse.bsr_matrix((np.ascontiguousarray(blocks[:, :6, :6]), cols, ptr),
+                                       shape=(6 * nl, 6 * n))
+        # far-field self blocks (isolated spheres) and the Schur complement G: D_uu^-1 added
+        # to the diagonal blocks (lubrication_sparse stores one for every particle)
         radii = resistance.radii[p0:p1]
         inv = {a: np.linalg.inv(self_mobility(a)) for a in np.unique(radii)}
         self.d_inv = np.array([inv[a] for a in radii]).reshape(nl, NDOF, NDOF)
-        d_uu = scipy.sparse.block_diag(list(self.d_inv[:, :6, :6]), format="csr") if nl else \
-            scipy.sparse.csr_matrix((0, 0))
-        shift = scipy.sparse.csr_matrix((d_uu.data, d_uu.indices + 6 * p0, d_uu.indptr), shape=l_uu.shape)
-        schur = (l_uu + shift).tocsr()
-        self.l_uu = self._aij(l_uu)
-        self.schur = self._aij(schur)
+        diagonal = np.flatnonzero(cols == p0 + np.repeat(np.arange(nl), np.diff(ptr)))
+        schur = l_uu.copy()
+        schur.data[diagonal] += self.d_inv[:, :6, :6]
+        self.l_uu = self._aij(l_uu.tocsr())
+        self.schur = self._aij(schur.tocsr())
         self.u_in, self.u_out = self.l_uu.createVecs()
 
         self.inner = PETSc.KSP().create(comm=self.comm)
@@ -393,7 +390,8 @@ class KrylovSolver:
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
         p0, p1 = self.p0, self.p1
         v_e = self._generalized(np.zeros((self.n, 6)), einf)
-        rhs = np.concatenate([v_e[NDOF * p0:NDOF * p1], forces[p0:p1].ravel() - self.l_u @ v_e])
+        l_v = (self.lub @ v_e).reshape(-1, NDOF)[:, :6]
+        rhs = np.concatenate([v_e[NDOF * p0:NDOF * p1], (forces[p0:p1] - l_v).ravel()])
         sol = self._run(self.ksp, rhs)
         u = self._gather(sol[self.nl11:], self.counts6).reshape(self.n, 6)
         self._last = (u.copy(), np.array(einf, dtype=float), sol[:self.nl11])
@@ -413,7 +411,7 @@ class KrylovSolver:
                 mat.setUp()
                 self._mobility_ksp = self._ksp(mat, "cg", _SelfPreconditioner(self))
             lam = self._run(self._mobility_ksp, v[NDOF * self.p0:NDOF * self.p1])
-        minus_s = lam.reshape(-1, NDOF)[:, 6:].ravel() + self.l_e @ v
+        minus_s = (lam.reshape(-1, NDOF) + (self.lub @ v).reshape(-1, NDOF))[:, 6:].ravel()
         return -self._gather(minus_s, 5 * (self.counts11 // NDOF)).reshape(self.n, 5)
 
     def brownian_forces(self, noise):
