@@ -115,3 +115,28 @@ def test_van_der_waals_tail_grows_for_small_pairs():
     big = law.magnitude(2.0, 1.0, 1.0) / law.magnitude(0.01, 1.0, 1.0)
     small = law.magnitude(0.6, 0.3, 0.3) / law.magnitude(0.01, 0.3, 0.3)
     assert small > 3 * big
+
+
+@pytest.mark.parametrize("side, strain", [(10.0, 0.0), (10.0, 0.45), (13.0, -0.9), (5.5, 0.2)])
+def test_mc_cell_list_finds_every_sphere_within_contact(side, strain):
+    """The MC overlap check looks only at the spheres in the 27 cells around a trial
+    position (lattice coordinates of the sheared box): for random spheres and trial
+    points anywhere (unwrapped), every sphere within the largest contact distance 2 by
+    the brute-force Lees-Edwards minimum image is among them (at side 5.5 the cells
+    collapse to one: all spheres)."""
+    from sdmpi.dynamics.initial import _cell_counts, _cell_index, _cells, _min_image, _neighbours
+
+    rng = np.random.default_rng(0)
+    pos = rng.uniform(-side, 2 * side, (300, 3))
+    cells = _cell_counts(side, strain, 2.0)
+    assert (cells.min() >= 3) == (side > 6.0)
+    head, nxt, _ = _cells(pos, side, strain, cells)
+    near = np.empty(len(pos), dtype=np.int64)
+    missed = 0
+    for trial in rng.uniform(-side, 2 * side, (300, 3)):
+        found = set(near[:_neighbours(_cell_index(trial, side, strain, cells), cells, head, nxt, near)])
+        for j in range(len(pos)):
+            dx = trial - pos[j]
+            _min_image(dx, side, strain)
+            missed += bool(dx @ dx < 4.0 and j not in found)
+    assert missed == 0
