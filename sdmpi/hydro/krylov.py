@@ -20,10 +20,10 @@ Preconditioner: the same block system with M replaced by its self (diagonal) par
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
 where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is applied
-through an incomplete Cholesky factor with one level of fill, ICC(1), of the whole G on
-every rank (the iteration counts do not depend on the number of ranks). ICC(0), as in
-fast SD, stalls on clusters of pairs at the minimum gap; ICC(1) needs as few iterations
-as the exact factor at a fraction of its cost (INNER_OPTIONS). Near-contact pairs, which
+through an incomplete Cholesky factor, ICC(ICC_LEVELS), on the pattern of G's full 6x6
+blocks, of the whole G on every rank (the iteration counts do not depend on the number
+of ranks). It needs about as few iterations as the exact factor at a fraction of its
+cost (measurements at INNER_OPTIONS). Near-contact pairs, which
 make R ill-conditioned, are thus (nearly exactly) in the preconditioner: the iterations
 mostly see the far field's many-body part M - D.
 
@@ -63,17 +63,20 @@ MAX_ITERATIONS = 2000
 LANCZOS_MAX_ITERATIONS = 500
 #: GMRES restart length
 GMRES_RESTART = 200
-#: the preconditioner's solve with G: incomplete Cholesky with one level of fill, ICC(1),
-#: of the whole G on every rank (redundant: the iteration counts do not depend on the
-#: split). Measured (phi = 0.45, solver tolerance 1e-6, one solve): N = 1000 ICC(1) 42
-#: iterations at 1.6 ms per application, the exact sparse Cholesky factor (MUMPS) 42 at
-#: 7 ms (N = 4096: 100-150 ms, factorisation 7-13 s); ICC(2) 41, 3.7 ms. ICC(0) stalls
-#: (839 iterations at N = 1000) on clusters of pairs at the minimum gap; at phi = 0.55,
-#: N = 343 ICC(1) 52, Cholesky 51. Block Jacobi per rank would drop the lubrication of
-#: the pairs across the split (5-10x the iterations on 2 ranks)
+#: the preconditioner's solve with G: incomplete Cholesky, ICC(ICC_LEVELS), of the whole
+#: G on every rank (redundant: the iteration counts do not depend on the split), on the
+#: pattern of G's full 6x6 blocks (zeros inside the blocks kept: ICC(0) on the pattern of
+#: the nonzero entries alone stalls, 839 iterations at N = 1000). Measured per solve
+#: (phi = 0.45, solver tolerance 1e-6; ICC(0) / ICC(1) / exact sparse Cholesky (MUMPS)):
+#: N = 343 44 / 38 / -, N = 1000 50 / 42 / 42 iterations, set-up 0.015 / 0.38 / 0.3 s,
+#: 0.55 / 1.5 / 7 ms per application; N = 4096 64 / 51 iterations, set-up 0.07 / 0.94 /
+#: 7-13 s (MUMPS 100-150 ms per application); phi = 0.55, N = 343: 58 / 52 / 51.
+#: Block Jacobi per rank would drop the lubrication of the pairs across the split (5-10x
+#: the iterations on 2 ranks)
+ICC_LEVELS = 1
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
 INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "redundant", "redundant_ksp_type": "preonly",
-                 "redundant_pc_type": "icc", "redundant_pc_factor_levels": "1"}
+                 "redundant_pc_type": "icc", "redundant_pc_factor_levels": str(ICC_LEVELS)}
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (faster there; its matrix
