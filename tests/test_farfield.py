@@ -142,31 +142,38 @@ def test_radial_machinery_matches_closed_forms():
     assert np.allclose(d1(r), (phi0(r + h) - phi0(r - h)) / (2 * h), rtol=1e-7)
 
 
-def test_pair_search_finds_exactly_the_images_within_reach():
-    """find_pairs' direct enumeration of lattice translations against a brute-force scan
-    of every translation |n_i| <= 4, for unwrapped positions and positive and negative
-    strain (the x-extent of a sheared box makes the enumeration order matter)."""
-    from sdmpi.hydro.geometry import find_pairs
+@pytest.mark.parametrize("box, count, reach_abs, cells", [
+    ([5.0, 4.0, 6.0], 7, 2.0, False),   # reach > box: many images, pair by pair
+    ([16.0, 14.0, 15.0], 60, 1.0, True),  # >= 3 cells of the reach per axis: cell list
+])
+def test_pair_search_finds_exactly_the_images_within_reach(box, count, reach_abs, cells):
+    """find_pairs (direct enumeration of lattice translations in small boxes, a cell list
+    in large ones) against a brute-force scan of every translation |n_i| <= 4, for
+    unwrapped positions and positive and negative strain (the x-extent of a sheared box
+    makes the enumeration order matter); pairs ordered by i, then j."""
+    from sdmpi.hydro.geometry import _cell_counts, find_pairs
 
     rng = np.random.default_rng(5)
-    box = np.array([5.0, 4.0, 6.0])
+    box = np.array(box)
     for strain in (0.0, 0.45, -0.3):
         lat = Lattice(box, strain)
-        pos = rng.uniform(-3, 9, (7, 3))  # not wrapped on purpose
-        radii = rng.uniform(0.5, 1.0, 7)
-        i, j, shift = find_pairs(pos, radii, lat, 2.0, 1.5)
+        pos = rng.uniform(-3, 9, (count, 3)) * box / 6  # not wrapped on purpose
+        radii = rng.uniform(0.5, 1.0, count)
+        assert (_cell_counts(lat, reach_abs + 3.0 * radii.max()) is not None) == cells
+        i, j, shift = find_pairs(pos, radii, lat, reach_abs, 1.5)
         got = {(a, b, tuple(np.round(s, 9))) for a, b, s in zip(i, j, shift)}
         n = np.stack(np.meshgrid(*[np.arange(-4, 5)] * 3, indexing="ij"), -1).reshape(-1, 3)
         shifts = n @ lat.vectors
         want = set()
-        for a in range(7):
-            for b in range(a, 7):
+        for a in range(count):
+            for b in range(a, count):
                 d = np.linalg.norm(pos[b] + shifts - pos[a], axis=1)
-                for k in np.nonzero(d < 2.0 + 1.5 * (radii[a] + radii[b]))[0]:
+                for k in np.nonzero(d < reach_abs + 1.5 * (radii[a] + radii[b]))[0]:
                     if a == b and tuple(n[k][::-1]) <= (0, 0, 0):  # one of each +-n
                         continue
                     want.add((a, b, tuple(np.round(shifts[k], 9))))
-        assert got == want and len(got) == len(i)
+        assert got == want and len(got) == len(i) and len(got) > count // 4
+        assert np.all(np.diff(i * count + j) >= 0)
 
 
 @pytest.mark.parametrize("tol", [1e-4, 1e-6, 1e-8])

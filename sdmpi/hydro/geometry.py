@@ -125,23 +125,97 @@ def _scan_pairs(pos, radii, cell, periodic, reach_abs, reach_rel, out_i, out_j, 
     return count
 
 
+@numba.njit(cache=True)
+def _scan_pairs_cells(pos, radii, cell, counts, reach_abs, reach_rel, out_i, out_j, out_s):
+    """_scan_pairs (same arguments, periodic) with a cell list: counts (3,) cells per
+    lattice axis, each at least the largest reach wide (plane spacing) and >= 3 of them,
+    so that a pair within reach has exactly one image within reach, the nearest one, and
+    lies in neighbouring cells. The pairs come in cell order (the caller sorts them);
+    each is tested with the arithmetic of _scan_pairs, so both find the same pairs."""
+    lx, ly, lz, tilt = cell[0], cell[1], cell[2], cell[3]
+    m0, m1, m2 = counts[0], counts[1], counts[2]
+    n = pos.shape[0]
+    head = np.full(m0 * m1 * m2, -1, dtype=np.int64)
+    nxt = np.empty(n, dtype=np.int64)
+    home = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        # lattice coordinates ((x - tilt y/Ly)/Lx, y/Ly, z/Lz), wrapped into [0, 1)
+        frac = ((pos[i, 0] - tilt * pos[i, 1] / ly) / lx, pos[i, 1] / ly, pos[i, 2] / lz)
+        key = 0
+        for c in range(3):
+            f = frac[c] - math.floor(frac[c])
+            home[i, c] = min(int(f * counts[c]), counts[c] - 1)
+            key = key * counts[c] + home[i, c]
+        nxt[i] = head[key]
+        head[key] = i
+    count = 0
+    for i in range(n):
+        for d0 in range(-1, 2):
+            for d1 in range(-1, 2):
+                for d2 in range(-1, 2):
+                    key = (((home[i, 0] + d0) % m0) * m1 + (home[i, 1] + d1) % m1) * m2 + (home[i, 2] + d2) % m2
+                    j = head[key]
+                    while j >= 0:
+                        if j > i:
+                            reach = reach_abs + reach_rel * (radii[i] + radii[j])
+                            dx0 = pos[j, 0] - pos[i, 0]
+                            dy0 = pos[j, 1] - pos[i, 1]
+                            dz0 = pos[j, 2] - pos[i, 2]
+                            n2 = -round(dz0 / lz)
+                            n1 = -round(dy0 / ly)
+                            dxy = dx0 + n1 * tilt
+                            n0 = -round(dxy / lx)
+                            dz = dz0 + n2 * lz
+                            rem_z = reach * reach - dz * dz
+                            dy = dy0 + n1 * ly
+                            rem_y = rem_z - dy * dy
+                            dx = dxy + n0 * lx
+                            if rem_z > 0.0 and rem_y > 0.0 and dx * dx < rem_y:
+                                if count < out_i.shape[0]:
+                                    out_i[count], out_j[count] = i, j
+                                    out_s[count, 0] = n0 * lx + n1 * tilt
+                                    out_s[count, 1] = n1 * ly
+                                    out_s[count, 2] = n2 * lz
+                                count += 1
+                        j = nxt[j]
+    return count
+
+
+def _cell_counts(lattice, reach):
+    """Cells per lattice axis for _scan_pairs_cells: the plane spacings 1/|b_i| over the
+    reach, floored; None when a cell list does not apply (fewer than 3 along an axis)."""
+    counts = np.floor(1.0 / (np.linalg.norm(lattice.reciprocal, axis=1) * reach)).astype(np.int64)
+    return counts if counts.min() >= 3 else None
+
+
 def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
     """Pairs (i <= j) and lattice images within reach_abs + reach_rel (a_i + a_j):
-    arrays i, j and shift vectors (so that the separation is x_j + shift - x_i). With
-    lattice None (unbounded fluid) only the zero shift is used. Self-images appear once
-    per +-n pair."""
+    arrays i, j and shift vectors (so that the separation is x_j + shift - x_i), ordered
+    by i, then j. With lattice None (unbounded fluid) only the zero shift is used.
+    Self-images appear once per +-n pair. Large periodic boxes (>= 3 cells of the largest
+    reach per axis) are scanned with a cell list, O(N), others pair by pair, O(N^2)."""
+    pos = np.ascontiguousarray(positions, dtype=float)
+    radii = np.ascontiguousarray(radii, dtype=float)
     if lattice is None:
-        cell, periodic = np.ones(4), False
+        cell, periodic, counts = np.ones(4), False, None
     else:
         lx, ly, lz = lattice.box
         cell, periodic = np.array([lx, ly, lz, lattice.strain * ly]), True
-    pos = np.ascontiguousarray(positions, dtype=float)
-    radii = np.ascontiguousarray(radii, dtype=float)
+        reach = float(reach_abs) + 2.0 * float(reach_rel) * (float(radii.max()) if len(radii) else 0.0)
+        counts = _cell_counts(lattice, reach) if reach > 0 else None
     size = 16 * len(pos)
     while True:
         i, j = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
         s = np.empty((size, 3))
-        count = _scan_pairs(pos, radii, cell, periodic, float(reach_abs), float(reach_rel), i, j, s)
+        if counts is None:
+            count = _scan_pairs(pos, radii, cell, periodic, float(reach_abs), float(reach_rel), i, j, s)
+        else:
+            count = _scan_pairs_cells(pos, radii, cell, counts, float(reach_abs), float(reach_rel), i, j, s)
         if count <= size:
-            return i[:count], j[:count], s[:count]
+            break
         size = count
+    i, j, s = i[:count], j[:count], s[:count]
+    if counts is not None:
+        order = np.lexsort((j, i))
+        i, j, s = i[order], j[order], s[order]
+    return i, j, s
