@@ -276,3 +276,23 @@ def test_monolayer_agrees_with_dense():
     for key in ("stress_hydrodynamic", "stress_interparticle"):
         assert np.abs(dense[key] - krylov[key]).max() < 1e-7 * np.abs(dense[key]).max(), key
     assert np.abs(x_dense - x_krylov).max() < 1e-9
+
+
+@pytest.mark.parametrize("phi", [0.5, 0.55])
+def test_preconditioner_keeps_iterations_low_near_contact(phi):
+    """The preconditioner (incomplete Cholesky of G on its full 6x6-block pattern) keeps
+    the iterations of a solve at N = 125 with pairs at the minimum gap (strain 0.3,
+    tolerance 1e-8) near those of the exact factor: measured 56-58 (ICC(1), 65 / 63 with
+    ICC(0)); an incomplete factor on the pattern of the nonzero entries alone needs
+    hundreds. Bound: 100."""
+    from sdmpi.dynamics.initial import hard_sphere_fluid
+
+    n = 125
+    pos, side = hard_sphere_fluid(n, phi, np.random.default_rng(2), strain=0.3)
+    res = split_resistance(pos, np.ones(n), np.full(3, side), 0.3)
+    assert res.pairs.n_regularised > 0  # pairs closer than the minimum gap
+    solver = make_solver("petsc-krylov", res, tolerance=1e-8)
+    assert solver.schur.getInfo()["nz_used"] == 36 * len(res.lubrication.data)  # full blocks
+    rng = np.random.default_rng(1)
+    solver.velocities(rng.standard_normal((n, 6)), rng.standard_normal((n, 5)))
+    assert 0 < solver.stats["iterations"] < 100
