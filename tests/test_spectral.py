@@ -89,6 +89,19 @@ def test_linear_and_symmetric():
     assert np.linalg.norm(combo - (2.5 * y1 - 0.7 * y2)) <= 1e-12 * np.linalg.norm(combo)
 
 
+def test_public_fft_fallback_gives_the_same_product(monkeypatch):
+    """Without scipy's private pocketfft module (transforms into given arrays) the public
+    scipy.fft functions give the same product to rounding (1e-13)."""
+    from sdmpi.hydro import spectral
+
+    pos, radii, box, _ = configuration(0.5, 0.3, True)
+    op = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=1e-5)
+    x = np.random.default_rng(8).standard_normal(11 * N)
+    y = op.matvec(x)
+    monkeypatch.setattr(spectral, "pypocketfft", None)
+    assert np.linalg.norm(op.matvec(x) - y) <= 1e-13 * np.linalg.norm(y)
+
+
 def test_periodic_images_give_the_same_product():
     """Positions moved by lattice translations (unwrapped, as a dynamics run leaves them)
     describe the same suspension: same product up to the rounding of the wrap (1e-12)."""
@@ -99,6 +112,24 @@ def test_periodic_images_give_the_same_product():
     y = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
     y_images = SpectralFarField(pos + shifts, radii, lattice, tol=1e-5).matvec(x)
     assert np.linalg.norm(y_images - y) <= 1e-12 * np.linalg.norm(y)
+
+
+def test_grid_translations_give_the_same_product():
+    """The grid is uniform in lattice coordinates, so moving every particle by whole grid
+    steps along the lattice vectors shifts the spread force density cyclically and leaves
+    the discrete operator unchanged (to rounding, 1e-12). The shift carries windows across
+    the box edges, where they wrap into the grid padded along z; at tol 1e-9 the windows
+    (23 points) are wider than the grid (20), so some reach past twice its length and
+    their pads fold back twice."""
+    pos, radii, box, _ = configuration(0.05, -0.45, True)
+    lattice = Lattice(box, -0.45)
+    x = np.random.default_rng(7).standard_normal(11 * N)
+    op = SpectralFarField(pos, radii, lattice, tol=1e-9)
+    assert op._stencils.pad + op.params.grid[2] > 2 * op.params.grid[2] + 1
+    steps = np.array([3, -5, 7]) / np.array(op.params.grid)
+    moved = SpectralFarField(pos + steps @ lattice.vectors, radii, lattice, tol=1e-9)
+    y = op.matvec(x)
+    assert np.linalg.norm(moved.matvec(x) - y) <= 1e-12 * np.linalg.norm(y)
 
 
 def test_bad_input():

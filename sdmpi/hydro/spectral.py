@@ -29,7 +29,15 @@ Self terms: `farfield.self_mobility`. Units: viscosity 1, lengths as given.
 
 Parallel (comm given): every rank spreads and interpolates a share of the particles; the
 grid is summed on rank 0 (Reduce), which does the FFTs and sends the velocity grid back
-(Bcast); ranks 1.. share the real-space pairs; the 11N result is summed (Allreduce).
+(Bcast); ranks 1.. share the real-space pairs, whose product they compute while rank 0
+does the FFTs; the 11N result is summed (Allreduce).
+
+Speed: the window stencils of a configuration (wrapped grid indices, in-plane Gaussians,
+z ranges and moments: `Stencils`) are computed once, not per product; spreading and
+interpolation run along grid rows in z, over a grid padded along z by the window width,
+so that no index wraps inside the loops (`_fold`, `_pad`); the grids and the FFT outputs
+are kept between products (scipy's pocketfft backend, which takes output arrays): fresh
+pages cost as much as the transforms. bench/bench_spectral.py measures the parts.
 """
 
 import math
@@ -38,6 +46,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 import scipy.fft
+try:  # scipy.fft's backend (private): transforms into given arrays, no fresh allocations
+    from scipy.fft._pocketfft import pypocketfft
+except ImportError:  # a scipy without it: the public functions (same numbers, allocating)
+    pypocketfft = None
 
 from .basis import BASIS
 from .farfield import (NDOF, _cached_radial_table, _pair_block, _power_bounds, _truncation_parameter,
@@ -112,18 +124,20 @@ def _pair_blocks(pos, radii, pi, pj, shift, table, xi, basis, blocks):
         _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, blocks[p])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=True)
 def _pairs_product(pi, pj, blocks, x, y):
     """y += sum over pair images of M_ij x_j + M_ij^T x_i (blocks[p] = M_ij)."""
     for p in range(pi.shape[0]):
         i0, j0 = NDOF * pi[p], NDOF * pj[p]
         b = blocks[p]
+        xi, xj = x[i0:i0 + NDOF], x[j0:j0 + NDOF]
+        yi, yj = y[i0:i0 + NDOF], y[j0:j0 + NDOF]
         for a in range(NDOF):
             acc = 0.0
             for c in range(NDOF):
-                acc += b[a, c] * x[j0 + c]
-                y[j0 + c] += b[a, c] * x[i0 + a]
-            y[i0 + a] += acc
+                acc += b[a, c] * xj[c]
+                yj[c] += b[a, c] * xi[a]
+            yi[a] += acc
 
 
 # ---------------------------------------------------------------------------------
@@ -131,48 +145,85 @@ def _pairs_product(pi, pj, blocks, x, y):
 # ---------------------------------------------------------------------------------
 
 
+@dataclass
+class Stencils:
+    """The separable parts of the window stencils of a set of particles, the grid points
+    within the window reach of each (computed once per configuration, used by every
+    product). For the i-th particle: grid indices idx[i, c, q] (wrapped into [0, M_c))
+    along x and y (c = 0, 1); the first grid index zb[i] in [0, M3) along z, from which
+    the window runs unwrapped (the grids are padded along z); offsets s0[i] from the
+    particle to the first point, in grid steps; in-plane Gaussians
+    e12[i, q1, q2] = exp(-alpha (dx^2 + dy^2)) of the (x, y) offsets; the range
+    zr[i, q1, q2] = [lo, hi) of q3 within reach; z moments
+    ez[i, k, q3] = z^k exp(-alpha z^2) (k = 0..3) of the z offsets. steps: rows
+    e_i = L_i/M_i, with e_3 along z and e_1, e_2 in the x-y plane (the Lees-Edwards
+    lattice). Memory: about 16 P^2 bytes per particle for P window points per axis
+    (3 kB at tol 1e-4, P = 14)."""
+
+    steps: np.ndarray
+    idx: np.ndarray
+    zb: np.ndarray
+    s0: np.ndarray
+    e12: np.ndarray
+    zr: np.ndarray
+    ez: np.ndarray
+
+    @classmethod
+    def build(cls, frac, grid, steps, half, alpha, reach):
+        """Stencils of the particles at fractional coordinates frac (n, 3) on a grid of
+        shape `grid`, window half-width half (grid steps per axis)."""
+        n, p = len(frac), int(2 * half.max()) + 1
+        st = cls(steps, np.empty((n, 2, p), dtype=np.int64), np.empty(n, dtype=np.int64), np.empty((n, 3)),
+                 np.zeros((n, p, p)), np.zeros((n, p, p, 2), dtype=np.int32), np.empty((n, 4, p)))
+        _fill_stencils(frac, np.array(grid), steps, half, alpha, reach, *st.arrays()[1:])
+        return st
+
+    @property
+    def pad(self):
+        """Points per axis of the largest stencil: the z pad of the grids."""
+        return self.idx.shape[2]
+
+    def arrays(self):
+        """The arrays, in the order the kernels take them."""
+        return self.steps, self.idx, self.zb, self.s0, self.e12, self.zr, self.ez
+
+
 @numba.njit(cache=True)
-def _stencil(t, m, steps, half, alpha, reach, idx, d12, e12, zr, z3, e3):
-    """Separable parts of the window stencil of a particle at grid coordinates t (3,),
-    the grid points within distance reach: wrapped grid indices idx[c, q]; in-plane
-    (x, y) offsets d12[q1, q2] from the particle to the grid points, their Gaussians
-    e12 = exp(-alpha (dx^2 + dy^2)) and the range zr[q1, q2] = [lo, hi) of q3 within
-    reach; z offsets z3[q3] and e3 = exp(-alpha dz^2). steps: rows e_i = L_i/M_i, with
-    e_3 along z and e_1, e_2 in the x-y plane (the Lees-Edwards lattice). Returns the
-    number of points per axis."""
-    npt = np.empty(3, dtype=np.int64)
-    s0 = np.empty(3)
-    for c in range(3):
-        start = math.ceil(t[c] - half[c])
-        s0[c] = start - t[c]
-        npt[c] = int(2 * half[c]) + 1
-        for q in range(npt[c]):
-            idx[c, q] = (start + q) % m[c]
+def _fill_stencils(frac, m, steps, half, alpha, reach, idx, zb, s0, e12, zr, ez):
+    """Fill the `Stencils` arrays."""
     hz = steps[2, 2]
-    for q in range(npt[2]):
-        z3[q] = (s0[2] + q) * hz
-        e3[q] = math.exp(-alpha * z3[q] * z3[q])
-    for q1 in range(npt[0]):
-        for q2 in range(npt[1]):
-            dx = (s0[0] + q1) * steps[0, 0] + (s0[1] + q2) * steps[1, 0]
-            dy = (s0[0] + q1) * steps[0, 1] + (s0[1] + q2) * steps[1, 1]
-            d12[q1, q2, 0], d12[q1, q2, 1] = dx, dy
-            e12[q1, q2] = math.exp(-alpha * (dx * dx + dy * dy))
-            rem = reach * reach - dx * dx - dy * dy
-            if rem <= 0.0:
-                zr[q1, q2, 0], zr[q1, q2, 1] = 0, 0
+    for i in range(frac.shape[0]):
+        for c in range(3):
+            t = frac[i, c] * m[c]
+            start = math.ceil(t - half[c])
+            s0[i, c] = start - t
+            if c < 2:
+                for q in range(idx.shape[2]):
+                    idx[i, c, q] = (start + q) % m[c]
             else:
-                dz = math.sqrt(rem) / hz
-                zr[q1, q2, 0] = max(0, math.ceil(-dz - s0[2]))
-                zr[q1, q2, 1] = min(npt[2], math.floor(dz - s0[2]) + 1)
-    return npt
+                zb[i] = start % m[c]
+        for q in range(idx.shape[2]):
+            z = (s0[i, 2] + q) * hz
+            ez[i, 0, q] = math.exp(-alpha * z * z)
+            ez[i, 1, q] = ez[i, 0, q] * z
+            ez[i, 2, q] = ez[i, 1, q] * z
+            ez[i, 3, q] = ez[i, 2, q] * z
+        for q1 in range(int(2 * half[0]) + 1):
+            for q2 in range(int(2 * half[1]) + 1):
+                dx, dy = _offset(s0[i], q1, q2, steps)
+                e12[i, q1, q2] = math.exp(-alpha * (dx * dx + dy * dy))
+                rem = reach * reach - dx * dx - dy * dy
+                if rem > 0.0:
+                    dz = math.sqrt(rem) / hz
+                    zr[i, q1, q2, 0] = max(0, math.ceil(-dz - s0[i, 2]))
+                    zr[i, q1, q2, 1] = min(int(2 * half[2]) + 1, math.floor(dz - s0[i, 2]) + 1)
 
 
-def _stencil_work(half):
-    """Work arrays for _stencil."""
-    p = int(2 * half.max()) + 1
-    return (np.empty((3, p), dtype=np.int64), np.empty((p, p, 2)), np.empty((p, p)),
-            np.empty((p, p, 2), dtype=np.int64), np.empty(p), np.empty(p))
+@numba.njit(cache=True, inline="always")
+def _offset(s0, q1, q2, steps):
+    """In-plane offset (dx, dy) from a particle to its stencil point (q1, q2)."""
+    return ((s0[0] + q1) * steps[0, 0] + (s0[1] + q2) * steps[1, 0],
+            (s0[0] + q1) * steps[0, 1] + (s0[1] + q2) * steps[1, 1])
 
 
 # The window weights of a sphere of radius a at offset d = (d0, d1, z), r2 = |d|^2, with
@@ -181,7 +232,9 @@ def _stencil_work(half):
 #   (1/2) grad g = -alpha g d,
 #   grad (1 + a^2/10 lap) g = g (C + D r2) d,  C = -2 alpha + 2 alpha^2 a^2,  D = -(4/5) alpha^3 a^2.
 # Along a grid row (fixed d0, d1) every weight is g times a cubic in z, so the sums below
-# work with the z-moments of each row.
+# work with the z-moments of each row. The grids are (M1, M2, M3 + pad, 3), padded along
+# z by the stencil width, so that every row of a window is one unwrapped range; `_fold`
+# and `_padded` map between the padded and the periodic grid.
 
 
 @numba.njit(cache=True, inline="always")
@@ -193,20 +246,14 @@ def _weight_coefficients(alpha, radius):
 
 
 @numba.njit(cache=True, fastmath=True)
-def _spread(frac, radii, order, x, steps, half, alpha, reach, basis, work, grid):
-    """grid (M1, M2, M3, 3) += force density f(x) of the generalized forces x (11N):
-    f = F (1 + a^2/6 lap) g + (1/2) grad g x L - S.grad (1 + a^2/10 lap) g per particle,
-    particles taken in the given order."""
-    idx, d12, e12, zr, z3, e3 = work
-    m = grid.shape[:3]
+def _spread(radii, order, x, alpha, basis, steps, idx, zb, s0, e12, zr, ez, grid):
+    """grid (M1, M2, M3 + pad, 3) += force density f(x) of the generalized forces x (11N):
+    f = F (1 + a^2/6 lap) g + (1/2) grad g x L - S.grad (1 + a^2/10 lap) g per particle
+    order[i], whose stencil is the i-th."""
     norm = (alpha / math.pi) ** 1.5
-    t = np.empty(3)
     s = np.zeros((3, 3))
-    cf = np.empty((3, 4))
-    for p in order:
-        for c in range(3):
-            t[c] = frac[p, c] * m[c]
-        npt = _stencil(t, m, steps, half, alpha, reach, idx, d12, e12, zr, z3, e3)
+    for i in range(order.shape[0]):
+        p = order[i]
         o = NDOF * p
         f0, f1, f2 = x[o], x[o + 1], x[o + 2]
         l0, l1, l2 = x[o + 3], x[o + 4], x[o + 5]
@@ -216,75 +263,81 @@ def _spread(frac, radii, order, x, steps, half, alpha, reach, basis, work, grid)
                 for n in range(5):
                     s[a, b] += x[o + 6 + n] * basis[n, a, b]
         wa, wb, wc, wd = _weight_coefficients(alpha, radii[p])
-        for q1 in range(npt[0]):
-            g1 = idx[0, q1]
-            for q2 in range(npt[1]):
-                g2 = idx[1, q2]
-                d0, d1 = d12[q1, q2, 0], d12[q1, q2, 1]
+        e0, e1, e2, e3 = ez[i, 0], ez[i, 1], ez[i, 2], ez[i, 3]
+        for q1 in range(e12.shape[1]):
+            for q2 in range(e12.shape[2]):
+                lo, hi = zr[i, q1, q2, 0], zr[i, q1, q2, 1]
+                if lo >= hi:
+                    continue
+                d0, d1 = _offset(s0[i], q1, q2, steps)
                 r12 = d0 * d0 + d1 * d1
                 pu, pe = wa + wb * r12, wc + wd * r12
-                # f_c / g = cf[c, 0] + cf[c, 1] z + cf[c, 2] z^2 + cf[c, 3] z^3
-                for c in range(3):
-                    sd = -(s[c, 0] * d0 + s[c, 1] * d1)
-                    cf[c, 1] = -pe * s[c, 2]
-                    cf[c, 3] = -wd * s[c, 2]
-                    cf[c, 0] = pe * sd
-                    cf[c, 2] = wd * sd
-                cf[0, 0] += f0 * pu - alpha * d1 * l2
-                cf[1, 0] += f1 * pu + alpha * d0 * l2
-                cf[2, 0] += f2 * pu - alpha * (d0 * l1 - d1 * l0)
-                cf[0, 1] += alpha * l1
-                cf[1, 1] -= alpha * l0
-                cf[0, 2] += f0 * wb
-                cf[1, 2] += f1 * wb
-                cf[2, 2] += f2 * wb
-                g12 = norm * e12[q1, q2]
-                for q3 in range(zr[q1, q2, 0], zr[q1, q2, 1]):
-                    g3 = idx[2, q3]
-                    z = z3[q3]
-                    g = g12 * e3[q3]
-                    for c in range(3):
-                        grid[g1, g2, g3, c] += g * (cf[c, 0] + z * (cf[c, 1] + z * (cf[c, 2] + z * cf[c, 3])))
+                g12 = norm * e12[i, q1, q2]
+                # along the row f / exp(-alpha z^2) = c0 + c1 z + c2 z^2 + c3 z^3 per component
+                # (x0..x3, y0..y3, z0..z3; scalars, so that the loop keeps them in registers)
+                sx = -(s[0, 0] * d0 + s[0, 1] * d1)
+                sy = -(s[1, 0] * d0 + s[1, 1] * d1)
+                sz = -(s[2, 0] * d0 + s[2, 1] * d1)
+                x0 = g12 * (pe * sx + f0 * pu - alpha * d1 * l2)
+                y0 = g12 * (pe * sy + f1 * pu + alpha * d0 * l2)
+                z0 = g12 * (pe * sz + f2 * pu - alpha * (d0 * l1 - d1 * l0))
+                x1, y1, z1 = (g12 * (alpha * l1 - pe * s[0, 2]), -g12 * (alpha * l0 + pe * s[1, 2]),
+                              -g12 * pe * s[2, 2])
+                x2, y2, z2 = g12 * (wd * sx + f0 * wb), g12 * (wd * sy + f1 * wb), g12 * (wd * sz + f2 * wb)
+                x3, y3, z3 = -g12 * wd * s[0, 2], -g12 * wd * s[1, 2], -g12 * wd * s[2, 2]
+                row = grid[idx[i, 0, q1], idx[i, 1, q2], zb[i]:]
+                for q3 in range(lo, hi):
+                    a0, a1, a2, a3 = e0[q3], e1[q3], e2[q3], e3[q3]
+                    row[q3, 0] += x0 * a0 + x1 * a1 + x2 * a2 + x3 * a3
+                    row[q3, 1] += y0 * a0 + y1 * a1 + y2 * a2 + y3 * a3
+                    row[q3, 2] += z0 * a0 + z1 * a1 + z2 * a2 + z3 * a3
 
 
 @numba.njit(cache=True, fastmath=True)
-def _interpolate(frac, radii, order, grid, steps, half, alpha, reach, basis, work, y):
-    """y (11N) += (U, Omega, E) of every particle from the velocity field u on the grid
-    (the adjoint of _spread): U = sum u (1 + a^2/6 lap) g, Omega = (1/2) sum u x grad g,
-    E^m = -B^m : sum u grad (1 + a^2/10 lap) g."""
-    idx, d12, e12, zr, z3, e3 = work
-    m = grid.shape[:3]
+def _interpolate(radii, order, grid, alpha, basis, steps, idx, zb, s0, e12, zr, ez, y):
+    """y (11N) += (U, Omega, E) of particle order[i] (stencil i) from the velocity field u
+    on the grid (M1, M2, M3 + pad, 3) (the adjoint of _spread): U = sum u (1 + a^2/6 lap) g,
+    Omega = (1/2) sum u x grad g, E^m = -B^m : sum u grad (1 + a^2/10 lap) g."""
     norm = (alpha / math.pi) ** 1.5
-    t = np.empty(3)
     mom = np.empty((4, 3))  # row moments sum g z^k u_c
     u = np.empty(3)
     om = np.empty(3)
     tens = np.empty((3, 3))
-    for p in order:
-        for c in range(3):
-            t[c] = frac[p, c] * m[c]
-        npt = _stencil(t, m, steps, half, alpha, reach, idx, d12, e12, zr, z3, e3)
+    for i in range(order.shape[0]):
+        p = order[i]
         wa, wb, wc, wd = _weight_coefficients(alpha, radii[p])
         u[:] = 0.0
         om[:] = 0.0
         tens[:, :] = 0.0
-        for q1 in range(npt[0]):
-            g1 = idx[0, q1]
-            for q2 in range(npt[1]):
-                g2 = idx[1, q2]
-                mom[:, :] = 0.0
-                g12 = norm * e12[q1, q2]
-                for q3 in range(zr[q1, q2, 0], zr[q1, q2, 1]):
-                    g3 = idx[2, q3]
-                    z = z3[q3]
-                    g = g12 * e3[q3]
-                    for c in range(3):
-                        v = g * grid[g1, g2, g3, c]
-                        mom[0, c] += v
-                        mom[1, c] += v * z
-                        mom[2, c] += v * z * z
-                        mom[3, c] += v * z * z * z
-                d0, d1 = d12[q1, q2, 0], d12[q1, q2, 1]
+        e0, e1, e2, e3 = ez[i, 0], ez[i, 1], ez[i, 2], ez[i, 3]
+        for q1 in range(e12.shape[1]):
+            for q2 in range(e12.shape[2]):
+                lo, hi = zr[i, q1, q2, 0], zr[i, q1, q2, 1]
+                if lo >= hi:
+                    continue
+                row = grid[idx[i, 0, q1], idx[i, 1, q2], zb[i]:]
+                m00 = m01 = m02 = m10 = m11 = m12 = m20 = m21 = m22 = m30 = m31 = m32 = 0.0
+                for q3 in range(lo, hi):
+                    a0, a1, a2, a3 = e0[q3], e1[q3], e2[q3], e3[q3]
+                    v0, v1, v2 = row[q3, 0], row[q3, 1], row[q3, 2]
+                    m00 += a0 * v0
+                    m01 += a0 * v1
+                    m02 += a0 * v2
+                    m10 += a1 * v0
+                    m11 += a1 * v1
+                    m12 += a1 * v2
+                    m20 += a2 * v0
+                    m21 += a2 * v1
+                    m22 += a2 * v2
+                    m30 += a3 * v0
+                    m31 += a3 * v1
+                    m32 += a3 * v2
+                g12 = norm * e12[i, q1, q2]
+                mom[0, 0], mom[0, 1], mom[0, 2] = g12 * m00, g12 * m01, g12 * m02
+                mom[1, 0], mom[1, 1], mom[1, 2] = g12 * m10, g12 * m11, g12 * m12
+                mom[2, 0], mom[2, 1], mom[2, 2] = g12 * m20, g12 * m21, g12 * m22
+                mom[3, 0], mom[3, 1], mom[3, 2] = g12 * m30, g12 * m31, g12 * m32
+                d0, d1 = _offset(s0[i], q1, q2, steps)
                 r12 = d0 * d0 + d1 * d1
                 pu, pe = wa + wb * r12, wc + wd * r12
                 for c in range(3):
@@ -306,6 +359,20 @@ def _interpolate(frac, radii, order, grid, steps, half, alpha, reach, basis, wor
                 for b in range(3):
                     acc += basis[n, a, b] * tens[a, b]
             y[o + 6 + n] -= acc
+
+
+def _fold(padded, m3):
+    """Add the pads of a grid padded along z back into its periodic part [0, M3), in place."""
+    for start in range(m3, padded.shape[2], m3):
+        width = min(m3, padded.shape[2] - start)
+        padded[:, :, :width] += padded[:, :, start:start + width]
+
+
+def _pad(padded, m3):
+    """Fill the pads of a grid padded along z from its periodic part [0, M3), in place."""
+    for start in range(m3, padded.shape[2], m3):
+        width = min(m3, padded.shape[2] - start)
+        padded[:, :, start:start + width] = padded[:, :, :width]
 
 
 @numba.njit(cache=True)
@@ -333,8 +400,10 @@ def _apply_kernel(fk, scale, recip):
 
 
 def _kernel_scale(lattice, par):
-    """h(k)/k^2 / g^(k)^2 / (V/(M1 M2 M3)) on the rfft grid (the last factor: the grid
-    cell, quadrature weight of the spreading), zero at k = 0 and |k| > kmax."""
+    """h(k)/k^2 / g^(k)^2 V/(M1 M2 M3)^2 on the rfft grid, zero at k = 0 and |k| > kmax.
+    The last factor: 1/V of the reciprocal sum times the grid cell V/(M1 M2 M3) twice,
+    the quadrature weight of the forward transform of the spread density and of the
+    interpolation integrals (the inverse transform is unnormalised)."""
     m1, m2, m3 = par.grid
     n = np.meshgrid(np.fft.fftfreq(m1, 1 / m1), np.fft.fftfreq(m2, 1 / m2),
                     np.arange(m3 // 2 + 1), indexing="ij")
@@ -343,7 +412,7 @@ def _kernel_scale(lattice, par):
     u = ksq / (4 * par.xi ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = ((1 + u + 2 * u * u) * np.exp(-u + ksq / (2 * par.alpha))
-                 * lattice.volume / (ksq * m1 * m2 * m3))
+                 * lattice.volume / (ksq * (m1 * m2 * m3) ** 2))
     scale[(ksq == 0) | (ksq > par.kmax ** 2)] = 0.0
     return scale
 
@@ -396,15 +465,21 @@ class SpectralFarField:
         self._self = np.array([np.diag(self_mobility(a, par.xi)) for a in unique])[which].ravel()
         # wave space: every rank spreads and interpolates a share of the particles (in
         # grid-cell order, contiguous in space), rank 0 does the FFTs
-        self._steps = lattice.vectors / np.array(par.grid)[:, None]
         # half-width of the window in grid steps along each axis (plane spacing 1/(M_i |b_i|))
-        self._half = par.window * np.array(par.grid) * np.linalg.norm(lattice.reciprocal, axis=1)
-        self._work = _stencil_work(self._half)
+        half = par.window * np.array(par.grid) * np.linalg.norm(lattice.reciprocal, axis=1)
         cells = np.floor(self._frac * np.array(par.grid) / 4).astype(np.int64)
         self._order = np.array_split(np.lexsort(cells.T[::-1]), size)[rank]
+        steps = lattice.vectors / np.array(par.grid)[:, None]
+        self._stencils = Stencils.build(self._frac[self._order], par.grid, steps, half, par.alpha, par.window)
+        # work grids: padded along z for spreading and interpolation; for MPI, a contiguous
+        # copy of its periodic part
+        self._padded_grid = np.zeros((*par.grid[:2], par.grid[2] + self._stencils.pad, 3))
+        if size > 1:
+            self._grid = np.zeros((*par.grid, 3))
         if rank == 0:
             self._scale = _kernel_scale(lattice, par)
             self._recip = lattice.reciprocal
+            self._fk = np.empty((*self._scale.shape, 3), dtype=complex)
         # real space: pair images on one rank, else shared by ranks 1..size-1
         pi, pj, shift = find_pairs(pos, rad, lattice, par.rcut, 0.0)
         if size > 1:
@@ -419,24 +494,46 @@ class SpectralFarField:
         """y += this rank's share of the real-space product."""
         _pairs_product(self._pi, self._pj, self._blocks, x, y)
 
-    def wave_space(self, x, y):
-        """y += the wave-space product at this rank's particles (collective over comm)."""
-        par = self.params
+    def wave_space(self, x, y, meanwhile=None):
+        """y += the wave-space product at this rank's particles (collective over comm).
+        meanwhile: local work (a callable) that ranks 1.. do while rank 0 does the FFTs."""
+        par, st = self.params, self._stencils
         parallel = self.comm is not None and self.comm.size > 1
-        stencil = (self._steps, self._half, par.alpha, par.window, BASIS, self._work)
-        grid = np.zeros((*par.grid, 3))
-        _spread(self._frac, self._radii, self._order, x, *stencil, grid)
+        # work arrays kept between products (fresh pages, also of the FFT outputs, cost more
+        # than the transforms)
+        padded, m3 = self._padded_grid, par.grid[2]
+        padded.fill(0.0)
+        _spread(self._radii, self._order, x, par.alpha, BASIS, *st.arrays(), padded)
+        _fold(padded, m3)
+        grid = padded[:, :, :m3]  # the periodic grid, a view
         if parallel:
             from mpi4py import MPI
 
+            self._grid[...] = grid  # contiguous, for MPI
+            grid = self._grid
             self.comm.Reduce(MPI.IN_PLACE if self.comm.rank == 0 else grid, grid, op=MPI.SUM, root=0)
         if self.comm is None or self.comm.rank == 0:
-            fk = scipy.fft.rfftn(grid, axes=(0, 1, 2))
-            _apply_kernel(fk, self._scale, self._recip)
-            grid = np.ascontiguousarray(scipy.fft.irfftn(fk, s=par.grid, axes=(0, 1, 2)))
+            self._velocity_grid(grid)
+        if meanwhile is not None:
+            meanwhile()
         if parallel:
             self.comm.Bcast(grid, root=0)
-        _interpolate(self._frac, self._radii, self._order, grid, *stencil, y)
+            padded[:, :, :m3] = grid
+        _pad(padded, m3)
+        _interpolate(self._radii, self._order, padded, par.alpha, BASIS, *st.arrays(), y)
+
+    def _velocity_grid(self, grid):
+        """Rank 0: grid (M1, M2, M3, 3), the force density <- the velocity field, by FFT,
+        k-space kernel and inverse FFT."""
+        if pypocketfft is None:  # unnormalised both ways, as below
+            fk = scipy.fft.rfftn(grid, axes=(0, 1, 2))
+            _apply_kernel(fk, self._scale, self._recip)
+            grid[...] = scipy.fft.irfftn(fk, s=grid.shape[:3], axes=(0, 1, 2), norm="forward")
+            return
+        pypocketfft.r2c(grid, axes=(0, 1, 2), forward=True, out=self._fk)
+        _apply_kernel(self._fk, self._scale, self._recip)
+        pypocketfft.c2c(self._fk, axes=(0, 1), forward=False, out=self._fk)  # in place, then along z:
+        pypocketfft.c2r(self._fk, axes=(2,), lastsize=grid.shape[2], forward=False, out=grid)
 
     def matvec(self, x):
         """M_inf x for x of shape (11N,); collective over comm."""
@@ -446,8 +543,7 @@ class SpectralFarField:
                              f"got {x.shape}")
         x = np.ascontiguousarray(x)
         y = np.zeros_like(x)
-        self.wave_space(x, y)
-        self.real_space(x, y)
+        self.wave_space(x, y, meanwhile=lambda: self.real_space(x, y))
         if self.comm is None or self.comm.rank == 0:
             y += self._self * x
         if self.comm is not None and self.comm.size > 1:
