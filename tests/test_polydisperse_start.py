@@ -140,3 +140,17 @@ def test_mc_cell_list_finds_every_sphere_within_contact(side, strain):
             _min_image(dx, side, strain)
             missed += bool(dx @ dx < 4.0 and j not in found)
     assert missed == 0
+
+
+@pytest.mark.parametrize("spread, strain", [(1.0, 0.0), (1.0, 0.4), (4.0, -0.3)])
+def test_compression_closest_pair_matches_the_full_scan(spread, strain):
+    """compress's closest contact ratio from the near pairs (cell list) is the full
+    O(N^2) scan's number bit for bit; with no pair within 1.5 contacts (spread 4) it
+    falls back to that scan."""
+    from sdmpi.dynamics.initial import _closest_ratio, _contact_ratio
+
+    rng = np.random.default_rng(4)
+    n, side = 200, 30.0
+    pos = rng.uniform(-side, 2 * side, (n, 3))
+    radii = rng.uniform(0.5, 1.0, n) / spread
+    assert _closest_ratio(pos, side, strain, radii) == _contact_ratio(pos, side, strain, radii)
