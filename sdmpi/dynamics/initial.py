@@ -256,6 +256,16 @@ def hard_disk_monolayer(n_particles, phi_a, rng, z=0.0, sweeps=200, strain=0.0):
 
 
 @numba.njit(cache=True)
+def _ratio_squared(pos, i, j, side, strain, radii, dx):
+    """(|x_i - x_j| / (a_i + a_j))^2, Lees-Edwards minimum image in a cube (dx: work)."""
+    for c in range(3):
+        dx[c] = pos[i, c] - pos[j, c]
+    _min_image(dx, side, strain)
+    contact = radii[i] + radii[j]
+    return (dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2) / (contact * contact)
+
+
+@numba.njit(cache=True)
 def _contact_ratio(pos, side, strain, radii):
     """Smallest |x_i - x_j| / (a_i + a_j) (Lees-Edwards minimum image) in a cube."""
     n = pos.shape[0]
@@ -263,11 +273,7 @@ def _contact_ratio(pos, side, strain, radii):
     dx = np.empty(3)
     for i in range(n):
         for j in range(i + 1, n):
-            for c in range(3):
-                dx[c] = pos[i, c] - pos[j, c]
-            _min_image(dx, side, strain)
-            contact = radii[i] + radii[j]
-            best = min(best, (dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2) / (contact * contact))
+            best = min(best, _ratio_squared(pos, i, j, side, strain, radii, dx))
     return math.sqrt(best)
 
 
@@ -283,12 +289,7 @@ def _pairs_ratio(pos, side, strain, radii, pi, pj):
     best = np.inf
     dx = np.empty(3)
     for p in range(pi.shape[0]):
-        i, j = pi[p], pj[p]
-        for c in range(3):
-            dx[c] = pos[i, c] - pos[j, c]
-        _min_image(dx, side, strain)
-        contact = radii[i] + radii[j]
-        best = min(best, (dx[0] ** 2 + dx[1] ** 2 + dx[2] ** 2) / (contact * contact))
+        best = min(best, _ratio_squared(pos, pi[p], pj[p], side, strain, radii, dx))
     return math.sqrt(best)
 
 

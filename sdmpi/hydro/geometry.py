@@ -78,6 +78,18 @@ def _image_range(d0, reach, length, periodic):
     return math.ceil((-reach - d0) / length), math.floor((reach - d0) / length)
 
 
+@numba.njit(cache=True, inline="always")
+def _record(count, i, j, n0, n1, n2, cell, out_i, out_j, out_s):
+    """Stores pair `count` (i, j, shift n0 L1 + n1 L2 + n2 L3; cell as in _scan_pairs) if
+    the outputs have room; returns count + 1."""
+    if count < out_i.shape[0]:
+        out_i[count], out_j[count] = i, j
+        out_s[count, 0] = n0 * cell[0] + n1 * cell[3]
+        out_s[count, 1] = n1 * cell[1]
+        out_s[count, 2] = n2 * cell[2]
+    return count + 1
+
+
 @numba.njit(cache=True)
 def _scan_pairs(pos, radii, cell, periodic, reach_abs, reach_rel, out_i, out_j, out_s):
     """Fills (up to their length) the pairs (i <= j) and lattice translations
@@ -116,12 +128,7 @@ def _scan_pairs(pos, radii, cell, periodic, reach_abs, reach_rel, out_i, out_j, 
                             continue
                         if i == j and not (n2 > 0 or (n2 == 0 and (n1 > 0 or (n1 == 0 and n0 > 0)))):
                             continue
-                        if count < out_i.shape[0]:
-                            out_i[count], out_j[count] = i, j
-                            out_s[count, 0] = n0 * lx + n1 * tilt
-                            out_s[count, 1] = n1 * ly
-                            out_s[count, 2] = n2 * lz
-                        count += 1
+                        count = _record(count, i, j, n0, n1, n2, cell, out_i, out_j, out_s)
     return count
 
 
@@ -171,12 +178,7 @@ def _scan_pairs_cells(pos, radii, cell, counts, reach_abs, reach_rel, out_i, out
                             rem_y = rem_z - dy * dy
                             dx = dxy + n0 * lx
                             if rem_z > 0.0 and rem_y > 0.0 and dx * dx < rem_y:
-                                if count < out_i.shape[0]:
-                                    out_i[count], out_j[count] = i, j
-                                    out_s[count, 0] = n0 * lx + n1 * tilt
-                                    out_s[count, 1] = n1 * ly
-                                    out_s[count, 2] = n2 * lz
-                                count += 1
+                                count = _record(count, i, j, n0, n1, n2, cell, out_i, out_j, out_s)
                         j = nxt[j]
     return count
 
