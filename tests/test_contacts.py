@@ -335,14 +335,16 @@ def test_resume_from_state_is_bit_identical():
 @pytest.mark.mpi
 @pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
 def test_frictional_job_file_killed_then_resumed_on_two_ranks(tmp_path):
-    """jobs/frictional_mu0.5.toml, tiny (N = 8; a wide minimum gap so that contacts form
-    within 150 steps), SIGKILLed after its third checkpoint (step 150, with a contact in its
-    history), resumed under mpirun -n 2: the samples equal an uninterrupted in-process run."""
+    """jobs/frictional_mu0.5.toml, tiny (N = 8 in one size class: the job's two classes
+    would touch through two images in so small a box; a wide minimum gap so that contacts
+    form within 150 steps), SIGKILLed after its third checkpoint (step 150, with a contact
+    in its history), resumed under mpirun -n 2: the samples equal an uninterrupted
+    in-process run."""
     path = ROOT / "jobs" / "frictional_mu0.5.toml"
     short = ["system.n_particles=8", "system.phi=[0.5]", "ensemble.realisations=1",
              "integration.n_steps=200", "integration.discard_steps=20", "job.seed=1",
              "output.checkpoint_every=50", "hydrodynamics.min_gap=0.02", "interparticle.k_t=300.0",
-             "interparticle.k_n=2000.0"]
+             "interparticle.k_n=2000.0", "system.size_classes=[{radius = 1.0, fraction = 1.0}]"]
     sets = [a for item in short for a in ("--set", item)]
     out = tmp_path / "run.h5"
     res = sdmpi("run", path, "-o", out, *sets, env={"SDMPI_TEST_KILL": "commit:3"})
