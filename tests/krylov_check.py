@@ -13,7 +13,7 @@ import numpy as np
 
 from petsc_check import N, STRAIN, configuration, print_per_rank
 from sdmpi.hydro.farfield import NDOF, far_field_mobility
-from sdmpi.hydro.krylov import FAR_FIELDS
+from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField
 from sdmpi.hydro.lubrication import lubrication_matrix
 from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
 from sdmpi.hydro.solvers import make_solver
@@ -63,10 +63,35 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     far = (v @ ((v.T @ z[:NDOF * N]) / np.sqrt(w))).reshape(N, NDOF)[:, :6]
     f_b = krylov.brownian_forces(z)
     out["brownian_far"] = rel(far, f_b)
+    out["takeover_g"], out["takeover_again"] = takeover(krylov, split, box, forces, einf, u_k, comm)
     out["iterations"] = krylov.stats["iterations"]
     out["lanczos"] = krylov.stats["lanczos"]
     out["digest"] = hashlib.sha256(np.concatenate([u_k.ravel(), f_b.ravel()]).tobytes()).hexdigest()
     return out
+
+
+def takeover(krylov, split, box, forces, einf, u_k, comm):
+    """A solver at a nearby configuration with the same pair sets (the Brownian midpoint)
+    takes over krylov's preconditioner factor (warm_start). Returns the max relative
+    differences of its G (this rank's rows) from the G it would build itself, and of
+    krylov's velocities solved again afterwards (krylov rebuilds its own factor) from the
+    first ones: both 0 up to rounding."""
+    rng = np.random.default_rng(5)
+    mid = split_resistance(split.positions + 1e-3 * rng.standard_normal((N, 3)), np.ones(N), box,
+                           STRAIN, plan=split.plan, far_field=split_far_field(split), comm=comm)
+    own, taker = (make_solver("petsc-krylov", mid, comm, TOL) for _ in range(2))
+    taker.warm_start(krylov)
+    assert taker.inner is not None and krylov.inner is None  # taken over
+    own.velocities(forces, einf)
+    taker.velocities(forces, einf)
+    (ip_o, j_o, v_o), (ip_t, j_t, v_t) = own.schur.getValuesCSR(), taker.schur.getValuesCSR()
+    assert np.array_equal(ip_o, ip_t) and np.array_equal(j_o, j_t)
+    return rel(v_o, v_t), rel(u_k, krylov.velocities(forces, einf))
+
+
+def split_far_field(split):
+    """The far-field kind of a SplitResistance."""
+    return "dense" if isinstance(split.far, DenseFarField) else "spectral"
 
 
 if __name__ == "__main__":

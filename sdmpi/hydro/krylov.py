@@ -14,8 +14,10 @@ solved for (lambda, U') by left-preconditioned GMRES in PETSc (a shell matrix: t
 field as a product `matvec`, L_uu a PETSc AIJ matrix). The stresslets follow without
 another solve: -S = P_e (lambda + L V).
 
-Preconditioner: the same block system with M replaced by its self (diagonal) part D
-(isolated-sphere 11x11 blocks), solved by block elimination,
+Preconditioner: the same block system with M replaced by a block-diagonal D (the
+isolated-sphere 11x11 self blocks, divided by `self_resistance_scale(phi)`: a sphere's
+far-field resistance among others is larger than alone; 20-30% fewer iterations at
+phi >= 0.45), solved by block elimination,
 
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
@@ -23,7 +25,8 @@ where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is
 through an incomplete Cholesky factor, ICC(ICC_LEVELS), on the pattern of G's full 6x6
 blocks, of the whole G on every rank (the iteration counts do not depend on the number
 of ranks). It needs about as few iterations as the exact factor at a fraction of its
-cost (measurements at INNER_OPTIONS). Near-contact pairs, which
+cost (measurements at INNER_OPTIONS). The Brownian midpoint's solver takes over the
+start's factor (same pattern: only the numeric factorisation is redone, `warm_start`). Near-contact pairs, which
 make R ill-conditioned, are thus (nearly exactly) in the preconditioner: the iterations
 mostly see the far field's many-body part M - D.
 
@@ -77,11 +80,25 @@ ICC_LEVELS = 1
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
 INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "redundant", "redundant_ksp_type": "preonly",
                  "redundant_pc_type": "icc", "redundant_pc_factor_levels": str(ICC_LEVELS)}
+#: the preconditioner's far-field self resistance grows with the volume fraction like
+#: (1 - phi)^-SELF_RESISTANCE_EXPONENT (self_resistance_scale)
+SELF_RESISTANCE_EXPONENT = 2.5
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (faster there; its matrix
 #: is 11N x 11N: 140 MB at N = 400), spectral from there on (bench/bench_krylov.py)
 DENSE_FAR_FIELD_MAX_N = 400
+
+
+def self_resistance_scale(phi):
+    """Factor on the isolated-sphere far-field resistance D^-1 in the preconditioner,
+    (1 - phi)^-SELF_RESISTANCE_EXPONENT at volume fraction phi: the far-field resistance
+    of a sphere among others exceeds the isolated one (hindered mobility), and a larger
+    D^-1 approximates M^-1 better. Empirical (N = 1000, solver tolerance 1e-6, GMRES
+    iterations of a shear-flow / a random-force solve, D^-1 scale 1 -> best): phi = 0.1
+    17/17 -> 17/17 (scale 1-2); 0.3 27/27 -> 23/24 (3); 0.45 42/42 -> 31/33 (5-6);
+    0.55 59/57 -> 38/40 (8); the rule gives 1.3, 2.4, 4.5 and 7.4."""
+    return (1.0 - min(phi, 0.7)) ** -SELF_RESISTANCE_EXPONENT
 
 
 class KrylovError(RuntimeError):
@@ -204,7 +221,7 @@ class _NearFieldPreconditioner(_Context):
         f, g = ra[:s.nl11].reshape(-1, NDOF), ra[s.nl11:]
         d_f = np.einsum("pij,pj->pi", s.d_inv, f)
         s.u_in.setArray(g - d_f[:, :6].ravel())
-        s.inner.solve(s.u_in, s.u_out)
+        s.schur_solver().solve(s.u_in, s.u_out)
         y = s.u_out.getArray(readonly=True).copy()
         rhs = f.copy()
         rhs[:, :6] += y.reshape(-1, 6)
@@ -268,25 +285,24 @@ class KrylovSolver:
         self.lub = scipy.sparse.bsr_matrix((blocks, cols, ptr), shape=(NDOF * nl, NDOF * n))
         l_uu = scipy.sparse.bsr_matrix((np.ascontiguousarray(blocks[:, :6, :6]), cols, ptr),
                                        shape=(6 * nl, 6 * n))
-        # far-field self blocks (isolated spheres) and the Schur complement G: D_uu^-1 added
-        # to the diagonal blocks (lubrication_sparse stores one for every particle)
+        # far-field self blocks of the preconditioner (isolated spheres, scaled by
+        # self_resistance_scale) and the Schur complement G: D_uu^-1 added to the diagonal
+        # blocks (lubrication_sparse stores one for every particle)
         radii = resistance.radii[p0:p1]
-        inv = {a: np.linalg.inv(self_mobility(a)) for a in np.unique(radii)}
+        scale = self_resistance_scale(resistance.volume_fraction)
+        inv = {a: scale * np.linalg.inv(self_mobility(a)) for a in np.unique(radii)}
         self.d_inv = np.array([inv[a] for a in radii]).reshape(nl, NDOF, NDOF)
         diagonal = np.flatnonzero(cols == p0 + np.repeat(np.arange(nl), np.diff(ptr)))
         schur = l_uu.copy()
         schur.data[diagonal] += self.d_inv[:, :6, :6]
         self.l_uu = self._aij(l_uu.tocsr())
-        self.schur = self._aij(schur.tocsr())
+        self._schur_csr = schur.tocsr()
+        self._schur_csr.sort_indices()
+        # G as a PETSc matrix and its incomplete factor (the KSP `inner`): built at the first
+        # preconditioner application, or taken over from a solver of the same pattern
+        # (warm_start)
+        self.schur = self.inner = None
         self.u_in, self.u_out = self.l_uu.createVecs()
-
-        self.inner = PETSc.KSP().create(comm=self.comm)
-        self.inner.setOperators(self.schur)
-        self.inner.setOptionsPrefix(OPTIONS_PREFIX)
-        options = PETSc.Options(OPTIONS_PREFIX)
-        for key, value in INNER_OPTIONS.items():
-            options.setValue(key, value)
-        self.inner.setFromOptions()
 
         m = NDOF * n + 6 * n
         ml = self.nl11 + 6 * nl
@@ -308,6 +324,35 @@ class KrylovSolver:
         _LIVE.discard(self)
 
     # ------------------------------------------------------------------ helpers
+
+    def schur_solver(self):
+        """The KSP applying the incomplete factor of G (INNER_OPTIONS), built on first use."""
+        if self.inner is None:
+            self.schur = self._aij(self._schur_csr)
+            self.inner = self._PETSc.KSP().create(comm=self.comm)
+            self.inner.setOperators(self.schur)
+            self.inner.setOptionsPrefix(OPTIONS_PREFIX)
+            options = self._PETSc.Options(OPTIONS_PREFIX)
+            for key, value in INNER_OPTIONS.items():
+                options.setValue(key, value)
+            self.inner.setFromOptions()
+        return self.inner
+
+    def _take_schur_solver(self, other):
+        """Take over other's G matrix and factor when G has the same sparsity pattern here
+        (the Brownian midpoint: the pair sets of the step's start): G's values are
+        overwritten with this configuration's, so the factorisation keeps its symbolic
+        part and redoes only the numeric one. other builds a new one if it needs it."""
+        mine, theirs = self._schur_csr, other._schur_csr
+        if (self.inner is not None or other.inner is None or mine.shape != theirs.shape
+                or not np.array_equal(mine.indptr, theirs.indptr)
+                or not np.array_equal(mine.indices, theirs.indices)):
+            return
+        self.schur, self.inner = other.schur, other.inner
+        other.schur = other.inner = None
+        self.schur.zeroEntries()
+        self.schur.setValuesCSR(mine.indptr.astype(np.int32), mine.indices.astype(np.int32), mine.data)
+        self.schur.assemble()
 
     def _aij(self, csr):
         csr.sort_indices()
@@ -386,8 +431,10 @@ class KrylovSolver:
         """The next velocities() solve starts from other's last solution (a KrylovSolver
         of a nearby configuration on the same ranks and particles, e.g. the Brownian step's
         start for its midpoint: ~20% fewer iterations there). The tolerance stays relative
-        to the right-hand side."""
+        to the right-hand side. Also takes over other's preconditioner factor where the
+        pair pattern is the same (`_take_schur_solver`)."""
         self._guess = other._solution
+        self._take_schur_solver(other)
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""

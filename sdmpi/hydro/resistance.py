@@ -138,6 +138,7 @@ class SplitResistance:
     plan: HydroPlan
     positions: np.ndarray
     radii: np.ndarray
+    volume_fraction: float  # sum of sphere volumes / box volume (0 in unbounded fluid)
 
     @property
     def n_particles(self):
@@ -163,4 +164,5 @@ def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     else:
         lub_pairs = pairs
     lub, pi, pj, chol = lubrication_sparse(pos, radii, lub_pairs, factors=True)
-    return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii)
+    phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
+    return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii, phi)
