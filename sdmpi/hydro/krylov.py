@@ -67,19 +67,31 @@ LANCZOS_MAX_ITERATIONS = 500
 #: GMRES restart length
 GMRES_RESTART = 200
 #: the preconditioner's solve with G: incomplete Cholesky, ICC(ICC_LEVELS), of the whole
-#: G on every rank (redundant: the iteration counts do not depend on the split), on the
-#: pattern of G's full 6x6 blocks (zeros inside the blocks kept: ICC(0) on the pattern of
-#: the nonzero entries alone stalls, 839 iterations at N = 1000). Measured per solve
-#: (phi = 0.45, solver tolerance 1e-6; ICC(0) / ICC(1) / exact sparse Cholesky (MUMPS)):
-#: N = 343 44 / 38 / -, N = 1000 50 / 42 / 42 iterations, set-up 0.015 / 0.38 / 0.3 s,
-#: 0.55 / 1.5 / 7 ms per application; N = 4096 64 / 51 iterations, set-up 0.07 / 0.94 /
-#: 7-13 s (MUMPS 100-150 ms per application); phi = 0.55, N = 343: 58 / 52 / 51.
+#: G, computed by every rank for itself (sequential PETSc: the iteration counts do not
+#: depend on the split; no gather of G), on the pattern of G's full 6x6 blocks (zeros
+#: inside the blocks kept: ICC(0) on the pattern of the nonzero entries alone stalls, 839
+#: iterations at N = 1000). Measured per solve (phi = 0.45, solver tolerance 1e-6, the
+#: isolated-sphere D; ICC(0) / ICC(1) / exact sparse Cholesky (MUMPS)): N = 343 44 / 38
+#: / -, N = 1000 50 / 42 / 42 iterations, set-up 0.015 / 0.38 / 0.3 s, 0.55 / 1.5 / 7 ms
+#: per application; N = 4096 64 / 51 iterations, set-up 0.07 / 0.94 / 7-13 s (MUMPS
+#: 100-150 ms per application); phi = 0.55, N = 343: 58 / 52 / 51. With the scaled D
+#: (self_resistance_scale), N = 1000: ICC(0) 48-52, ICC(1) 31-33, ICC(2) 31-33 (set-up
+#: 0.06 / 0.5 / 2.7 s); RCM or nested-dissection orderings: no fewer iterations, slower.
 #: Block Jacobi per rank would drop the lubrication of the pairs across the split (5-10x
 #: the iterations on 2 ranks)
 ICC_LEVELS = 1
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
-INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "redundant", "redundant_ksp_type": "preonly",
-                 "redundant_pc_type": "icc", "redundant_pc_factor_levels": str(ICC_LEVELS)}
+INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "icc", "pc_factor_levels": str(ICC_LEVELS)}
+#: G keeps the lubrication coupling (off-diagonal blocks) of pairs closer than this surface
+#: gap, in mean radii (2 h / (a_i + a_j)); farther pairs keep their diagonal parts only (G
+#: stays positive definite). Measured (N = 1000, tolerance 1e-6, flow / force solve
+#: iterations, ICC(1) set-up, application): phi = 0.45, all pairs (gap < 2) 31/33, 0.66 s,
+#: 3.0 ms; gap < 1: 32/34, 0.10 s, 1.2 ms; < 0.5: 33/37, 0.04 s, 0.7 ms; < 0.25: 44/48;
+#: phi = 0.55, all 38/40, 1.8 s, 15 ms; < 1: 41/45, 0.25 s, 4 ms; < 0.5: 43/47, 0.07 s,
+#: 0.75 ms; phi = 0.3, all 23/24, 0.36 s, 2.5 ms; < 1: 24/25, 0.15 s, 0.9 ms; < 0.5:
+#: 27/28. Near contact at tolerance 1e-8 (tests/test_krylov.py, N = 125, phi = 0.5): all
+#: 49, < 1: 55, < 0.5: 64 iterations; so 1, not 0.5
+PRECONDITIONER_MAX_GAP = 1.0
 #: the preconditioner's far-field self resistance grows with the volume fraction like
 #: (1 - phi)^-SELF_RESISTANCE_EXPONENT (self_resistance_scale)
 SELF_RESISTANCE_EXPONENT = 2.5
@@ -88,6 +100,14 @@ FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (faster there; its matrix
 #: is 11N x 11N: 140 MB at N = 400), spectral from there on (bench/bench_krylov.py)
 DENSE_FAR_FIELD_MAX_N = 400
+
+
+def _near_blocks(pairs, rows, cols, n):
+    """Which blocks (rows, cols) of an N x N block pattern belong to a pair of `pairs` (a
+    `lubrication.PairList`) closer than PRECONDITIONER_MAX_GAP mean radii."""
+    near = 2 * pairs.gap / pairs.radii_sum < PRECONDITIONER_MAX_GAP
+    i, j = np.asarray(pairs.i)[near], np.asarray(pairs.j)[near]
+    return np.isin(rows * n + cols, np.concatenate([i * n + j, j * n + i]))
 
 
 def self_resistance_scale(phi):
@@ -220,9 +240,7 @@ class _NearFieldPreconditioner(_Context):
         ra = r.getArray(readonly=True)
         f, g = ra[:s.nl11].reshape(-1, NDOF), ra[s.nl11:]
         d_f = np.einsum("pij,pj->pi", s.d_inv, f)
-        s.u_in.setArray(g - d_f[:, :6].ravel())
-        s.schur_solver().solve(s.u_in, s.u_out)
-        y = s.u_out.getArray(readonly=True).copy()
+        y = s.schur_solve(g - d_f[:, :6].ravel())
         rhs = f.copy()
         rhs[:, :6] += y.reshape(-1, 6)
         out = z.getArray()
@@ -285,24 +303,27 @@ class KrylovSolver:
         self.lub = scipy.sparse.bsr_matrix((blocks, cols, ptr), shape=(NDOF * nl, NDOF * n))
         l_uu = scipy.sparse.bsr_matrix((np.ascontiguousarray(blocks[:, :6, :6]), cols, ptr),
                                        shape=(6 * nl, 6 * n))
-        # far-field self blocks of the preconditioner (isolated spheres, scaled by
-        # self_resistance_scale) and the Schur complement G: D_uu^-1 added to the diagonal
-        # blocks (lubrication_sparse stores one for every particle)
-        radii = resistance.radii[p0:p1]
-        scale = self_resistance_scale(resistance.volume_fraction)
-        inv = {a: scale * np.linalg.inv(self_mobility(a)) for a in np.unique(radii)}
-        self.d_inv = np.array([inv[a] for a in radii]).reshape(nl, NDOF, NDOF)
-        diagonal = np.flatnonzero(cols == p0 + np.repeat(np.arange(nl), np.diff(ptr)))
-        schur = l_uu.copy()
-        schur.data[diagonal] += self.d_inv[:, :6, :6]
         self.l_uu = self._aij(l_uu.tocsr())
-        self._schur_csr = schur.tocsr()
-        self._schur_csr.sort_indices()
-        # G as a PETSc matrix and its incomplete factor (the KSP `inner`): built at the first
-        # preconditioner application, or taken over from a solver of the same pattern
-        # (warm_start)
-        self.schur = self.inner = None
         self.u_in, self.u_out = self.l_uu.createVecs()
+        # far-field self blocks of the preconditioner (isolated spheres, scaled by
+        # self_resistance_scale; this rank's particles), and the blocks of the whole Schur
+        # complement G (every rank): L_uu with D_uu^-1 added to its diagonal blocks
+        # (lubrication_sparse stores one for every particle), of which G keeps the
+        # diagonal ones and those of pairs closer than PRECONDITIONER_MAX_GAP
+        scale = self_resistance_scale(resistance.volume_fraction)
+        inv = {a: scale * np.linalg.inv(self_mobility(a)) for a in np.unique(resistance.radii)}
+        d_inv = np.array([inv[a] for a in resistance.radii])
+        self.d_inv = d_inv[p0:p1]
+        g_blocks = np.ascontiguousarray(bsr.data[:, :6, :6])
+        block_rows = np.repeat(np.arange(n), np.diff(bsr.indptr))
+        diagonal = bsr.indices == block_rows
+        g_blocks[diagonal] += d_inv[:, :6, :6]
+        self._g_blocks, self._g_pattern = g_blocks, (bsr.indptr, bsr.indices, block_rows)
+        self._g_keep = diagonal | _near_blocks(resistance.pairs, block_rows, bsr.indices, n)
+        # G as a sequential PETSc matrix, its incomplete factor (the KSP `inner`) and work
+        # vectors: built at the first preconditioner application, or taken over from a
+        # solver of the same pattern (warm_start)
+        self.schur = self.inner = self._g_in = self._g_out = None
 
         m = NDOF * n + 6 * n
         ml = self.nl11 + 6 * nl
@@ -318,40 +339,65 @@ class KrylovSolver:
     def destroy(self):
         """Frees the PETSc objects now (otherwise when the solver is garbage collected)."""
         for obj in (self.ksp, self._mobility_ksp, self.inner, self.saddle, self.l_uu, self.schur,
-                    self.u_in, self.u_out):
+                    self.u_in, self.u_out, self._g_in, self._g_out):
             if obj is not None:
                 obj.destroy()
         _LIVE.discard(self)
 
     # ------------------------------------------------------------------ helpers
 
+    def schur_csr(self):
+        """G (6N x 6N, scipy CSR): the kept blocks (_g_keep) of L_uu + D_uu^-1."""
+        _, cols, rows = self._g_pattern
+        keep = self._g_keep
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=self.n))])
+        csr = scipy.sparse.bsr_matrix((self._g_blocks[keep], cols[keep], indptr),
+                                      shape=(6 * self.n, 6 * self.n)).tocsr()
+        csr.sort_indices()
+        return csr
+
     def schur_solver(self):
-        """The KSP applying the incomplete factor of G (INNER_OPTIONS), built on first use."""
+        """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
+        rank alone, built on first use."""
         if self.inner is None:
-            self.schur = self._aij(self._schur_csr)
-            self.inner = self._PETSc.KSP().create(comm=self.comm)
+            PETSc, csr = self._PETSc, self.schur_csr()
+            self.schur = PETSc.Mat().createAIJ(csr.shape, csr=(csr.indptr.astype(np.int32),
+                                                               csr.indices.astype(np.int32), csr.data),
+                                               comm=PETSc.COMM_SELF)
+            self.schur.assemble()
+            self.inner = PETSc.KSP().create(comm=PETSc.COMM_SELF)
             self.inner.setOperators(self.schur)
             self.inner.setOptionsPrefix(OPTIONS_PREFIX)
-            options = self._PETSc.Options(OPTIONS_PREFIX)
+            options = PETSc.Options(OPTIONS_PREFIX)
             for key, value in INNER_OPTIONS.items():
                 options.setValue(key, value)
             self.inner.setFromOptions()
+        if self._g_in is None:
+            self._g_in, self._g_out = self.schur.createVecs()
         return self.inner
 
+    def schur_solve(self, local):
+        """This rank's rows of G^-1 g (incomplete factor) from this rank's rows of g."""
+        inner = self.schur_solver()
+        self._g_in.setArray(self._gather(local, self.counts6))
+        inner.solve(self._g_in, self._g_out)
+        return self._g_out.getArray(readonly=True)[6 * self.p0:6 * self.p1].copy()
+
     def _take_schur_solver(self, other):
-        """Take over other's G matrix and factor when G has the same sparsity pattern here
-        (the Brownian midpoint: the pair sets of the step's start): G's values are
-        overwritten with this configuration's, so the factorisation keeps its symbolic
-        part and redoes only the numeric one. other builds a new one if it needs it."""
-        mine, theirs = self._schur_csr, other._schur_csr
-        if (self.inner is not None or other.inner is None or mine.shape != theirs.shape
-                or not np.array_equal(mine.indptr, theirs.indptr)
-                or not np.array_equal(mine.indices, theirs.indices)):
+        """Take over other's G matrix and factor when the lubrication has the same block
+        pattern here (the Brownian midpoint: the pair sets of the step's start): G keeps
+        other's blocks, with this configuration's values, so the factorisation keeps its
+        symbolic part and redoes only the numeric one. other builds a new one if it needs it."""
+        mine, theirs = self._g_pattern, other._g_pattern
+        if (self.inner is not None or other.inner is None or len(mine[1]) != len(theirs[1])
+                or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):
             return
+        self._g_keep = other._g_keep
+        csr = self.schur_csr()
         self.schur, self.inner = other.schur, other.inner
         other.schur = other.inner = None
         self.schur.zeroEntries()
-        self.schur.setValuesCSR(mine.indptr.astype(np.int32), mine.indices.astype(np.int32), mine.data)
+        self.schur.setValuesCSR(csr.indptr.astype(np.int32), csr.indices.astype(np.int32), csr.data)
         self.schur.assemble()
 
     def _aij(self, csr):
