@@ -182,3 +182,22 @@ def test_independent_of_ranks():
 
 if __name__ == "__main__":
     print(json.dumps(rank_check()), flush=True)
+
+
+def test_real_space_shares_balance_rank_zeros_ffts():
+    """Pair images per rank: all of them, once; rank 0's share plus its FFTs (in pair
+    units) equals each other rank's share to one pair; none for rank 0 when its FFTs
+    alone outweigh the others' shares."""
+    from sdmpi.hydro.spectral import _FFT_COST_PER_GRID_POINT, real_space_shares
+
+    grid = (48, 50, 50)
+    fft = _FFT_COST_PER_GRID_POINT * np.prod(grid)
+    for pairs, size in ((59692, 2), (243000, 2), (243000, 4), (7, 2)):
+        shares = real_space_shares(pairs, grid, size)
+        assert len(shares) == size and shares.sum() == pairs and np.all(shares >= 0)
+        if shares[0] > 0:
+            assert np.all(np.abs(shares[0] + fft - shares[1:]) <= 1)
+        else:
+            assert np.all(shares[1:] <= fft + 1)
+    assert real_space_shares(1000, grid, 2)[0] == 0  # FFTs outweigh: all pairs on rank 1
+    assert np.array_equal(real_space_shares(10, grid, 1), [10])

@@ -29,8 +29,9 @@ Self terms: `farfield.self_mobility`. Units: viscosity 1, lengths as given.
 
 Parallel (comm given): every rank spreads and interpolates a share of the particles; the
 grid is summed on rank 0 (Reduce), which does the FFTs and sends the velocity grid back
-(Bcast); ranks 1.. share the real-space pairs, whose product they compute while rank 0
-does the FFTs; the 11N result is summed (Allreduce).
+(Bcast); the real-space pairs are shared so that rank 0's share plus its FFTs balances
+the others' (`real_space_shares`), whose product they compute while rank 0 does the
+FFTs; the 11N result is summed (Allreduce).
 
 Speed: the window stencils of a configuration (wrapped grid indices, in-plane Gaussians,
 z ranges and moments: `Stencils`) are computed once, not per product; spreading and
@@ -422,6 +423,23 @@ def _kernel_scale(lattice, par):
 # ---------------------------------------------------------------------------------
 
 
+#: cost of the FFTs + k-space kernel per grid point, in units of the real-space product
+#: per pair image (bench/bench_spectral.py, N = 1000 and 4096, tol 1e-4: measured 0.3-0.5)
+_FFT_COST_PER_GRID_POINT = 0.4
+
+
+def real_space_shares(n_pairs, grid, size):
+    """Pair images per rank (size ranks) such that rank 0's share plus its FFTs (cost
+    _FFT_COST_PER_GRID_POINT per grid point) equals every other rank's share: with R the
+    pair images and F the FFTs in pair units, r_k = (R + F)/size for k >= 1 and
+    r_0 = r_k - F (none if negative). A fixed cost model, not a timing: the split, and so
+    the rounding of the result, depends only on the configuration and the rank count."""
+    fft = _FFT_COST_PER_GRID_POINT * float(np.prod(grid))
+    first = int(round(min(n_pairs, max(0.0, (n_pairs + fft) / size - fft))))
+    rest = np.diff(np.linspace(0, n_pairs - first, size).round().astype(np.int64))
+    return np.concatenate([[first], rest])
+
+
 def _check_inputs(positions, radii, lattice, tol, xi):
     pos = np.asarray(positions, dtype=float)
     if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] < 1:
@@ -480,11 +498,12 @@ class SpectralFarField:
             self._scale = _kernel_scale(lattice, par)
             self._recip = lattice.reciprocal
             self._fk = np.empty((*self._scale.shape, 3), dtype=complex)
-        # real space: pair images on one rank, else shared by ranks 1..size-1
+        # real space: pair images on one rank, else shared so that every rank's real-space
+        # work plus rank 0's FFTs balance (real_space_shares)
         pi, pj, shift = find_pairs(pos, rad, lattice, par.rcut, 0.0)
         if size > 1:
-            mine = np.array_split(np.arange(len(pi)), size - 1)[rank - 1] if rank > 0 else np.arange(0)
-            pi, pj, shift = pi[mine], pj[mine], shift[mine]
+            bounds = np.cumsum(np.concatenate([[0], real_space_shares(len(pi), par.grid, size)]))
+            pi, pj, shift = (a[bounds[rank]:bounds[rank + 1]] for a in (pi, pj, shift))
         self._pi, self._pj = pi, pj
         self._blocks = np.empty((len(pi), NDOF, NDOF))
         _pair_blocks(pos, rad, pi, pj, np.ascontiguousarray(shift), _cached_radial_table(par.xi),
