@@ -233,18 +233,23 @@ def test_two_ranks_per_task_same_stream(tmp_path):
         assert np.all(run["solver_residual"] < 1e-10)
 
 
-def test_fast_tolerances_change_the_stream_only_at_their_level():
-    """The benchmark's fast settings (solver tolerance 1e-6, Lanczos 1e-4, Ewald 1e-4)
-    against tight ones (1e-10, 1e-10, 1e-8) on the same realisation (N = 27, phi = 0.45,
-    the same noise): each sample's stresses agree to 1e-3 of their scale (measured 7e-5
-    hydrodynamic, 4e-4 Brownian: far below the sampling noise of a stress average), positions to
-    3e-5 a after 4 steps (Lanczos error 1e-4 x the Brownian displacement, ~0.09 a:
-    ~1e-5; measured 6.6e-6)."""
+@pytest.mark.parametrize("fast, bounds", [((1e-6, 1e-4, 1e-4), (1e-3, 1e-3)),
+                                          ((1e-5, 1e-4, 1e-4), (1e-3, 3e-3))])
+def test_fast_tolerances_change_the_stream_only_at_their_level(fast, bounds):
+    """The benchmark's fast settings (solver tolerance 1e-6 or 1e-5, Lanczos 1e-4, Ewald
+    1e-4) against tight ones (1e-10, 1e-10, 1e-8) on the same realisation (N = 27, phi =
+    0.45, the same noise): each sample's stresses agree to `bounds` (hydrodynamic,
+    Brownian) of their scale (measured 7e-5 and 3e-4 at 1e-6; 1.6e-4 and 9e-4 at 1e-5:
+    far below the sampling noise of a stress average; the Brownian stress, a difference of
+    two solves ~sqrt(dt) apart, amplifies the solver error; at 1e-4 it reaches 5e-2, so
+    1e-5 is the loosest solver tolerance offered as fast), positions to 3e-5 a after 4
+    steps (Lanczos error 1e-4 x the Brownian displacement, ~0.09 a: ~1e-5; measured
+    6.5e-6 and 6.8e-6)."""
     from sdmpi.config import enumerate_tasks, load_job
     from sdmpi.dynamics import Realisation
 
     streams = {}
-    for name, (tol, lanczos, ewald) in {"tight": (1e-10, 1e-10, 1e-8), "fast": (1e-6, 1e-4, 1e-4)}.items():
+    for name, (tol, lanczos, ewald) in {"tight": (1e-10, 1e-10, 1e-8), "fast": fast}.items():
         job = load_job(str(ROOT / "jobs" / "demo.toml"), [
             "system.n_particles=27", "system.phi=[0.45]", 'solver.backend="petsc-krylov"',
             f"solver.tolerance={tol}", f"solver.lanczos_tolerance={lanczos}",
@@ -252,9 +257,9 @@ def test_fast_tolerances_change_the_stream_only_at_their_level():
         real = Realisation(job, enumerate_tasks(job)[0])
         streams[name] = real.advance(4), real.positions
     (tight, x_tight), (fast, x_fast) = streams["tight"], streams["fast"]
-    for key in ("stress_hydrodynamic", "stress_brownian"):
+    for key, bound in zip(("stress_hydrodynamic", "stress_brownian"), bounds):
         scale = np.abs(tight[key]).max()
-        assert np.abs(tight[key] - fast[key]).max() < 1e-3 * scale, key
+        assert np.abs(tight[key] - fast[key]).max() < bound * scale, key
     assert np.abs(x_tight - x_fast).max() < 3e-5
     assert fast["solver_iterations"].sum() < tight["solver_iterations"].sum()
 
