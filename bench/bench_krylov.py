@@ -38,13 +38,17 @@ OUT = HERE / "krylov.json"
 PLOT = HERE / "krylov_cost.png"
 
 
-def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance):
-    """One realisation stepped on COMM_WORLD; returns the row (on every rank)."""
+def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, far_field=None):
+    """One realisation stepped on COMM_WORLD; returns the row (on every rank). far_field:
+    "dense" or "spectral" instead of the choice by N (krylov.DENSE_FAR_FIELD_MAX_N)."""
     from mpi4py import MPI
 
     from sdmpi.config import enumerate_tasks, load_job
     from sdmpi.dynamics import Realisation
-    from sdmpi.hydro.krylov import DENSE_FAR_FIELD_MAX_N
+    from sdmpi.hydro import krylov
+
+    if far_field is not None:  # the by-N rule, moved so that it picks far_field at this N
+        krylov.DENSE_FAR_FIELD_MAX_N = n + 1 if far_field == "dense" else 0
 
     comm = MPI.COMM_WORLD
     job = load_job(str(ROOT / "jobs" / "demo.toml"), overrides=[
@@ -53,6 +57,7 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance):
         f"hydrodynamics.ewald_tolerance={ewald_tolerance}", f"ensemble.ranks_per_task={comm.size}",
         "ensemble.realisations=1", "shear.omega=[6.283185307179586]",
         "integration.steps_per_period=2000"])  # dt = 5e-4 t_D, the seed's largest
+    speed_before = machine_speed()
     t0 = time.perf_counter()
     real = Realisation(job, enumerate_tasks(job)[0], comm if comm.size > 1 else None)
     t_init = time.perf_counter() - t0
@@ -66,13 +71,31 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance):
         its.append(int(sample["solver_iterations"][0]))
         lanczos.append(int(sample["lanczos_iterations"][0]))
     rss = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20  # KiB -> GiB
-    far = "-" if backend != "petsc-krylov" else ("dense" if n < DENSE_FAR_FIELD_MAX_N else "spectral")
+    far = "-" if backend != "petsc-krylov" else ("dense" if n < krylov.DENSE_FAR_FIELD_MAX_N else "spectral")
     return {"backend": backend, "n": n, "ranks": comm.size, "phi": 0.45, "tolerance": tolerance,
             "lanczos_tolerance": lanczos_tolerance, "ewald_tolerance": ewald_tolerance,
-            "far_field": far, "seconds_per_step": float(np.median(times)),
+            "far_field": far, "far_field_forced": far_field is not None,
+            "seconds_per_step": float(np.median(times)),
             "seconds_per_step_all": times, "iterations_per_step": its,
             "lanczos_per_step": lanczos, "peak_rss_gib_total": rss, "init_seconds": t_init,
-            "dt": real.dt, "load_average_1min": os.getloadavg()[0]}
+            "dt": real.dt, "load_average_1min": os.getloadavg()[0],
+            "dgemm_gflops_before_after": [speed_before, machine_speed()]}
+
+
+def machine_speed(n=1000, repeat=5):
+    """This core's speed right now: one-thread DGEMM GFLOP/s (best of `repeat` n x n
+    products). The VM's speed drifts (seen: 15 to 75 GFLOP/s within minutes), so every
+    row records it before and after its steps."""
+    a = np.random.default_rng(0).standard_normal((n, n))
+    a @ a
+    best = min(_timed(lambda: a @ a) for _ in range(repeat))
+    return 2 * n ** 3 / best / 1e9
+
+
+def _timed(work):
+    t0 = time.perf_counter()
+    work()
+    return time.perf_counter() - t0
 
 
 def settings(row):
@@ -89,7 +112,7 @@ def merge(rows):
     data = json.loads(OUT.read_text()) if OUT.exists() else {"rows": []}
 
     def key(r):
-        return r["backend"], r["n"], r["ranks"], settings(r)
+        return r["backend"], r["n"], r["ranks"], settings(r), r["far_field"]
 
     new = {key(r) for r in rows}
     data["rows"] = [r for r in data["rows"] if key(r) not in new] + rows
@@ -101,7 +124,7 @@ def merge(rows):
     data["cost_exponents_2_ranks"] = []
     for setting in sorted({settings(r) for r in data["rows"]}):
         kry = sorted((r for r in data["rows"] if r["backend"] == "petsc-krylov" and r["ranks"] == 2
-                      and settings(r) == setting), key=lambda r: r["n"])
+                      and settings(r) == setting and not r.get("far_field_forced")), key=lambda r: r["n"])
         data["cost_exponents_2_ranks"] += [
             {"settings": label(setting), "from": a["n"], "to": b["n"],
              "exponent": float(np.log(b["seconds_per_step"] / a["seconds_per_step"]) / np.log(b["n"] / a["n"])),
@@ -120,7 +143,8 @@ def plot(data):
     fig, ax = plt.subplots(figsize=(5.5, 4))
     groups = {}
     for r in data["rows"]:
-        groups.setdefault((r["backend"], r["ranks"], settings(r)), []).append(r)
+        if not r.get("far_field_forced"):  # the --far-field rows: the crossover, not the plot
+            groups.setdefault((r["backend"], r["ranks"], settings(r)), []).append(r)
     for (backend, ranks, setting), rows in sorted(groups.items()):
         rows.sort(key=lambda r: r["n"])
         ax.loglog([r["n"] for r in rows], [r["seconds_per_step"] for r in rows], "o-",
@@ -131,6 +155,7 @@ def plot(data):
         n0, t0 = kry[0]["n"], kry[0]["seconds_per_step"]
         ns = np.array([n0, max(r["n"] for r in kry)])
         ax.loglog(ns, t0 * (ns / n0) ** 1.5, "k--", lw=0.8, label="N^1.5")
+    ax.plot([1000, 4096], [3.0, 15.0], "k*", ms=9, label="targets (issue 6), 2 ranks")
     ax.set_xlabel("N (phi = 0.45)")
     ax.set_ylabel("wall time per Brownian step [s]")
     ax.grid(True, which="both", alpha=0.3)
@@ -150,6 +175,8 @@ def main():
                         help="solver.lanczos_tolerance (default: --tolerance)")
     parser.add_argument("--ewald-tolerance", type=float, default=1e-6,
                         help="hydrodynamics.ewald_tolerance")
+    parser.add_argument("--far-field", choices=["dense", "spectral"], default=None,
+                        help="petsc-krylov's far field (default: by N, krylov.DENSE_FAR_FIELD_MAX_N)")
     parser.add_argument("--plot", action="store_true")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -157,7 +184,7 @@ def main():
         from mpi4py import MPI
 
         row = measure(args.sizes[0], args.backend, args.steps, args.tolerance, args.ewald_tolerance,
-                      args.lanczos_tolerance or args.tolerance)
+                      args.lanczos_tolerance or args.tolerance, args.far_field)
         if MPI.COMM_WORLD.rank == 0:
             emit([row])
         return
@@ -165,7 +192,9 @@ def main():
         (row,) = run_worker(__file__, ["--sizes", n, "--backend", args.backend, "--steps", args.steps,
                                        "--tolerance", args.tolerance, "--ewald-tolerance",
                                        args.ewald_tolerance, "--lanczos-tolerance",
-                                       args.lanczos_tolerance or args.tolerance], args.ranks, cwd=ROOT)
+                                       args.lanczos_tolerance or args.tolerance,
+                                       *(["--far-field", args.far_field] if args.far_field else [])],
+                            args.ranks, cwd=ROOT)
         print(json.dumps({k: v for k, v in row.items() if not k.endswith("_all")}), flush=True)
         merge([row])
     if args.plot or args.sizes:

@@ -98,8 +98,10 @@ SELF_RESISTANCE_EXPONENT = 2.5
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (faster there; its matrix
-#: is 11N x 11N: 140 MB at N = 400), spectral from there on (bench/bench_krylov.py)
-DENSE_FAR_FIELD_MAX_N = 400
+#: is 11N x 11N), spectral from there on (bench/bench_krylov.py --far-field, phi = 0.45,
+#: 2 ranks, tolerances 1e-6 / 1e-4 / 1e-4: N = 125 dense 0.40 s, spectral 0.59 s per
+#: Brownian step; N = 343 dense 2.3 s, spectral 1.6 s)
+DENSE_FAR_FIELD_MAX_N = 200
 
 
 def _near_blocks(pairs, rows, cols, n):
