@@ -23,12 +23,15 @@ phi >= 0.45), solved by block elimination,
 
 where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is applied
 through an incomplete Cholesky factor, ICC(ICC_LEVELS), on the pattern of G's full 6x6
-blocks, of the whole G on every rank (the iteration counts do not depend on the number
-of ranks). It needs about as few iterations as the exact factor at a fraction of its
-cost (measurements at INNER_OPTIONS). The Brownian midpoint's solver takes over the
-start's factor (same pattern: only the numeric factorisation is redone, `warm_start`). Near-contact pairs, which
-make R ill-conditioned, are thus (nearly exactly) in the preconditioner: the iterations
-mostly see the far field's many-body part M - D.
+blocks, of the whole G, which every rank computes for itself (the iteration counts do
+not depend on the number of ranks). G keeps the lubrication coupling of the pairs closer
+than PRECONDITIONER_MAX_GAP only (the others' diagonal parts), which makes the factor
+several times cheaper for one more iteration per solve; it needs about as few iterations
+as the exact factor (measurements at INNER_OPTIONS). The Brownian midpoint's solver
+takes over the start's factor (same pattern: only the numeric factorisation is redone,
+`warm_start`). Near-contact pairs, which make R ill-conditioned, are thus (nearly
+exactly) in the preconditioner: the iterations mostly see the far field's many-body part
+M - D.
 
 Brownian forces with covariance R_FU = P_u M^-1 P_u^T + L_uu, without a dense root:
 
@@ -391,7 +394,7 @@ class KrylovSolver:
         other's blocks, with this configuration's values, so the factorisation keeps its
         symbolic part and redoes only the numeric one. other builds a new one if it needs it."""
         mine, theirs = self._g_pattern, other._g_pattern
-        if (self.inner is not None or other.inner is None or len(mine[1]) != len(theirs[1])
+        if (self.inner is not None or other.inner is None
                 or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):
             return
         self._g_keep = other._g_keep
