@@ -112,7 +112,7 @@ def merge(rows):
     data = json.loads(OUT.read_text()) if OUT.exists() else {"rows": []}
 
     def key(r):
-        return r["backend"], r["n"], r["ranks"], settings(r), r["far_field"]
+        return r["backend"], r["n"], r["ranks"], settings(r), r["far_field"], r.get("far_field_forced", False)
 
     new = {key(r) for r in rows}
     data["rows"] = [r for r in data["rows"] if key(r) not in new] + rows

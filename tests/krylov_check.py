@@ -36,7 +36,8 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     """Max relative differences between petsc-krylov (far field `far_field`, "dense" or
     "spectral") on comm and dense: velocities and
     stresslets (imposed forces and strain), the near-field covariance, the far-field
-    Brownian force; the smallest gap; the iterations."""
+    Brownian force; the smallest gap; the iterations; and the preconditioner takeover's
+    three differences (`takeover`)."""
     pos, side = configuration(phi, seed)
     box = np.full(3, side)
     res = grand_resistance(pos, np.ones(N), box, STRAIN)
@@ -63,8 +64,9 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     far = (v @ ((v.T @ z[:NDOF * N]) / np.sqrt(w))).reshape(N, NDOF)[:, :6]
     f_b = krylov.brownian_forces(z)
     out["brownian_far"] = rel(far, f_b)
-    out["takeover_g"], out["takeover_again"] = takeover(krylov, split, box, forces, einf, u_k, comm)
     out["iterations"] = krylov.stats["iterations"]
+    out["takeover_g"], out["takeover_u"], out["takeover_again"] = takeover(krylov, split, box, forces,
+                                                                           einf, u_k, comm)
     out["lanczos"] = krylov.stats["lanczos"]
     out["digest"] = hashlib.sha256(np.concatenate([u_k.ravel(), f_b.ravel()]).tobytes()).hexdigest()
     return out
@@ -73,20 +75,25 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
 def takeover(krylov, split, box, forces, einf, u_k, comm):
     """A solver at a nearby configuration with the same pair sets (the Brownian midpoint)
     takes over krylov's preconditioner factor (warm_start). Returns the max relative
-    differences of its G (this rank's rows) from the G it would build itself, and of
-    krylov's velocities solved again afterwards (krylov rebuilds its own factor) from the
-    first ones: both 0 up to rounding."""
+    differences of (1) its G (the whole sequential matrix) from the G a solver of that
+    configuration builds itself, (2) its velocities from that solver's, started from the
+    same guess (a stale factor, not refactorised, gives ~5e-8 here), and (3) krylov's
+    velocities solved again afterwards (krylov rebuilds its own factor) from the first
+    ones: all 0 up to rounding; the iterations of (2) must be equal too."""
     rng = np.random.default_rng(5)
     mid = split_resistance(split.positions + 1e-3 * rng.standard_normal((N, 3)), np.ones(N), box,
                            STRAIN, plan=split.plan, far_field=split_far_field(split), comm=comm)
     own, taker = (make_solver("petsc-krylov", mid, comm, TOL) for _ in range(2))
     taker.warm_start(krylov)
     assert taker.inner is not None and krylov.inner is None  # taken over
-    own.velocities(forces, einf)
-    taker.velocities(forces, einf)
+    own.warm_start(krylov)  # the same initial guess; nothing left to take over
+    assert own.inner is None
+    own._g_keep = taker._g_keep  # the same kept blocks (a pair may cross the gap filter)
+    u_own, u_taker = own.velocities(forces, einf), taker.velocities(forces, einf)
+    assert own.stats["iterations"] == taker.stats["iterations"]
     (ip_o, j_o, v_o), (ip_t, j_t, v_t) = own.schur.getValuesCSR(), taker.schur.getValuesCSR()
     assert np.array_equal(ip_o, ip_t) and np.array_equal(j_o, j_t)
-    return rel(v_o, v_t), rel(u_k, krylov.velocities(forces, einf))
+    return rel(v_o, v_t), rel(u_own, u_taker), rel(u_k, krylov.velocities(forces, einf))
 
 
 def split_far_field(split):

@@ -3,6 +3,7 @@ one rank in process, on two ranks under mpirun, through solve_mobility, and a Br
 realisation with ranks_per_task = 2 against one rank."""
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -49,7 +50,9 @@ def rows_on_two_ranks(script, *args):
     cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, str(HERE / script), *args]
     res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=120, cwd=ROOT)
     assert res.returncode == 0, res.stderr
-    lines = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("[")]
+    # a library may write a terminal escape (seen: "\x1b[0m") before a line: strip those
+    text = re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", res.stdout)
+    lines = [json.loads(line) for line in text.splitlines() if line.startswith("[")]
     assert len(lines) == 2  # one per rank
     for out in (out for rows in lines for out in rows):
         assert out["ranks"] == 2 and out["same_on_all_ranks"], out

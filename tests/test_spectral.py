@@ -8,10 +8,7 @@ test_independent_of_ranks): prints one JSON line per rank.
 
 import functools
 import hashlib
-import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +19,6 @@ from sdmpi.hydro.farfield import far_field_mobility
 from sdmpi.hydro.geometry import Lattice
 from sdmpi.hydro.spectral import SpectralFarField
 
-HERE = Path(__file__).resolve().parent
 MPIRUN = shutil.which("mpirun")
 N = 27
 
@@ -167,21 +163,13 @@ def rank_check():
 @pytest.mark.mpi
 @pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
 def test_independent_of_ranks():
-    """Two ranks (wave space on one, real space on the other) give the one-rank result up
-    to the order of floating-point sums (1e-13), the same bits on every rank."""
-    from test_ensemble import _env  # tests/ is on sys.path under pytest
+    """Two ranks (spreading and interpolation split by particles, FFTs on rank 0, the
+    real-space pairs shared by `real_space_shares`) give the one-rank result up to the
+    order of floating-point sums (1e-13), the same bits on every rank."""
+    from test_petsc_dense import rows_on_two_ranks  # tests/ is on sys.path under pytest
 
-    cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, str(Path(__file__))]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=120, cwd=HERE.parent)
-    assert res.returncode == 0, res.stderr
-    rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
-    assert len(rows) == 2
-    assert all(r["ranks"] == 2 and r["diff"] < 1e-13 for r in rows), rows
-    assert rows[0]["digest"] == rows[1]["digest"]
-
-
-if __name__ == "__main__":
-    print(json.dumps(rank_check()), flush=True)
+    rows = rows_on_two_ranks(Path(__file__).name)
+    assert len(rows) == 2 and all(r["diff"] < 1e-13 for r in rows), rows
 
 
 def test_real_space_shares_balance_rank_zeros_ffts():
@@ -201,3 +189,11 @@ def test_real_space_shares_balance_rank_zeros_ffts():
             assert np.all(shares[1:] <= fft + 1)
     assert real_space_shares(1000, grid, 2)[0] == 0  # FFTs outweigh: all pairs on rank 1
     assert np.array_equal(real_space_shares(10, grid, 1), [10])
+
+
+if __name__ == "__main__":
+    from mpi4py import MPI
+
+    from petsc_check import print_per_rank
+
+    print_per_rank([rank_check()], MPI.COMM_WORLD)

@@ -386,6 +386,9 @@ class KrylovSolver:
         inner = self.schur_solver()
         self._g_in.setArray(self._gather(local, self.counts6))
         inner.solve(self._g_in, self._g_out)
+        if inner.getConvergedReason() < 0:  # e.g. a zero pivot in the incomplete factor
+            raise KrylovError(f"petsc-krylov: the preconditioner's incomplete Cholesky factor "
+                              f"failed (PETSc reason {inner.getConvergedReason()})")
         return self._g_out.getArray(readonly=True)[6 * self.p0:6 * self.p1].copy()
 
     def _take_schur_solver(self, other):

@@ -164,5 +164,7 @@ def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     else:
         lub_pairs = pairs
     lub, pi, pj, chol = lubrication_sparse(pos, radii, lub_pairs, factors=True)
+    # the box's volume fraction (a monolayer's cell of height layer_spacing x L: ~0.02,
+    # so its preconditioner's self-resistance scale is ~1)
     phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
     return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii, phi)

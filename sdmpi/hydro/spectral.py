@@ -515,7 +515,8 @@ class SpectralFarField:
 
     def wave_space(self, x, y, meanwhile=None):
         """y += the wave-space product at this rank's particles (collective over comm).
-        meanwhile: local work (a callable) that ranks 1.. do while rank 0 does the FFTs."""
+        meanwhile: local work (a callable, this rank's real-space share) that ranks 1.. do
+        while rank 0 does the FFTs, and rank 0 after them."""
         par, st = self.params, self._stencils
         parallel = self.comm is not None and self.comm.size > 1
         # work arrays kept between products (fresh pages, also of the FFT outputs, cost more
