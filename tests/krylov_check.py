@@ -14,7 +14,7 @@ import numpy as np
 from petsc_check import N, STRAIN, configuration, print_per_rank
 from sdmpi.hydro.farfield import NDOF, far_field_mobility
 from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField
-from sdmpi.hydro.lubrication import lubrication_matrix
+from sdmpi.hydro.lubrication import lubrication_matrix, lubrication_sparse
 from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
 from sdmpi.hydro.solvers import make_solver
 
@@ -58,6 +58,9 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
             np.add.at(near, (pu, slice(None), pv), c[:, 6 * u:6 * u + 6, 6 * v:6 * v + 6])
     lub_fu = rigid_block(lubrication_matrix(res.positions, np.ones(N), res.pairs), N)
     out["near_covariance"] = rel(lub_fu, near.reshape(6 * N, 6 * N))
+    # the lubrication of the split resistance (computed by rank 0, broadcast) is this rank's own
+    own, _, _, own_chol = lubrication_sparse(split.positions, np.ones(N), split.pairs, factors=True)
+    out["lubrication_shared"] = max(rel(own.data, split.lubrication.data), rel(own_chol, split.pair_chol))
     z = np.zeros(krylov.noise_shape)
     z[:NDOF * N] = rng.standard_normal(NDOF * N)
     w, v = np.linalg.eigh(far_field_mobility(res.positions, np.ones(N), plan=res.plan.far))

@@ -45,6 +45,7 @@ def _check(out):
         assert out[key] < AGREE + 10 * FAR_ERROR[out["far_field"]], (key, out)
     assert out["near_covariance"] < EXACT, out
     assert max(out["takeover_g"], out["takeover_u"], out["takeover_again"]) < EXACT, out
+    assert out["lubrication_shared"] == 0.0, out
 
 
 @pytest.mark.parametrize("far_field", ["dense", "spectral"])

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+import scipy.sparse
 from scipy.linalg import lapack
 
 from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, plan_far_field
@@ -145,13 +146,35 @@ class SplitResistance:
         return self.positions.shape[0]
 
 
+def _shared_lubrication(positions, radii, pairs, comm):
+    """`lubrication_sparse(positions, radii, pairs, factors=True)` on every rank of comm,
+    computed by rank 0 alone and broadcast (the same bits everywhere): the other ranks
+    meanwhile finish their larger shares of the spectral far field's real-space blocks
+    (`spectral.real_space_shares` gives rank 0 the smallest)."""
+    if comm is None or comm.size == 1:
+        return lubrication_sparse(positions, radii, pairs, factors=True)
+    if comm.rank == 0:
+        lub, pi, pj, chol = lubrication_sparse(positions, radii, pairs, factors=True)
+        arrays = [lub.data, lub.indices, lub.indptr, pi, pj, chol]
+        comm.bcast([(a.shape, a.dtype.str) for a in arrays], root=0)
+    else:
+        arrays = [np.empty(shape, dtype) for shape, dtype in comm.bcast(None, root=0)]
+    for a in arrays:
+        comm.Bcast(a, root=0)
+    if comm.rank == 0:
+        return lub, pi, pj, chol
+    data, indices, indptr, pi, pj, chol = arrays
+    n = NDOF * positions.shape[0]
+    return scipy.sparse.bsr_matrix((data, indices, indptr), shape=(n, n)), pi, pj, chol
+
+
 def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
                      ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
                      max_overlap=None, plan=None, far_field=None, comm=None):
     """The matrix-free form of `grand_resistance` (same arguments and pair sets): the
     far field by the operator `far_field` (`krylov.far_field_operator`: "spectral",
     "dense", None: by N; built on the MPI communicator comm), the
-    lubrication sparse (`lubrication.lubrication_sparse`)."""
+    lubrication sparse (`lubrication.lubrication_sparse`, computed by comm's rank 0)."""
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan)
@@ -163,7 +186,7 @@ def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
         lub_pairs = close_pairs(pos, radii, images=(none, none, np.zeros((0, 3))))
     else:
         lub_pairs = pairs
-    lub, pi, pj, chol = lubrication_sparse(pos, radii, lub_pairs, factors=True)
+    lub, pi, pj, chol = _shared_lubrication(pos, radii, lub_pairs, comm)
     # the box's volume fraction (a monolayer's cell of height layer_spacing x L: ~0.02,
     # so its preconditioner's self-resistance scale is ~1)
     phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
