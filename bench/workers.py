@@ -4,6 +4,7 @@ run) and reads the rows the worker prints."""
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -28,5 +29,6 @@ def run_worker(script, args, ranks, cwd=None):
     res = subprocess.run(cmd, capture_output=True, text=True, env=ENV, cwd=cwd)
     if res.returncode != 0:
         sys.exit(f"{' '.join(cmd)}: failed\n{res.stderr[-3000:]}")
-    return [row for line in res.stdout.splitlines() if line.startswith(TAG)
+    text = re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", res.stdout)  # stray terminal escapes (seen: ESC[0m)
+    return [row for line in text.splitlines() if line.startswith(TAG)
             for row in json.loads(line[len(TAG):])]
