@@ -107,6 +107,11 @@ FAR_FIELDS = ("dense", "spectral")
 DENSE_FAR_FIELD_MAX_N = 200
 
 
+def _int32_csr(csr):
+    """(indptr, indices, data) of a scipy CSR matrix, the indices as PETSc's 32-bit ints."""
+    return csr.indptr.astype(np.int32), csr.indices.astype(np.int32), csr.data
+
+
 def _near_blocks(pairs, rows, cols, n):
     """Which blocks (rows, cols) of an N x N block pattern belong to a pair of `pairs` (a
     `lubrication.PairList`) closer than PRECONDITIONER_MAX_GAP mean radii."""
@@ -365,11 +370,8 @@ class KrylovSolver:
         """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
         rank alone, built on first use."""
         if self.inner is None:
-            PETSc, csr = self._PETSc, self.schur_csr()
-            self.schur = PETSc.Mat().createAIJ(csr.shape, csr=(csr.indptr.astype(np.int32),
-                                                               csr.indices.astype(np.int32), csr.data),
-                                               comm=PETSc.COMM_SELF)
-            self.schur.assemble()
+            PETSc = self._PETSc
+            self.schur = self._aij(self.schur_csr(), PETSc.COMM_SELF)
             self.inner = PETSc.KSP().create(comm=PETSc.COMM_SELF)
             self.inner.setOperators(self.schur)
             self.inner.setOptionsPrefix(OPTIONS_PREFIX)
@@ -405,15 +407,16 @@ class KrylovSolver:
         self.schur, self.inner = other.schur, other.inner
         other.schur = other.inner = None
         self.schur.zeroEntries()
-        self.schur.setValuesCSR(csr.indptr.astype(np.int32), csr.indices.astype(np.int32), csr.data)
+        self.schur.setValuesCSR(*_int32_csr(csr))
         self.schur.assemble()
 
-    def _aij(self, csr):
+    def _aij(self, csr, comm=None):
+        """A PETSc AIJ matrix (6N x 6N) of this rank's rows csr, on comm (None: the
+        solver's communicator)."""
         csr.sort_indices()
         rows = csr.shape[0]
         mat = self._PETSc.Mat().createAIJ([(rows, 6 * self.n), (rows, 6 * self.n)],
-                                          csr=(csr.indptr.astype(np.int32), csr.indices.astype(np.int32),
-                                               csr.data), comm=self.comm)
+                                          csr=_int32_csr(csr), comm=self.comm if comm is None else comm)
         mat.assemble()
         return mat
 
