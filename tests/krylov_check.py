@@ -77,19 +77,18 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
 
 def takeover(krylov, split, box, forces, einf, u_k, comm):
     """A solver at a nearby configuration with the same pair sets (the Brownian midpoint)
-    takes over krylov's preconditioner factor (warm_start). Returns the max relative
+    takes over krylov's preconditioner factor (take_preconditioner). Returns the max relative
     differences of (1) its G (the whole sequential matrix) from the G a solver of that
-    configuration builds itself, (2) its velocities from that solver's, started from the
-    same guess (a stale factor, not refactorised, gives ~5e-8 here), and (3) krylov's
+    configuration builds itself, (2) its velocities from that solver's (a stale factor, not refactorised, gives ~5e-8 here), and (3) krylov's
     velocities solved again afterwards (krylov rebuilds its own factor) from the first
     ones: all 0 up to rounding; the iterations of (2) must be equal too."""
     rng = np.random.default_rng(5)
     mid = split_resistance(split.positions + 1e-3 * rng.standard_normal((N, 3)), np.ones(N), box,
                            STRAIN, plan=split.plan, far_field=split_far_field(split), comm=comm)
     own, taker = (make_solver("petsc-krylov", mid, comm, TOL) for _ in range(2))
-    taker.warm_start(krylov)
+    taker.take_preconditioner(krylov)
     assert taker.inner is not None and krylov.inner is None  # taken over
-    own.warm_start(krylov)  # the same initial guess; nothing left to take over
+    own.take_preconditioner(krylov)  # nothing left to take over
     assert own.inner is None
     own._g_keep = taker._g_keep  # the same kept blocks (a pair may cross the gap filter)
     u_own, u_taker = own.velocities(forces, einf), taker.velocities(forces, einf)

@@ -45,7 +45,7 @@ import numpy as np
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
-from ..hydro.solvers import assemble, make_solver, noise_shape, resolve_backend, solver_stats, warm_start
+from ..hydro.solvers import assemble, make_solver, noise_shape, resolve_backend, solver_stats, take_preconditioner
 from .contacts import contact_model
 from .forces import force_law, pair_forces, remove_overlaps
 from .initial import hard_sphere_fluid
@@ -356,7 +356,7 @@ def midpoint_brownian(res, solver, z, kT, dt, resistance_at, solver_at=None):
     u_start = solver.velocities(force, zero)
     mid = resistance_at(res.positions + 0.5 * dt * u_start[:, :3], res.plan)
     solver_mid = make_solver("dense", mid) if solver_at is None else solver_at(mid)
-    warm_start(solver_mid, solver)  # iterative backends: start from u_start
+    take_preconditioner(solver_mid, solver)  # petsc-krylov: refactorise the start's factor
     u_mid = solver_mid.velocities(force, zero)
     return u_mid, solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
 

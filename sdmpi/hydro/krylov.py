@@ -17,7 +17,8 @@ another solve: -S = P_e (lambda + L V).
 Preconditioner: the same block system with M replaced by a block-diagonal D (the
 isolated-sphere 11x11 self blocks, divided by `self_resistance_scale(phi)`: a sphere's
 far-field resistance among others is larger than alone; 20-30% fewer iterations at
-phi >= 0.45), solved by block elimination,
+phi >= 0.45; and weighted per translation, rotation and stresslet,
+`self_resistance_weights`: ~10% fewer), solved by block elimination,
 
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
@@ -29,7 +30,7 @@ than PRECONDITIONER_MAX_GAP only (the others' diagonal parts), which makes the f
 several times cheaper for one more iteration per solve; it needs about as few iterations
 as the exact factor (measurements at INNER_OPTIONS). The Brownian midpoint's solver
 takes over the start's factor (same pattern: only the numeric factorisation is redone,
-`warm_start`). Near-contact pairs, which make R ill-conditioned, are thus (nearly
+`take_preconditioner`). Near-contact pairs, which make R ill-conditioned, are thus (nearly
 exactly) in the preconditioner: the iterations mostly see the far field's many-body part
 M - D.
 
@@ -98,6 +99,9 @@ PRECONDITIONER_MAX_GAP = 1.0
 #: the preconditioner's far-field self resistance grows with the volume fraction like
 #: (1 - phi)^-SELF_RESISTANCE_EXPONENT (self_resistance_scale)
 SELF_RESISTANCE_EXPONENT = 2.5
+#: ... times these weights on its (translation, rotation, stresslet) parts: translation is
+#: hindered more than rotation, the stresslet less (self_resistance_weights)
+SELF_RESISTANCE_WEIGHTS = (1.5, 1.0, 0.6)
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (faster there; its matrix
@@ -129,6 +133,16 @@ def self_resistance_scale(phi):
     17/17 -> 17/17 (scale 1-2); 0.3 27/27 -> 23/24 (3); 0.45 42/42 -> 31/33 (5-6);
     0.55 59/57 -> 38/40 (8); the rule gives 1.3, 2.4, 4.5 and 7.4."""
     return (1.0 - min(phi, 0.7)) ** -SELF_RESISTANCE_EXPONENT
+
+
+def self_resistance_weights():
+    """(11,) weights w on the scaled self resistance, applied as W^1/2 D^-1 W^1/2: the
+    SELF_RESISTANCE_WEIGHTS of translation, rotation and stresslet. Empirical (N = 1000,
+    solver tolerance 1e-5, flow / force solve iterations, weights (1, 1, 1) -> (1.5, 1,
+    0.6)): phi = 0.1 14/14 -> 13/12; 0.3 20/21 -> 17/18; 0.45 27/29 -> 24/25; 0.55 34/37
+    -> 31/33 (at phi = 0.45: (2, 1, 0.5) 26/26, (1, 1, 0.5) 24/24 at N = 343, the
+    rotational weight 0.5-2 makes no difference)."""
+    return np.repeat(SELF_RESISTANCE_WEIGHTS, [3, 3, 5])
 
 
 class KrylovError(RuntimeError):
@@ -277,7 +291,7 @@ class KrylovSolver:
     """The `petsc-krylov` backend for a `resistance.SplitResistance` on the MPI
     communicator comm (None: this rank alone); tol: relative residual of every solve,
     lanczos_tol: relative accuracy of the Lanczos square roots (None: tol). Interface
-    as `solvers.DenseSolver`, plus noise_shape, warm_start and stats (iterations,
+    as `solvers.DenseSolver`, plus noise_shape, take_preconditioner and stats (iterations,
     largest relative residual, Lanczos iterations)."""
 
     name = "petsc-krylov"
@@ -316,11 +330,13 @@ class KrylovSolver:
         self.l_uu = self._aij(l_uu.tocsr())
         self.u_in, self.u_out = self.l_uu.createVecs()
         # far-field self blocks of the preconditioner (isolated spheres, scaled by
-        # self_resistance_scale; this rank's particles), and the blocks of the whole Schur
-        # complement G (every rank): L_uu with D_uu^-1 added to its diagonal blocks
-        # (lubrication_sparse stores one for every particle), of which G keeps the
-        # diagonal ones and those of pairs closer than PRECONDITIONER_MAX_GAP
-        scale = self_resistance_scale(resistance.volume_fraction)
+        # self_resistance_scale, weighted by self_resistance_weights; this rank's
+        # particles), and the blocks of the whole Schur complement G (every rank): L_uu
+        # with D_uu^-1 added to its diagonal blocks (lubrication_sparse stores one for
+        # every particle), of which G keeps the diagonal ones and those of pairs closer
+        # than PRECONDITIONER_MAX_GAP
+        root_w = np.sqrt(self_resistance_weights())
+        scale = self_resistance_scale(resistance.volume_fraction) * np.outer(root_w, root_w)
         inv = {a: scale * np.linalg.inv(self_mobility(a)) for a in np.unique(resistance.radii)}
         d_inv = np.array([inv[a] for a in resistance.radii])
         self.d_inv = d_inv[p0:p1]
@@ -332,7 +348,7 @@ class KrylovSolver:
         self._g_keep = diagonal | _near_blocks(resistance.pairs, block_rows, bsr.indices, n)
         # G as a sequential PETSc matrix, its incomplete factor (the KSP `inner`) and work
         # vectors: built at the first preconditioner application, or taken over from a
-        # solver of the same pattern (warm_start)
+        # solver of the same pattern (take_preconditioner)
         self.schur = self.inner = self._g_in = self._g_out = None
 
         m = NDOF * n + 6 * n
@@ -343,8 +359,6 @@ class KrylovSolver:
         self.ksp.setGMRESRestart(GMRES_RESTART)
         self._mobility_ksp = None
         self._last = None  # (velocities, einf, lambda rows) of the last solve
-        self._solution = None  # this rank's (lambda, U') of the last saddle-point solve
-        self._guess = None  # the initial guess of the next one (warm_start)
 
     def destroy(self):
         """Frees the PETSc objects now (otherwise when the solver is garbage collected)."""
@@ -393,11 +407,17 @@ class KrylovSolver:
                               f"failed (PETSc reason {inner.getConvergedReason()})")
         return self._g_out.getArray(readonly=True)[6 * self.p0:6 * self.p1].copy()
 
-    def _take_schur_solver(self, other):
+    def take_preconditioner(self, other):
         """Take over other's G matrix and factor when the lubrication has the same block
         pattern here (the Brownian midpoint: the pair sets of the step's start): G keeps
         other's blocks, with this configuration's values, so the factorisation keeps its
-        symbolic part and redoes only the numeric one. other builds a new one if it needs it."""
+        symbolic part and redoes only the numeric one. other builds a new one if it needs
+        it. (The solve itself starts from zero, as other's did: the two GMRES runs then
+        take nearly the same path, so their errors nearly cancel in the difference of the
+        two solutions, the Brownian stresslets S_mid - S_start; started from other's
+        solution instead, the midpoint needs ~20% fewer iterations, but its error is
+        independent of other's and the difference is ~100 x less accurate:
+        tests/test_krylov.py::test_midpoint_difference_is_accurate.)"""
         mine, theirs = self._g_pattern, other._g_pattern
         if (self.inner is not None or other.inner is None
                 or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):
@@ -448,16 +468,11 @@ class KrylovSolver:
         return full[NDOF * self.p0:NDOF * self.p1].copy()
 
     def _run(self, ksp, rhs):
-        """Solve with ksp for this rank's part of rhs; returns this rank's solution.
-        Records the iterations and the relative preconditioned residual |P^-1 r|/|P^-1 b|."""
+        """Solve with ksp for this rank's part of rhs, from zero; returns this rank's
+        solution. Records the iterations and the relative preconditioned residual
+        |P^-1 r|/|P^-1 b|."""
         b, x = ksp.getOperators()[0].createVecs()
         b.setArray(rhs)
-        saddle = ksp is self.ksp
-        start = self._guess if saddle else None
-        if start is not None:
-            x.setArray(start)
-            self._guess = None
-        ksp.setInitialGuessNonzero(start is not None)
         ksp.solve(b, x)
         reason = ksp.getConvergedReason()
         pb = b.duplicate()
@@ -470,10 +485,7 @@ class KrylovSolver:
                               f"iterations, tolerance {self.tol:g})")
         self.stats["iterations"] += ksp.getIterationNumber()
         self.stats["residual"] = max(self.stats["residual"], residual)
-        solution = x.getArray().copy()
-        if saddle:
-            self._solution = solution
-        return solution
+        return x.getArray().copy()
 
     @staticmethod
     def _generalized(velocities, einf):
@@ -483,15 +495,6 @@ class KrylovSolver:
         return v.ravel()
 
     # ------------------------------------------------------------------ interface
-
-    def warm_start(self, other):
-        """The next velocities() solve starts from other's last solution (a KrylovSolver
-        of a nearby configuration on the same ranks and particles, e.g. the Brownian step's
-        start for its midpoint: ~20% fewer iterations there). The tolerance stays relative
-        to the right-hand side. Also takes over other's preconditioner factor where the
-        pair pattern is the same (`_take_schur_solver`)."""
-        self._guess = other._solution
-        self._take_schur_solver(other)
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""

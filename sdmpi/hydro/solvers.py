@@ -128,13 +128,13 @@ def noise_shape(solver):
     return getattr(solver, "noise_shape", (solver.n, 6))
 
 
-def warm_start(solver, previous):
-    """Let solver's next velocities() solve start from the last solution of previous (a
-    solver of the same backend at a nearby configuration), where the backend iterates
-    (petsc-krylov); the direct backends ignore it."""
-    start = getattr(solver, "warm_start", None)
-    if start is not None:
-        start(previous)
+def take_preconditioner(solver, previous):
+    """Let solver take over the preconditioner factor of previous (a solver of the same
+    backend at a nearby configuration, the Brownian step's start for its midpoint), where
+    the backend has one (petsc-krylov); the direct backends ignore it."""
+    take = getattr(solver, "take_preconditioner", None)
+    if take is not None:
+        take(previous)
 
 
 def solver_stats(solver):
