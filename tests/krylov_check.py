@@ -4,7 +4,9 @@ and as a script under ``mpirun -n P`` (rank 0 prints one JSON line per rank).
 Configurations: those of petsc_check (N = 27, sheared periodic box, near-contact pairs,
 phi = 0.1 and 0.5); the far field dense or spectral (the script runs both). Brownian forces: the near-field part is checked exactly through its
 covariance (the sum of the pair factors' squares must equal the dense lubrication's FU
-block), the far-field part against the dense M^-1/2 z for one noise vector."""
+block), the far-field part against the dense P (P^T M P)^-1/2 z for one noise vector, P the
+Lanczos preconditioner's factor (krylov.LongWaveFactor) as a matrix, checked to give
+P^T C P = I for C = D + M_long built here from its definition."""
 
 import hashlib
 import sys
@@ -12,8 +14,9 @@ import sys
 import numpy as np
 
 from petsc_check import N, STRAIN, configuration, print_per_rank
-from sdmpi.hydro.farfield import NDOF, far_field_mobility
-from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField
+from sdmpi.hydro.farfield import NDOF, far_field_mobility, self_mobility
+from sdmpi.hydro.geometry import Lattice
+from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, long_waves
 from sdmpi.hydro.lubrication import lubrication_matrix, lubrication_sparse
 from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
 from sdmpi.hydro.solvers import make_solver
@@ -30,6 +33,29 @@ def rel(a, b):
 def rigid_block(matrix, n):
     idx = (NDOF * np.arange(n)[:, None] + np.arange(6)).ravel()
     return matrix[np.ix_(idx, idx)]
+
+
+def inverse_root(matrix):
+    """matrix^-1/2 of a symmetric positive definite matrix (eigendecomposition)."""
+    w, v = np.linalg.eigh(matrix)
+    return (v / np.sqrt(w)) @ v.T
+
+
+def long_wave_preconditioner(positions, radii, lattice):
+    """C = D + M_long (11N x 11N) of the Lanczos preconditioner, pair by pair from its
+    definition: D the self mobilities, M_long,ij = (2/V) sum_k j0(k a_i) j0(k a_j)/k^2
+    cos(k.(x_i - x_j)) (I - k k/k^2) on the translational entries."""
+    n = len(positions)
+    c = np.zeros((n, NDOF, n, NDOF))
+    for i in range(n):
+        c[i, :, i, :] = self_mobility(radii[i])
+    for k in long_waves(lattice):
+        k2 = k @ k
+        j0 = np.sinc(np.sqrt(k2) * radii / np.pi)
+        coupling = 2 / (lattice.volume * k2) * np.outer(j0, j0) * np.cos((positions @ k)[:, None]
+                                                                         - (positions @ k)[None, :])
+        c[:, :3, :, :3] += coupling[:, None, :, None] * (np.eye(3) - np.outer(k, k) / k2)[None, :, None, :]
+    return c.reshape(NDOF * n, NDOF * n)
 
 
 def compare(phi, comm=None, seed=1, far_field="dense"):
@@ -63,8 +89,14 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     out["lubrication_shared"] = max(rel(own.data, split.lubrication.data), rel(own_chol, split.pair_chol))
     z = np.zeros(krylov.noise_shape)
     z[:NDOF * N] = rng.standard_normal(NDOF * N)
-    w, v = np.linalg.eigh(far_field_mobility(res.positions, np.ones(N), plan=res.plan.far))
-    far = (v @ ((v.T @ z[:NDOF * N]) / np.sqrt(w))).reshape(N, NDOF)[:, :6]
+    lattice = Lattice(box, STRAIN)
+    factor = LongWaveFactor(res.positions, np.ones(N), lattice, 0, N)
+    p = np.array([factor.right(e) for e in np.eye(NDOF * N)]).T
+    p_t = np.array([factor.left(e) for e in np.eye(NDOF * N)]).T
+    out["long_wave_factor"] = max(rel(p.T, p_t), float(np.abs(
+        p.T @ long_wave_preconditioner(res.positions, np.ones(N), lattice) @ p - np.eye(NDOF * N)).max()))
+    m = far_field_mobility(res.positions, np.ones(N), plan=res.plan.far)
+    far = (p @ inverse_root(p.T @ m @ p) @ z[:NDOF * N]).reshape(N, NDOF)[:, :6]
     f_b = krylov.brownian_forces(z)
     out["brownian_far"] = rel(far, f_b)
     out["iterations"] = krylov.stats["iterations"]

@@ -43,7 +43,7 @@ def _check(out):
     assert out["min_gap"] < 0.01  # near-contact pairs present
     for key in ("velocities", "stresslets", "brownian_far"):
         assert out[key] < AGREE + 10 * FAR_ERROR[out["far_field"]], (key, out)
-    assert out["near_covariance"] < EXACT, out
+    assert out["near_covariance"] < EXACT and out["long_wave_factor"] < EXACT, out
     assert max(out["takeover_g"], out["takeover_u"], out["takeover_again"]) < EXACT, out
     assert out["lubrication_shared"] == 0.0, out
 
@@ -176,6 +176,26 @@ def test_midpoint_difference_is_accurate():
     for got, exact, whole in ((u_follow - u_first, u1 - u0, u0), (s_follow - s_first, s1 - s0, s0)):
         assert np.abs(exact).max() < 5e-2 * np.abs(whole).max()  # a small difference
         assert np.abs(got - exact).max() < 1e-3 * np.abs(exact).max()
+
+
+def test_long_waves_cut_the_lanczos_iterations(monkeypatch):
+    """The Lanczos square root preconditioned by the far field's longest waves
+    (krylov.LongWaveFactor; its exactness: _check's long_wave_factor and brownian_far)
+    needs fewer iterations than with the self mobilities alone: N = 125, phi = 0.45,
+    Lanczos tolerance 1e-4, measured 22 against 29 (N = 343: 22 against 33)."""
+    from sdmpi.dynamics.initial import hard_sphere_fluid
+    from sdmpi.hydro import krylov
+
+    n = 125
+    pos, side = hard_sphere_fluid(n, 0.45, np.random.default_rng(3), strain=0.1)
+    res = split_resistance(pos, np.ones(n), np.full(3, side), 0.1, far_field="dense")
+    iterations = []
+    for waves in (krylov.LONG_WAVES, 0):
+        monkeypatch.setattr(krylov, "LONG_WAVES", waves)
+        solver = make_solver("petsc-krylov", res, tolerance=1e-6, lanczos_tolerance=1e-4)
+        solver.brownian_forces(np.random.default_rng(1).standard_normal(solver.noise_shape))
+        iterations.append(solver.stats["lanczos"])
+    assert iterations[0] < 0.85 * iterations[1], iterations
 
 
 def test_lanczos_tolerance():

@@ -421,7 +421,7 @@ class Solver:
                        "(petsc-dense on several ranks) below 300 particles, else petsc-krylov",
                        allowed=Choice(("dense", "petsc-dense", "petsc-krylov", "auto")))
     tolerance: float = key(1e-8, "float", "relative residual of iterative solves "
-                           "(petsc-krylov; direct backends ignore it); for dynamics 1e-5 to "
+                           "(petsc-krylov; direct backends ignore it); for dynamics 1e-4 to "
                            "1e-6 with lanczos_tolerance = 1e-4 and hydrodynamics."
                            "ewald_tolerance = 1e-4 suffice (README, Krylov benchmark)",
                            allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))

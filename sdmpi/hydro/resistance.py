@@ -140,6 +140,7 @@ class SplitResistance:
     positions: np.ndarray
     radii: np.ndarray
     volume_fraction: float  # sum of sphere volumes / box volume (0 in unbounded fluid)
+    lattice: Lattice | None  # the periodic box (None: unbounded fluid)
 
     @property
     def n_particles(self):
@@ -190,4 +191,4 @@ def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     # the box's volume fraction (a monolayer's cell of height layer_spacing x L: ~0.02,
     # so its preconditioner's self-resistance scale is ~1)
     phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
-    return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii, phi)
+    return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii, phi, lattice)
