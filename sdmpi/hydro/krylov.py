@@ -117,10 +117,13 @@ SELF_RESISTANCE_WEIGHTS = (1.5, 1.0, 0.6)
 LONG_WAVES = 8
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
-#: the default far field is dense below this many particles (faster there; its matrix
-#: is 11N x 11N), spectral from there on (bench/bench_krylov.py --far-field, phi = 0.45,
-#: 2 ranks, tolerances 1e-6 / 1e-4 / 1e-4: N = 125 dense 0.40 s, spectral 0.59 s per
-#: Brownian step; N = 343 dense 2.3 s, spectral 1.6 s)
+#: the default far field is dense below this many particles (its matrix is 11N x 11N),
+#: spectral from there on (bench/bench_krylov.py --far-field, phi = 0.45, 2 ranks, per
+#: Brownian step: tolerances 1e-6 / 1e-4 / 1e-4 (session 3) N = 125 dense 0.40 s,
+#: spectral 0.59 s, N = 343 dense 2.3 s, spectral 1.6 s; 1e-4 / 1e-4 / 1e-4 (single-
+#: precision real-space blocks) N = 125 dense 0.43 s, spectral 0.37 s, N = 343 dense
+#: 2.34 s, spectral 0.81 s: the crossover moves below 125 at the fast settings, kept at
+#: 200 for the tight defaults, where the dense matrix is also the exact reference)
 DENSE_FAR_FIELD_MAX_N = 200
 
 
