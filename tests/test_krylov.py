@@ -198,6 +198,27 @@ def test_long_waves_cut_the_lanczos_iterations(monkeypatch):
     assert iterations[0] < 0.85 * iterations[1], iterations
 
 
+@pytest.mark.parametrize("n", [20, 90])
+def test_long_wave_factor_with_unequal_radii(n):
+    """P^T C P = I (krylov.LongWaveFactor against C built pair by pair) for radii 0.5-1.5
+    in a sheared box, with fewer rows than long-wave columns (n = 20: 60 < 184) and more
+    (n = 90); P^T is the transpose of P. (On two ranks: test_agrees_with_dense_two_ranks.)"""
+    from krylov_check import long_wave_preconditioner
+
+    from sdmpi.hydro.geometry import Lattice
+    from sdmpi.hydro.krylov import LongWaveFactor
+
+    rng = np.random.default_rng(n)
+    lattice = Lattice(np.array([9.0, 8.0, 10.0]), 0.35)
+    pos, radii = rng.uniform(0, 8, (n, 3)), rng.uniform(0.5, 1.5, n)
+    factor = LongWaveFactor(pos, radii, lattice, 0, n)
+    eye = np.eye(11 * n)
+    p, p_t = (np.array([f(e) for e in eye]).T for f in (factor.right, factor.left))
+    assert np.abs(p.T - p_t).max() < 1e-14 * np.abs(p).max()
+    c = long_wave_preconditioner(pos, radii, lattice)
+    assert np.abs(p.T @ c @ p - eye).max() < 1e-12
+
+
 def test_lanczos_tolerance():
     """A looser Lanczos tolerance gives the Brownian force to about that tolerance in
     fewer iterations."""

@@ -194,7 +194,8 @@ class LongWaveFactor:
 
     def __init__(self, positions, radii, lattice, p0, p1, comm=None):
         self.comm = comm
-        self.d_root = 1.0 / np.sqrt(np.concatenate([np.diag(self_mobility(a)) for a in radii[p0:p1]]))
+        unique, which = np.unique(radii[p0:p1], return_inverse=True)
+        self.d_root = (1.0 / np.sqrt([np.diag(self_mobility(a)) for a in unique]))[which].ravel()
         self.u = None
         k = np.zeros((0, 3)) if lattice is None else long_waves(lattice)
         if len(k) == 0:
