@@ -111,9 +111,11 @@ SELF_RESISTANCE_EXPONENT = 2.5
 SELF_RESISTANCE_WEIGHTS = (1.5, 1.0, 0.6)
 #: the Lanczos preconditioner's long waves: the lattice's Fourier modes k = 2 pi n.b with
 #: 0 < |n|^2 <= LONG_WAVES (92 wave vectors, 46 pairs +-k, 184 columns; `LongWaveFactor`).
-#: Measured (phi = 0.45, Lanczos tolerance 1e-4, iterations at N = 1000 / 4096): no
-#: preconditioner 42 / 58, D alone 38 / 58, |n|^2 <= 3 30 / 41, <= 5 27 / 37, <= 8 25 / 32
-#: (the cost of C^-1/2 is small against a far-field product: 3N x 184 numbers per rank)
+#: Measured (phi = 0.45, Lanczos tolerance 1e-4, Ewald 1e-4, iterations at N = 1000 /
+#: 4096): no preconditioner 42 / 58, D alone 42 / 61, |n|^2 <= 3 30 / 39, <= 5 27 / 37,
+#: <= 8 24 / 32, <= 12 22 / 28, <= 16 22 / - (applying P is cheap against a far-field
+#: product, 3N x 184 numbers per rank; its QR, ~50 ms at N = 1000 for <= 8, grows with the
+#: square of the columns)
 LONG_WAVES = 8
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
