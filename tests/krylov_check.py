@@ -90,9 +90,11 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     z = np.zeros(krylov.noise_shape)
     z[:NDOF * N] = rng.standard_normal(NDOF * N)
     lattice = Lattice(box, STRAIN)
-    factor = LongWaveFactor(res.positions, np.ones(N), lattice, 0, N)
-    p = np.array([factor.right(e) for e in np.eye(NDOF * N)]).T
-    p_t = np.array([factor.left(e) for e in np.eye(NDOF * N)]).T
+    # the factor on this rank's rows, as the solver has it; P as a matrix, column by column
+    factor = LongWaveFactor(res.positions, np.ones(N), lattice, krylov.p0, krylov.p1, comm)
+    rows = slice(NDOF * krylov.p0, NDOF * krylov.p1)
+    p, p_t = (np.array([krylov._gather(apply(e[rows]), krylov.counts11) for e in np.eye(NDOF * N)]).T
+              for apply in (factor.right, factor.left))
     out["long_wave_factor"] = max(rel(p.T, p_t), float(np.abs(
         p.T @ long_wave_preconditioner(res.positions, np.ones(N), lattice) @ p - np.eye(NDOF * N)).max()))
     m = far_field_mobility(res.positions, np.ones(N), plan=res.plan.far)

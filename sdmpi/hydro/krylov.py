@@ -185,14 +185,22 @@ class LongWaveFactor:
     j0(x) = sin(x)/x (the Faxen factor), which carry M's largest eigenvalues (the box's
     collective flows: ~n/k^2 against 1/(6 pi a) for a sphere alone; N = 4096, phi = 0.45,
     |k| = 2 pi/L: 3.1 against 0.053). With M_long = A S A^T (A: 3N x 4|K+|, cos and sin
-    times two polarisations), V = D^-1/2 A = Q R (thin QR) and R S R^T = W L W^T,
+    times two polarisations), V = D^-1/2 A, its Gram matrix V^T V = E s E^T (the
+    directions with s > GRAM_CUTOFF max s: V = Q R, Q = V E s^-1/2, R = s^1/2 E^T) and
+    R S R^T = W L W^T,
 
         P = D^-1/2 X^-1/2,   X^-1/2 = (I + V S V^T)^-1/2 = I + U diag((1 + L)^-1/2 - 1) U^T,
 
-    U = Q W (translational rows). Then F = P (P^T M P)^-1/2 z has covariance M^-1.
-    Every rank computes U for all particles (the same bits); right (P x) and left (P^T x)
-    act on this rank's particles p0..p1 (11 per particle) and sum over the ranks of comm.
-    In unbounded fluid (lattice None), or with LONG_WAVES = 0, P = D^-1/2."""
+    U = Q W = V B, B = E s^-1/2 W (translational rows). Then F = P (P^T M P)^-1/2 z has
+    covariance M^-1 (for any invertible P: P^T C P = I only makes it converge fast).
+    Each rank forms its particles' rows of V; the Gram matrix is summed over comm, and
+    rank 0's B and L are broadcast, so that all ranks use one basis. right (P x) and left
+    (P^T x) act on this rank's particles p0..p1 (11 per particle) and sum over the ranks
+    of comm. In unbounded fluid (lattice None), or with LONG_WAVES = 0, P = D^-1/2."""
+
+    #: Gram eigenvalues below this fraction of the largest are dropped (V is rank-deficient
+    #: with fewer rows than columns; P^T C P = I to 2e-15 measured also then, N = 5-90)
+    GRAM_CUTOFF = 1e-13
 
     def __init__(self, positions, radii, lattice, p0, p1, comm=None):
         self.comm = comm
@@ -203,19 +211,38 @@ class LongWaveFactor:
         if len(k) == 0:
             return
         k_norm = np.linalg.norm(k, axis=1)
-        phase = positions @ k.T  # (N, m)
-        amplitude = np.sinc(np.outer(radii, k_norm) / np.pi) * np.sqrt(6 * np.pi * radii)[:, None]
+        a = radii[p0:p1]
+        phase = positions[p0:p1] @ k.T  # (n, m)
+        amplitude = np.sinc(np.outer(a, k_norm) / np.pi) * np.sqrt(6 * np.pi * a)[:, None]
         axis = np.eye(3)[np.argmin(np.abs(k), axis=1)]  # polarisations e1, e2 orthogonal to k
         e1 = np.cross(k, axis)
         e1 /= np.linalg.norm(e1, axis=1)[:, None]
         e2 = np.cross(k / k_norm[:, None], e1)
         v = np.stack([amplitude[:, None, :] * trig(phase)[:, None, :] * e.T[None]
-                      for trig in (np.cos, np.sin) for e in (e1, e2)], -1)  # (N, 3, m, 4)
-        q, r = np.linalg.qr(v.reshape(3 * len(radii), -1))
-        weights = np.repeat(2.0 / (lattice.volume * k_norm ** 2), 4)  # columns (wave, 4)
-        lam, w = np.linalg.eigh((r * weights) @ r.T)
-        self.u = (q @ w)[3 * p0:3 * p1]
+                      for trig in (np.cos, np.sin) for e in (e1, e2)], -1).reshape(3 * len(a), -1)
+        gram = self._sum(v.T @ v)  # columns (wave, 4)
+        weights = np.repeat(2.0 / (lattice.volume * k_norm ** 2), 4)
+        shared = None
+        if comm is None or comm.rank == 0:
+            s, e = np.linalg.eigh(gram)
+            keep = s > self.GRAM_CUTOFF * s.max()
+            e, s = e[:, keep], s[keep]
+            r = np.sqrt(s)[:, None] * e.T
+            lam, w = np.linalg.eigh((r * weights) @ r.T)
+            shared = (e / np.sqrt(s)) @ w, lam  # B, L
+        if comm is not None and comm.size > 1:
+            shared = comm.bcast(shared, root=0)
+        basis, lam = shared
+        self.u = v @ basis
         self.c = (1.0 + np.maximum(lam, 0.0)) ** -0.5 - 1.0
+
+    def _sum(self, local):
+        """local summed over the ranks of comm."""
+        if self.comm is None or self.comm.size == 1:
+            return local
+        total = np.empty_like(local)
+        self.comm.Allreduce(local, total)
+        return total
 
     def _x_root(self, x):
         """X^-1/2 x (this rank's rows)."""
@@ -223,11 +250,7 @@ class LongWaveFactor:
             return x
         y = x.copy()
         trans = y.reshape(-1, NDOF)[:, :3]
-        t = self.u.T @ trans.ravel()
-        if self.comm is not None and self.comm.size > 1:
-            total = np.empty_like(t)
-            self.comm.Allreduce(t, total)
-            t = total
+        t = self._sum(self.u.T @ trans.ravel())
         trans += (self.u @ (self.c * t)).reshape(-1, 3)
         return y
 
