@@ -184,26 +184,53 @@ def lubrication_sparse(positions, radii, pairs, factors=False):
     slot_of = np.empty(len(order), dtype=np.int64)
     slot_of[order] = np.arange(len(order))
     data = np.zeros((len(order), NDOF, NDOF))
-    all_pi, all_pj, chol = [], [], []
+    n_pairs = len(pi)
+    all_pi, all_pj = np.empty(n_pairs, dtype=np.int64), np.empty(n_pairs, dtype=np.int64)
+    chol = np.empty((n_pairs if factors else 0, 12, 12))
+    done = 0  # pairs so far, in the order of pair_blocks
     for ci, cj, res in pair_blocks(radii, pairs):
         s_ij = np.where(ci == cj, ci, n + np.searchsorted(keys, ci * n + cj))
         s_ji = np.where(ci == cj, ci, n + np.searchsorted(keys, cj * n + ci))
         _scatter_slots(slot_of[ci], slot_of[s_ij], slot_of[s_ji], slot_of[cj], res, data)
         if factors:
-            all_pi.append(ci)
-            all_pj.append(cj)
-            chol.append(np.linalg.cholesky(res[:, _RIGID_PAIR][:, :, _RIGID_PAIR]))
+            part = slice(done, done + len(res))
+            all_pi[part], all_pj[part] = ci, cj
+            bad = _rigid_cholesky(res, chol[part])
+            if bad >= 0:
+                raise np.linalg.LinAlgError(f"the rigid-body lubrication block of the pair ({ci[bad]}, "
+                                            f"{cj[bad]}) is not positive definite")
+        done += len(res)
     indptr = np.searchsorted(rows[order], np.arange(n + 1))
     matrix = scipy.sparse.bsr_matrix((data, cols[order], indptr), shape=(NDOF * n, NDOF * n))
     if not factors:
         return matrix
-    if not chol:
-        return matrix, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 12, 12))
-    return matrix, np.concatenate(all_pi), np.concatenate(all_pj), np.concatenate(chol)
+    return matrix, all_pi, all_pj, chol
 
 
-#: the 12 rigid-body rows of a pair's 22x22 block (U, Omega of either sphere)
-_RIGID_PAIR = np.r_[0:6, NDOF:NDOF + 6]
+@numba.njit(cache=True)
+def _rigid_cholesky(res, out):
+    """out[p] = the lower Cholesky factor of the 12 rigid-body rows and columns (U, Omega
+    of either sphere: 0-5 and NDOF..NDOF+5) of each pair's 22x22 block res[p], from its
+    lower triangle (as LAPACK's potrf; ~10x faster than numpy's batched cholesky on
+    12x12 blocks). Returns the first pair that is not positive definite, else -1."""
+    for p in range(res.shape[0]):
+        for a in range(12):
+            ra = a if a < 6 else a + NDOF - 6
+            for b in range(a + 1):
+                rb = b if b < 6 else b + NDOF - 6
+                acc = res[p, ra, rb]
+                for c in range(b):
+                    acc -= out[p, a, c] * out[p, b, c]
+                if a > b:
+                    out[p, a, b] = acc / out[p, b, b]
+                elif acc > 0.0:
+                    out[p, a, a] = math.sqrt(acc)
+                else:
+                    return p
+            for b in range(a + 1, 12):
+                out[p, a, b] = 0.0
+    return -1
+
 #: pairs per chunk of `pair_blocks` (22x22 floats each: ~8 MB per chunk)
 _CHUNK = 2048
 
