@@ -114,8 +114,8 @@ SELF_RESISTANCE_WEIGHTS = (1.5, 1.0, 0.6)
 #: Measured (phi = 0.45, Lanczos tolerance 1e-4, Ewald 1e-4, iterations at N = 1000 /
 #: 4096): no preconditioner 42 / 58, D alone 42 / 61, |n|^2 <= 3 30 / 39, <= 5 27 / 37,
 #: <= 8 24 / 32, <= 12 22 / 28, <= 16 22 / - (applying P is cheap against a far-field
-#: product, 3N x 184 numbers per rank; its QR, ~50 ms at N = 1000 for <= 8, grows with the
-#: square of the columns)
+#: product, 3N x 184 numbers per rank; building it, ~0.05 s at N = 1000 for <= 8 and
+#: 0.19 s at 4096 on one rank, grows with the square of the columns)
 LONG_WAVES = 8
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
@@ -161,6 +161,15 @@ def self_resistance_weights():
     -> 31/33 (at phi = 0.45: (2, 1, 0.5) 26/26, (1, 1, 0.5) 24/24 at N = 343, the
     rotational weight 0.5-2 makes no difference)."""
     return np.repeat(SELF_RESISTANCE_WEIGHTS, [3, 3, 5])
+
+
+def _rank_sum(comm, local):
+    """The array local summed over the ranks of comm (None or one rank: local itself)."""
+    if comm is None or comm.size == 1:
+        return local
+    total = np.empty_like(local)
+    comm.Allreduce(local, total)
+    return total
 
 
 def long_waves(lattice):
@@ -213,14 +222,15 @@ class LongWaveFactor:
         k_norm = np.linalg.norm(k, axis=1)
         a = radii[p0:p1]
         phase = positions[p0:p1] @ k.T  # (n, m)
-        amplitude = np.sinc(np.outer(a, k_norm) / np.pi) * np.sqrt(6 * np.pi * a)[:, None]
+        # j0(k a) times D^-1/2 on the translational rows (sqrt(6 pi a), as in d_root)
+        amplitude = np.sinc(np.outer(a, k_norm) / np.pi) * self.d_root.reshape(-1, NDOF)[:, :1]
         axis = np.eye(3)[np.argmin(np.abs(k), axis=1)]  # polarisations e1, e2 orthogonal to k
         e1 = np.cross(k, axis)
         e1 /= np.linalg.norm(e1, axis=1)[:, None]
         e2 = np.cross(k / k_norm[:, None], e1)
         v = np.stack([amplitude[:, None, :] * trig(phase)[:, None, :] * e.T[None]
                       for trig in (np.cos, np.sin) for e in (e1, e2)], -1).reshape(3 * len(a), -1)
-        gram = self._sum(v.T @ v)  # columns (wave, 4)
+        gram = _rank_sum(comm, v.T @ v)  # columns (wave, 4)
         weights = np.repeat(2.0 / (lattice.volume * k_norm ** 2), 4)
         shared = None
         if comm is None or comm.rank == 0:
@@ -236,21 +246,13 @@ class LongWaveFactor:
         self.u = v @ basis
         self.c = (1.0 + np.maximum(lam, 0.0)) ** -0.5 - 1.0
 
-    def _sum(self, local):
-        """local summed over the ranks of comm."""
-        if self.comm is None or self.comm.size == 1:
-            return local
-        total = np.empty_like(local)
-        self.comm.Allreduce(local, total)
-        return total
-
     def _x_root(self, x):
         """X^-1/2 x (this rank's rows)."""
         if self.u is None:
             return x
         y = x.copy()
         trans = y.reshape(-1, NDOF)[:, :3]
-        t = self._sum(self.u.T @ trans.ravel())
+        t = _rank_sum(self.comm, self.u.T @ trans.ravel())
         trans += (self.u @ (self.c * t)).reshape(-1, 3)
         return y
 
@@ -652,9 +654,7 @@ class KrylovSolver:
         z2 = noise[NDOF * n:].reshape(-1, 12)
 
         def dot(a, b):  # a @ b summed over the ranks (a: vector or rows of vectors)
-            local = np.atleast_1d(a @ b)
-            total = np.empty_like(local)
-            self.comm.Allreduce(local, total)
+            total = _rank_sum(self.comm, np.atleast_1d(a @ b))
             return total if np.ndim(a) > 1 else float(total[0])
 
         pre = LongWaveFactor(self.positions, self.radii, self.lattice, self.p0, self.p1, self.comm)

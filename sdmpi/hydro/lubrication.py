@@ -211,8 +211,8 @@ def lubrication_sparse(positions, radii, pairs, factors=False):
 def _rigid_cholesky(res, out):
     """out[p] = the lower Cholesky factor of the 12 rigid-body rows and columns (U, Omega
     of either sphere: 0-5 and NDOF..NDOF+5) of each pair's 22x22 block res[p], from its
-    lower triangle (as LAPACK's potrf; ~10x faster than numpy's batched cholesky on
-    12x12 blocks). Returns the first pair that is not positive definite, else -1."""
+    lower triangle (as LAPACK's potrf; ~2.5x faster than numpy's batched cholesky on
+    12x12 blocks, N = 4096: 55 against 136 ms). Returns the first pair that is not positive definite, else -1."""
     for p in range(res.shape[0]):
         for a in range(12):
             ra = a if a < 6 else a + NDOF - 6

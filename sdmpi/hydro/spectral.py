@@ -113,7 +113,7 @@ _POW_ALIAS, _POW_WINDOW = 4, 4  # powers of the polynomial prefactors
 #: Ewald tolerances from which the real-space blocks are stored in single precision
 #: (rounding ~6e-8 relative, <= 1% of the tolerance; exactly symmetric all the same, as
 #: each block serves both M_ij x_j and M_ij^T x_i): the real-space product streams its
-#: blocks from memory, so half the bytes make it ~1.6x faster (N = 1000, 2 ranks)
+#: blocks from memory, so half the bytes make it 1.3-1.5x faster (N = 1000, one rank)
 SINGLE_PRECISION_TOL = 1e-5
 
 
