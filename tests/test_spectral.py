@@ -86,8 +86,9 @@ def test_linear_and_symmetric():
 
 
 def test_public_fft_fallback_gives_the_same_product(monkeypatch):
-    """Without scipy's private pocketfft module (transforms into given arrays) the public
-    scipy.fft functions give the same product to rounding (1e-13)."""
+    """Without scipy's private pocketfft module (transforms into given arrays, pruned to
+    the lines of the kept modes) the public scipy.fft functions (full 3-D transforms) give
+    the same product to rounding (1e-13)."""
     from sdmpi.hydro import spectral
 
     pos, radii, box, _ = configuration(0.5, 0.3, True)
@@ -96,6 +97,27 @@ def test_public_fft_fallback_gives_the_same_product(monkeypatch):
     y = op.matvec(x)
     monkeypatch.setattr(spectral, "pypocketfft", None)
     assert np.linalg.norm(op.matvec(x) - y) <= 1e-13 * np.linalg.norm(y)
+
+
+@pytest.mark.parametrize("n, strain, tol", [(27, 0.0, 1e-4), (27, 0.9, 1e-6), (8, -0.45, 1e-2)])
+def test_kept_modes_hold_every_mode_the_kernel_keeps(n, strain, tol):
+    """The pruned transforms' index ranges (`_kept_modes`) hold every mode with a nonzero
+    kernel and are the tightest such ranges (their last z index and the y bounds carry a
+    kept mode), so pruning skips only lines the kernel zeroes."""
+    from sdmpi.hydro.spectral import _kept_modes
+
+    rng = np.random.default_rng(n)
+    lattice = Lattice(np.full(3, 3.0 * round(n ** (1 / 3))), strain)
+    op = SpectralFarField(rng.random((n, 3)) * lattice.vectors.diagonal(), np.ones(n), lattice, tol=tol)
+    scale = op._scale
+    z_kept, y_kept = _kept_modes(scale)
+    inside = np.zeros(scale.shape, dtype=bool)
+    for part in y_kept:
+        inside[:, part, z_kept] = True
+    assert not np.any((scale != 0) & ~inside)
+    assert np.any(scale[:, :, z_kept.stop - 1] != 0)
+    assert all(np.any(scale[:, part.stop - 1 if k == 0 else part.start] != 0) for k, part in enumerate(y_kept))
+    assert inside.sum() < scale.size  # these grids have lines to skip
 
 
 def test_periodic_images_give_the_same_product():

@@ -38,7 +38,9 @@ z ranges and moments: `Stencils`) are computed once, not per product; spreading 
 interpolation run along grid rows in z, over a grid padded along z by the window width,
 so that no index wraps inside the loops (`_fold`, `_pad`); the grids and the FFT outputs
 are kept between products (scipy's pocketfft backend, which takes output arrays): fresh
-pages cost as much as the transforms. bench/bench_spectral.py measures the parts.
+pages cost as much as the transforms; the transforms run one axis at a time, along y and
+x only on the lines that hold modes with |k| <= kmax (`_kept_modes`: 10-15% less FFT time
+at N = 1000 and 4096). bench/bench_spectral.py measures the parts.
 """
 
 import math
@@ -438,6 +440,23 @@ def _kernel_scale(lattice, par):
     return scale
 
 
+def _kept_modes(scale):
+    """The index ranges of the rfft grid that hold every mode the kernel keeps (scale != 0,
+    |k| <= kmax): (z slice, (y slices)), the non-negative z indices 0..n3 and the y
+    indices -n2..n2 (two slices: 0..n2 and M2-n2..M2-1). Transforming along y only the z
+    lines 0..n3, and along x only the lines in both ranges, gives the same modes as the
+    full 3-D transform (and its inverse, whose input is zero outside) with fewer lines:
+    the grid, set by the window's aliasing, reaches a little beyond 2 kmax L/2pi (N =
+    1000: 43 of 50 y and 21 of 26 z indices kept; 10-15% less time)."""
+    m2 = scale.shape[1]
+    _, i2, i3 = np.nonzero(scale)
+    if len(i3) == 0:  # no wave-space modes: nothing to transform along y and x
+        return slice(0, 0), ()
+    n2 = int(np.max(np.minimum(i2, m2 - i2)))
+    y_kept = (slice(0, m2),) if 2 * n2 + 1 >= m2 else (slice(0, n2 + 1), slice(m2 - n2, m2))
+    return slice(0, int(i3.max()) + 1), y_kept
+
+
 # ---------------------------------------------------------------------------------
 # the operator
 # ---------------------------------------------------------------------------------
@@ -518,6 +537,7 @@ class SpectralFarField:
             self._scale = _kernel_scale(lattice, par)
             self._recip = lattice.reciprocal
             self._fk = np.empty((*self._scale.shape, 3), dtype=complex)
+            self._kept = _kept_modes(self._scale)
         # real space: pair images on one rank, else shared so that every rank's real-space
         # work plus rank 0's FFTs balance (real_space_shares)
         pi, pj, shift = find_pairs(pos, rad, lattice, par.rcut, 0.0)
@@ -571,10 +591,22 @@ class SpectralFarField:
             _apply_kernel(fk, self._scale, self._recip)
             grid[...] = scipy.fft.irfftn(fk, s=grid.shape[:3], axes=(0, 1, 2), norm="forward")
             return
-        pypocketfft.r2c(grid, axes=(0, 1, 2), forward=True, out=self._fk)
-        _apply_kernel(self._fk, self._scale, self._recip)
-        pypocketfft.c2c(self._fk, axes=(0, 1), forward=False, out=self._fk)  # in place, then along z:
-        pypocketfft.c2r(self._fk, axes=(2,), lastsize=grid.shape[2], forward=False, out=grid)
+        # one axis at a time, each along the lines the kept modes need (`_kept_modes`); the
+        # c2c transforms in place on views of the FFT output
+        fk, (z_kept, y_kept) = self._fk, self._kept
+        pypocketfft.r2c(grid, axes=(2,), forward=True, out=fk)
+        lines = fk[:, :, z_kept]
+        pypocketfft.c2c(lines, axes=(1,), forward=True, out=lines)
+        for part in y_kept:
+            lines = fk[:, part, z_kept]
+            pypocketfft.c2c(lines, axes=(0,), forward=True, out=lines)
+        _apply_kernel(fk, self._scale, self._recip)  # zero outside |k| <= kmax, so also the
+        for part in y_kept:                         # lines not transformed back
+            lines = fk[:, part, z_kept]
+            pypocketfft.c2c(lines, axes=(0,), forward=False, out=lines)
+        lines = fk[:, :, z_kept]
+        pypocketfft.c2c(lines, axes=(1,), forward=False, out=lines)
+        pypocketfft.c2r(fk, axes=(2,), lastsize=grid.shape[2], forward=False, out=grid)
 
     def matvec(self, x):
         """M_inf x for x of shape (11N,); collective over comm."""
