@@ -40,15 +40,13 @@ PLOT = HERE / "krylov_cost.png"
 
 def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, far_field=None):
     """One realisation stepped on COMM_WORLD; returns the row (on every rank). far_field:
-    "dense" or "spectral" instead of the choice by N (krylov.DENSE_FAR_FIELD_MAX_N)."""
+    "dense" or "spectral" (solver.far_field) instead of the choice by N
+    (krylov.DENSE_FAR_FIELD_MAX_N)."""
     from mpi4py import MPI
 
     from sdmpi.config import enumerate_tasks, load_job
     from sdmpi.dynamics import Realisation
     from sdmpi.hydro import krylov
-
-    if far_field is not None:  # the by-N rule, moved so that it picks far_field at this N
-        krylov.DENSE_FAR_FIELD_MAX_N = n + 1 if far_field == "dense" else 0
 
     comm = MPI.COMM_WORLD
     job = load_job(str(ROOT / "jobs" / "demo.toml"), overrides=[
@@ -56,7 +54,8 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
         f"solver.tolerance={tolerance}", f"solver.lanczos_tolerance={lanczos_tolerance}",
         f"hydrodynamics.ewald_tolerance={ewald_tolerance}", f"ensemble.ranks_per_task={comm.size}",
         "ensemble.realisations=1", "shear.omega=[6.283185307179586]",
-        "integration.steps_per_period=2000"])  # dt = 5e-4 t_D, the seed's largest
+        "integration.steps_per_period=2000",  # dt = 5e-4 t_D, the seed's largest
+        *([f"solver.far_field='{far_field}'"] if far_field else [])])
     speed_before = machine_speed()
     t0 = time.perf_counter()
     real = Realisation(job, enumerate_tasks(job)[0], comm if comm.size > 1 else None)
@@ -71,7 +70,8 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
         its.append(int(sample["solver_iterations"][0]))
         lanczos.append(int(sample["lanczos_iterations"][0]))
     rss = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20  # KiB -> GiB
-    far = "-" if backend != "petsc-krylov" else ("dense" if n < krylov.DENSE_FAR_FIELD_MAX_N else "spectral")
+    far = "-" if backend != "petsc-krylov" else (
+        far_field or ("dense" if n < krylov.DENSE_FAR_FIELD_MAX_N else "spectral"))
     return {"backend": backend, "n": n, "ranks": comm.size, "phi": 0.45, "tolerance": tolerance,
             "lanczos_tolerance": lanczos_tolerance, "ewald_tolerance": ewald_tolerance,
             "far_field": far, "far_field_forced": far_field is not None,

@@ -155,6 +155,7 @@ def test_schema_text_documents_every_key():
     ('[solver]\nbackend = "petsc_dense"\n', ["solver.backend", 'did you mean "petsc-dense"',
                                              '"dense", "petsc-dense", "petsc-krylov"']),
     ('[job]\nname = ""\n', ["job.name", "non-empty"]),
+    ('[solver]\nfar_field = "fft"\n', ["solver.far_field", '"dense", "spectral"']),
     # keys that are required / forbidden by another key
     ('[medium]\nkind = "maxwell"\n', ["medium.modes", "required", 'medium.kind is "maxwell"',
                                       "lambda = 0.5"]),
@@ -374,7 +375,7 @@ def test_every_backend_is_implemented():
 def test_hash_changes_with_any_value(all_backends):
     base = parse_job("")
     for override in ["job.seed=1", "shear.gamma0=0.03", "solver.backend=\"petsc-dense\"",
-                     "ensemble.ranks_per_task=2", "output.checkpoint_every=7"]:
+                     "ensemble.ranks_per_task=2", "output.checkpoint_every=7", 'solver.far_field="dense"']:
         other = parse_job("", [override, 'solver.backend="petsc-krylov"'] if "ranks" in override
                           else [override])
         assert job_hash(other) != job_hash(base), override

@@ -430,6 +430,12 @@ class Solver:
                                           "(petsc-krylov); absent: solver.tolerance",
                                           allowed=Range(0.0, 1.0, lo_open=True, hi_open=True),
                                           optional=True)
+    far_field: str | None = key(None, "str", "petsc-krylov's far-field mobility: spectral = "
+                                "particle-mesh Ewald products, O(N log N); dense = the Ewald "
+                                "matrix, 11N x 11N on every rank (small N, the exact reference); "
+                                "absent: dense below 200 particles, else spectral; the direct "
+                                "backends ignore it", allowed=Choice(("dense", "spectral")),
+                                optional=True)
 
 
 @dataclass(frozen=True)

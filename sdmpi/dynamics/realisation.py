@@ -45,7 +45,8 @@ import numpy as np
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
-from ..hydro.solvers import assemble, make_solver, noise_shape, resolve_backend, solver_stats, take_preconditioner
+from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, noise_shape, resolve_backend, solver_stats,
+                             take_preconditioner)
 from .contacts import contact_model
 from .forces import force_law, pair_forces, remove_overlaps
 from .initial import hard_sphere_fluid
@@ -147,6 +148,8 @@ class Realisation:
         hyd = job.hydrodynamics
         self._hydro = dict(lubrication=hyd.lubrication, ewald_tol=hyd.ewald_tolerance,
                            cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)
+        if self.backend in MATRIX_FREE:
+            self._hydro["far_field"] = job.solver.far_field
         self.maxwell = None
         if job.medium.kind == "maxwell":
             modes = job.medium.modes
