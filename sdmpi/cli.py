@@ -57,7 +57,7 @@ def _add_validate(subparsers) -> None:
     parser = subparsers.add_parser(
         "validate", help="check a job file and summarise it",
         description="Check a job file (with any --set overrides) against the schema and "
-                    "print a summary: task groups, time steps, tasks and total cost. Every "
+                    "print a summary: task groups, time steps, tasks and their steps in all. Every "
                     "problem is listed at once, each with the key, the offending value, "
                     "why, and what is allowed. Writes nothing.",
         epilog="exit status: 0 if the job is valid, 2 if not (or the file is unreadable)")
@@ -113,11 +113,10 @@ def summary(job) -> str:
         head = "  every task      " if omega is None else f"  omega = {omega:<9.5g}"
         lines.append(f"{head}  dt = {job.time_step(omega):<9.3g} "
                      f"{job.n_steps(omega)} steps ({job.discard_steps(omega)} discarded)")
-    cost = sum(t.cost for t in tasks)
     omegas = f"{len(s.omega)} omega x " if s.omega else ""
     lines.append(f"  tasks: {len(tasks)} = {len(job.system.phi)} phi x {omegas}"
                  f"{job.ensemble.realisations} realisations; "
-                 f"total cost {cost:.3g} (steps x N^3); backend {_backend(job)}, "
+                 f"{sum(t.n_steps for t in tasks)} time steps in all; backend {_backend(job)}, "
                  f"{job.ensemble.ranks_per_task} rank(s) per task")
     return "\n".join(lines)
 

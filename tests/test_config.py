@@ -404,7 +404,8 @@ def test_cli_validate_ok(capsys):
     assert main(["validate", str(DEMO)]) == 0
     out = capsys.readouterr().out
     assert "job 'demo': valid" in out and "tasks: 4 = 1 phi x 2 omega x 2 realisations" in out
-    assert "total cost" in out
+    steps = sum(t.n_steps for t in enumerate_tasks(load_job(str(DEMO))))
+    assert f"; {steps} time steps in all;" in out
 
 
 def test_cli_validate_with_overrides(capsys):
