@@ -139,6 +139,16 @@ def test_lanczos_inverse_square_root():
     assert its < n // 2  # converged long before the Krylov space is full (measured 172)
 
 
+def near_contact_start():
+    """A split resistance at phi = 0.5 with near-contact pairs (petsc_check.configuration,
+    27 spheres, strain 0.2) and its box: the start of a Brownian step."""
+    from petsc_check import configuration
+
+    pos, side = configuration(0.5, 1)
+    box = np.full(3, side)
+    return split_resistance(pos, np.ones(len(pos)), box, 0.2), box
+
+
 def test_midpoint_difference_is_accurate():
     """The Brownian stresslets are a difference of two solves, S_mid - S_start, at
     configurations ~sqrt(dt) apart, much smaller than each (here 1-2%). The midpoint's solve (which
@@ -149,11 +159,8 @@ def test_midpoint_difference_is_accurate():
     although each solve is accurate to ~2e-5 of itself only. Started from the start's
     solution, the midpoint needs fewer iterations (12 vs 19) but its error is independent:
     4e-3 and 3e-2 of the difference."""
-    from petsc_check import configuration
-
-    pos, side = configuration(0.5, 1)
-    n, box = len(pos), np.full(3, side)
-    start = split_resistance(pos, np.ones(n), box, 0.2)
+    start, box = near_contact_start()
+    n = start.n_particles
     rng = np.random.default_rng(7)
     forces, zero = rng.standard_normal((n, 6)), np.zeros((n, 5))
     # the midpoint of a step: displacements ~1e-3 a with the start's pair sets
@@ -170,7 +177,7 @@ def test_midpoint_difference_is_accurate():
     follow = make_solver("petsc-krylov", mid, tolerance=1e-5)
     take_preconditioner(follow, first)
     assert follow.inner is not None and first.inner is None  # taken over
-    take_preconditioner(make_solver("dense", grand_resistance(pos, np.ones(n), box, 0.2)), first)  # no-op
+    take_preconditioner(make_solver("dense", grand_resistance(start.positions, np.ones(n), box, 0.2)), first)  # no-op
     u_follow, s_follow = solved(follow)
     assert np.abs(u_first - u0).max() > 1e-6 * np.abs(u0).max()  # each solve is only ~1e-5 accurate
     for got, exact, whole in ((u_follow - u_first, u1 - u0, u0), (s_follow - s_first, s1 - s0, s0)):
@@ -223,11 +230,8 @@ def test_long_wave_factor_with_unequal_radii(n):
 def test_lanczos_tolerance():
     """A looser Lanczos tolerance gives the Brownian force to about that tolerance in
     fewer iterations."""
-    from petsc_check import configuration
-
-    pos, side = configuration(0.5, 1)
-    n, box = len(pos), np.full(3, side)
-    start = split_resistance(pos, np.ones(n), box, 0.2)
+    start, box = near_contact_start()
+    n = start.n_particles
     tight = make_solver("petsc-krylov", start, tolerance=1e-8)
     loose = make_solver("petsc-krylov", start, tolerance=1e-8, lanczos_tolerance=1e-3)
     z = np.random.default_rng(7).standard_normal(tight.noise_shape)
