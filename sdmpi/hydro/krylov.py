@@ -23,9 +23,11 @@ phi >= 0.45; and weighted per translation, rotation and stresslet,
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
 where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is applied
-through an incomplete Cholesky factor, ICC(ICC_LEVELS), on the pattern of G's full 6x6
-blocks, of the whole G, which every rank computes for itself (the iteration counts do
-not depend on the number of ranks). G keeps the lubrication coupling of the pairs closer
+through an incomplete factor with FILL_LEVELS levels of fill on the pattern of G's full
+6x6 blocks (block ILU of a PETSc BAIJ matrix: for the symmetric G the same factor as the
+incomplete Cholesky LDL^T on that pattern, in PETSc's 6x6 block kernels), of the whole G,
+which every rank computes for itself (the iteration counts do not depend on the number
+of ranks). G keeps the lubrication coupling of the pairs closer
 than PRECONDITIONER_MAX_GAP only (the others' diagonal parts), which makes the factor
 several times cheaper for one more iteration per solve; it needs about as few iterations
 as the exact factor (measurements at INNER_OPTIONS). The Brownian midpoint's solver
@@ -77,11 +79,15 @@ MAX_ITERATIONS = 2000
 LANCZOS_MAX_ITERATIONS = 500
 #: GMRES restart length
 GMRES_RESTART = 200
-#: the preconditioner's solve with G: incomplete Cholesky, ICC(ICC_LEVELS), of the whole
-#: G, computed by every rank for itself (sequential PETSc: the iteration counts do not
-#: depend on the split; no gather of G), on the pattern of G's full 6x6 blocks (zeros
-#: inside the blocks kept: ICC(0) on the pattern of the nonzero entries alone stalls, 839
-#: iterations at N = 1000). Measured per solve (phi = 0.45, solver tolerance 1e-6, the
+#: the preconditioner's solve with G: an incomplete factor with FILL_LEVELS levels of fill
+#: of the whole G, computed by every rank for itself (sequential PETSc: the iteration
+#: counts do not depend on the split; no gather of G), on the pattern of G's full 6x6
+#: blocks (zeros inside the blocks kept: ICC(0) on the pattern of the nonzero entries alone
+#: stalls, 839 iterations at N = 1000). Block ILU on BAIJ (block size 6) gives the factor
+#: of ICC on the AIJ matrix with full blocks (solutions equal to 1.5e-14) 3-6x faster to set
+#: up and 2-3x faster to apply (N = 1000, phi = 0.45, level 1: 0.03 against 0.09-0.17 s,
+#: 0.44-0.53 against 0.93-1.7 ms). Measured with ICC on AIJ (the iterations are the same),
+#: per solve (phi = 0.45, solver tolerance 1e-6, the
 #: isolated-sphere D; ICC(0) / ICC(1) / exact sparse Cholesky (MUMPS)): N = 343 44 / 38
 #: / -, N = 1000 50 / 42 / 42 iterations, set-up 0.015 / 0.38 / 0.3 s, 0.55 / 1.5 / 7 ms
 #: per application; N = 4096 64 / 51 iterations, set-up 0.07 / 0.94 / 7-13 s (MUMPS
@@ -90,9 +96,9 @@ GMRES_RESTART = 200
 #: 0.06 / 0.5 / 2.7 s); RCM or nested-dissection orderings: no fewer iterations, slower.
 #: Block Jacobi per rank would drop the lubrication of the pairs across the split (5-10x
 #: the iterations on 2 ranks)
-ICC_LEVELS = 1
+FILL_LEVELS = 1
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
-INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "icc", "pc_factor_levels": str(ICC_LEVELS)}
+INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "ilu", "pc_factor_levels": str(FILL_LEVELS)}
 #: G keeps the lubrication coupling (off-diagonal blocks) of pairs closer than this surface
 #: gap, in mean radii (2 h / (a_i + a_j)); farther pairs keep their diagonal parts only (G
 #: stays positive definite). Measured (N = 1000, tolerance 1e-6, flow / force solve
@@ -491,22 +497,24 @@ class KrylovSolver:
 
     # ------------------------------------------------------------------ helpers
 
-    def schur_csr(self):
-        """G (6N x 6N, scipy CSR): the kept blocks (_g_keep) of L_uu + D_uu^-1."""
+    def schur_blocks(self):
+        """G (6N x 6N) as (indptr, block columns, 6x6 blocks) of its kept blocks (_g_keep)
+        of L_uu + D_uu^-1, block rows in order, columns sorted within each (as
+        lubrication_sparse stores them), the indices as PETSc's 32-bit ints."""
         _, cols, rows = self._g_pattern
         keep = self._g_keep
         indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=self.n))])
-        csr = scipy.sparse.bsr_matrix((self._g_blocks[keep], cols[keep], indptr),
-                                      shape=(6 * self.n, 6 * self.n)).tocsr()
-        csr.sort_indices()
-        return csr
+        return indptr.astype(np.int32), cols[keep].astype(np.int32), self._g_blocks[keep]
 
     def schur_solver(self):
         """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
         rank alone, built on first use."""
         if self.inner is None:
             PETSc = self._PETSc
-            self.schur = self._aij(self.schur_csr(), PETSc.COMM_SELF)
+            indptr, cols, blocks = self.schur_blocks()
+            self.schur = PETSc.Mat().createBAIJ(6 * self.n, 6, csr=(indptr, cols, blocks.reshape(-1)),
+                                                comm=PETSc.COMM_SELF)
+            self.schur.assemble()
             self.inner = PETSc.KSP().create(comm=PETSc.COMM_SELF)
             self.inner.setOperators(self.schur)
             self.inner.setOptionsPrefix(OPTIONS_PREFIX)
@@ -524,7 +532,7 @@ class KrylovSolver:
         self._g_in.setArray(self._gather(local, self.counts6))
         inner.solve(self._g_in, self._g_out)
         if inner.getConvergedReason() < 0:  # e.g. a zero pivot in the incomplete factor
-            raise KrylovError(f"petsc-krylov: the preconditioner's incomplete Cholesky factor "
+            raise KrylovError(f"petsc-krylov: the preconditioner's incomplete factor "
                               f"failed (PETSc reason {inner.getConvergedReason()})")
         return self._g_out.getArray(readonly=True)[6 * self.p0:6 * self.p1].copy()
 
@@ -544,20 +552,20 @@ class KrylovSolver:
                 or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):
             return
         self._g_keep = other._g_keep
-        csr = self.schur_csr()
+        indptr, cols, blocks = self.schur_blocks()
         self.schur, self.inner = other.schur, other.inner
         other.schur = other.inner = None
         self.schur.zeroEntries()
-        self.schur.setValuesCSR(*_int32_csr(csr))
+        self.schur.setValuesBlockedCSR(indptr, cols, blocks.reshape(-1))
         self.schur.assemble()
 
-    def _aij(self, csr, comm=None):
-        """A PETSc AIJ matrix (6N x 6N) of this rank's rows csr, on comm (None: the
-        solver's communicator)."""
+    def _aij(self, csr):
+        """A PETSc AIJ matrix (6N x 6N) of this rank's rows csr, on the solver's
+        communicator."""
         csr.sort_indices()
         rows = csr.shape[0]
         mat = self._PETSc.Mat().createAIJ([(rows, 6 * self.n), (rows, 6 * self.n)],
-                                          csr=_int32_csr(csr), comm=self.comm if comm is None else comm)
+                                          csr=_int32_csr(csr), comm=self.comm)
         mat.assemble()
         return mat
 
