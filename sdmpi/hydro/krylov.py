@@ -11,7 +11,7 @@ and the auxiliary unknown lambda = M^-1 V, the problem (F, L, -S) = R V becomes
     P_u lambda + L_uu U' = F - L_ue (-e_inf)            (viscosity 1)
 
 solved for (lambda, U') by left-preconditioned GMRES in PETSc (a shell matrix: the far
-field as a product `matvec`, L_uu a PETSc AIJ matrix). The stresslets follow without
+field as a product `matvec`, L_uu a PETSc BAIJ matrix). The stresslets follow without
 another solve: -S = P_e (lambda + L V).
 
 Preconditioner: the same block system with M replaced by a block-diagonal D (the
@@ -133,11 +133,6 @@ FAR_FIELDS = ("dense", "spectral")
 #: 2.34 s, spectral 0.81 s: the crossover moves below 125 at the fast settings, kept at
 #: 200 for the tight defaults, where the dense matrix is also the exact reference)
 DENSE_FAR_FIELD_MAX_N = 200
-
-
-def _int32_csr(csr):
-    """(indptr, indices, data) of a scipy CSR matrix, the indices as PETSc's 32-bit ints."""
-    return csr.indptr.astype(np.int32), csr.indices.astype(np.int32), csr.data
 
 
 def _near_blocks(pairs, rows, cols, n):
@@ -452,9 +447,12 @@ class KrylovSolver:
         lo, hi = bsr.indptr[p0], bsr.indptr[p1]
         blocks, cols, ptr = bsr.data[lo:hi], bsr.indices[lo:hi], bsr.indptr[p0:p1 + 1] - lo
         self.lub = scipy.sparse.bsr_matrix((blocks, cols, ptr), shape=(NDOF * nl, NDOF * n))
-        l_uu = scipy.sparse.bsr_matrix((np.ascontiguousarray(blocks[:, :6, :6]), cols, ptr),
-                                       shape=(6 * nl, 6 * n))
-        self.l_uu = self._aij(l_uu.tocsr())
+        # L_uu as PETSc BAIJ (6x6 blocks; block kernels, ~2x faster products than AIJ)
+        self.l_uu = PETSc.Mat().createBAIJ([(6 * nl, 6 * n), (6 * nl, 6 * n)], 6,
+                                           csr=(ptr.astype(np.int32), cols.astype(np.int32),
+                                                np.ascontiguousarray(blocks[:, :6, :6]).reshape(-1)),
+                                           comm=self.comm)
+        self.l_uu.assemble()
         self.u_in, self.u_out = self.l_uu.createVecs()
         # far-field self blocks of the preconditioner (isolated spheres, scaled by
         # self_resistance_scale, weighted by self_resistance_weights; this rank's
@@ -558,16 +556,6 @@ class KrylovSolver:
         self.schur.zeroEntries()
         self.schur.setValuesBlockedCSR(indptr, cols, blocks.reshape(-1))
         self.schur.assemble()
-
-    def _aij(self, csr):
-        """A PETSc AIJ matrix (6N x 6N) of this rank's rows csr, on the solver's
-        communicator."""
-        csr.sort_indices()
-        rows = csr.shape[0]
-        mat = self._PETSc.Mat().createAIJ([(rows, 6 * self.n), (rows, 6 * self.n)],
-                                          csr=_int32_csr(csr), comm=self.comm)
-        mat.assemble()
-        return mat
 
     def _ksp(self, mat, kind, precond):
         PETSc = self._PETSc
