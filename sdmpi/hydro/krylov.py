@@ -86,7 +86,11 @@ GMRES_RESTART = 200
 #: stalls, 839 iterations at N = 1000). Block ILU on BAIJ (block size 6) gives the factor
 #: of ICC on the AIJ matrix with full blocks (solutions equal to 1.5e-14) 3-6x faster to set
 #: up and 2-3x faster to apply (N = 1000, phi = 0.45, level 1: 0.03 against 0.09-0.17 s,
-#: 0.44-0.53 against 0.93-1.7 ms). Measured with ICC on AIJ (the iterations are the same),
+#: 0.44-0.53 against 0.93-1.7 ms), storing L and U (~2x ICC's memory, ~20 MB at N = 4096).
+#: Equal while no pivot needs a shift: PETSc's ICC shifts the whole diagonal when a pivot
+#: is not positive (Manteuffel), ILU here shifts a singular pivot block ("inblocks"), so a
+#: near-singular G degrades the preconditioner instead of stopping the solve (GMRES does
+#: not need it definite). Measured with ICC on AIJ (the iterations are the same),
 #: per solve (phi = 0.45, solver tolerance 1e-6, the
 #: isolated-sphere D; ICC(0) / ICC(1) / exact sparse Cholesky (MUMPS)): N = 343 44 / 38
 #: / -, N = 1000 50 / 42 / 42 iterations, set-up 0.015 / 0.38 / 0.3 s, 0.55 / 1.5 / 7 ms
@@ -98,7 +102,8 @@ GMRES_RESTART = 200
 #: the iterations on 2 ranks)
 FILL_LEVELS = 1
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
-INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "ilu", "pc_factor_levels": str(FILL_LEVELS)}
+INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "ilu", "pc_factor_levels": str(FILL_LEVELS),
+                 "pc_factor_shift_type": "inblocks"}
 #: G keeps the lubrication coupling (off-diagonal blocks) of pairs closer than this surface
 #: gap, in mean radii (2 h / (a_i + a_j)); farther pairs keep their diagonal parts only (G
 #: stays positive definite). Measured (N = 1000, tolerance 1e-6, flow / force solve
