@@ -176,6 +176,24 @@ def test_pair_search_finds_exactly_the_images_within_reach(box, count, reach_abs
         assert np.all(np.diff(i * count + j) >= 0)
 
 
+@pytest.mark.parametrize("phi", [0.1, 0.45])
+def test_pair_room_covers_a_suspension(phi):
+    """find_pairs sizes its outputs by the mean count of pair images within reach
+    (geometry._expected_pairs, + 10%): enough for one scan of a hard-sphere suspension at
+    the reaches of lubrication (4) and of the spectral real space (6.45), and not much
+    more than needed (room - 16 N < 1.5 x the count: excluded volume only lowers it)."""
+    from sdmpi.dynamics.initial import hard_sphere_fluid
+    from sdmpi.hydro.geometry import _expected_pairs, find_pairs
+
+    n = 343
+    pos, side = hard_sphere_fluid(n, phi, np.random.default_rng(2), sweeps=3, strain=0.3)
+    lat = Lattice(np.full(3, side), 0.3)
+    for reach in (4.0, 6.45):
+        count = len(find_pairs(pos, np.ones(n), lat, reach, 0.0)[0])
+        room = _expected_pairs(n, lat, reach)
+        assert count <= room and room - 16 * n < 1.5 * count, (reach, count, room)
+
+
 @pytest.mark.parametrize("tol", [1e-4, 1e-6, 1e-8])
 def test_requested_accuracy_is_met(tol):
     """The whole periodic M_inf at accuracy tol (interpolated real-space radial values,

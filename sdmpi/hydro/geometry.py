@@ -190,6 +190,18 @@ def _cell_counts(lattice, reach):
     return counts if counts.min() >= 3 else None
 
 
+def _expected_pairs(n, lattice, reach):
+    """A room for find_pairs' outputs: in a periodic box ~10% more than the mean count of
+    pair images within reach, N(N+1)/2 x (4 pi/3) reach^3/V (images of a pair included),
+    so that one scan usually suffices (with 16 N, the pair search for the spectral real
+    space at N = 1000 scanned twice); in unbounded fluid every pair (N(N-1)/2) for an
+    infinite reach, else 16 N (a second scan finds the count if more)."""
+    if lattice is None:
+        return max(16, n * (n - 1) // 2) if math.isinf(reach) else 16 * n
+    mean = 0.5 * n * (n + 1) * 4.0 * math.pi / 3.0 * reach ** 3 / lattice.volume
+    return int(1.1 * mean) + 16 * n
+
+
 def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
     """Pairs (i <= j) and lattice images within reach_abs + reach_rel (a_i + a_j):
     arrays i, j and shift vectors (so that the separation is x_j + shift - x_i), ordered
@@ -205,8 +217,8 @@ def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
         cell, periodic = np.array([lx, ly, lz, lattice.strain * ly]), True
         reach = float(reach_abs) + 2.0 * float(reach_rel) * (float(radii.max()) if len(radii) else 0.0)
         counts = _cell_counts(lattice, reach) if reach > 0 else None
-    size = 16 * len(pos)
-    while True:
+    size = _expected_pairs(len(pos), lattice, reach_abs + 2.0 * reach_rel * (radii.max() if len(radii) else 0.0))
+    while True:  # a second scan only if the estimate was short
         i, j = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
         s = np.empty((size, 3))
         if counts is None:
