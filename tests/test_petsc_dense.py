@@ -84,13 +84,17 @@ def test_solve_mobility_one_rank():
     for a, b in zip(solve_mobility(pos, box, solver="dense", **kw),
                     solve_mobility(pos, box, solver="petsc-dense", **kw)):
         assert np.abs(a - b).max() < TOL * np.abs(a).max()
-    # the isolated sphere
+    assert_isolated_sphere("petsc-dense", kw["rate_of_strain"])
+
+
+def assert_isolated_sphere(solver, rate_of_strain):
+    """solve_mobility with `solver` for one sphere in unbounded fluid gives Stokes' laws:
+    U = F/(6 pi), Omega = L/(8 pi), S = (20 pi/3) E (viscosity 1, radius 1), to 1e-12."""
     u, w, s = solve_mobility([[0.0, 0.0, 0.0]], None, forces=[[1.0, 2.0, 3.0]],
-                             torques=[[0.0, 0.0, 1.0]], rate_of_strain=kw["rate_of_strain"],
-                             solver="petsc-dense")
+                             torques=[[0.0, 0.0, 1.0]], rate_of_strain=rate_of_strain, solver=solver)
     assert np.allclose(u, np.array([1.0, 2.0, 3.0]) / (6 * np.pi), rtol=1e-12)
     assert np.allclose(w, np.array([0.0, 0.0, 1.0]) / (8 * np.pi), rtol=1e-12)
-    assert np.allclose(s, 20 / 3 * np.pi * kw["rate_of_strain"], rtol=1e-12)
+    assert np.allclose(s, 20 / 3 * np.pi * rate_of_strain, rtol=1e-12)
 
 
 def test_not_positive_definite_is_a_linalg_error():
