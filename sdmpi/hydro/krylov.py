@@ -180,7 +180,10 @@ def _rank_sum(comm, local):
 
 def long_waves(lattice):
     """Wave vectors k = 2 pi n.b (m, 3) of the lattice with 0 < |n|^2 <= LONG_WAVES, one of
-    each pair +-k (the first nonzero component of n positive)."""
+    each pair +-k (the first nonzero component of n positive). By |n|, not |k|: in a tall
+    monolayer cell the waves along z are uniform over the layer and do not help; choosing
+    the same number of modes by |k| V^(1/3) instead took 19-24 Lanczos iterations against
+    17-21 (N = 400 and 1024, areal fraction 0.4, Lz = 2 L and 5 L; 27-31 without any)."""
     reach = int(np.sqrt(LONG_WAVES))
     n = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
     norm2 = np.einsum("ij,ij->i", n, n)
