@@ -6,7 +6,8 @@ phi = 0.1 and 0.5); the far field dense or spectral (the script runs both). Brow
 covariance (the sum of the pair factors' squares must equal the dense lubrication's FU
 block), the far-field part against the dense P (P^T M P)^-1/2 z for one noise vector, P the
 Lanczos preconditioner's factor (krylov.LongWaveFactor) as a matrix, checked to give
-P^T C P = I for C = D + M_long built here from its definition."""
+P^T C P = I for C = D + M_long built here from its definition. And a lone sphere, so that
+with two ranks one holds no particle (`lone_sphere`)."""
 
 import hashlib
 import sys
@@ -137,9 +138,26 @@ def split_far_field(split):
     return "dense" if isinstance(split.far, DenseFarField) else "spectral"
 
 
+def lone_sphere(comm=None):
+    """One sphere in a sheared periodic box (spectral far field): on comm with more ranks
+    than particles some ranks hold none. Max relative differences of its velocities from
+    dense and of its Brownian force from the one-rank solver's (the same noise)."""
+    pos, box = np.array([[1.0, 2.0, 3.0]]), np.full(3, 6.0)
+    forces, einf = np.array([[1.0, -2.0, 0.5, 0.3, 0.0, -0.4]]), np.array([[0.2, 0.0, -0.1, 0.3, 0.1]])
+    dense = make_solver("dense", grand_resistance(pos, np.ones(1), box, STRAIN))
+    solvers = [make_solver("petsc-krylov", split_resistance(pos, np.ones(1), box, STRAIN, far_field="spectral",
+                                                            comm=c), c, TOL) for c in (comm, None)]
+    z = np.random.default_rng(3).standard_normal(solvers[0].noise_shape)
+    u_k = solvers[0].velocities(forces, einf)
+    f_comm, f_self = (s.brownian_forces(z) for s in solvers)
+    return {"case": "lone sphere", "velocities": rel(dense.velocities(forces, einf), u_k),
+            "brownian": rel(f_self, f_comm),
+            "digest": hashlib.sha256(np.concatenate([u_k.ravel(), f_comm.ravel()]).tobytes()).hexdigest()}
+
+
 if __name__ == "__main__":
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
-    print_per_rank([compare(float(phi), comm, far_field=far) for phi in sys.argv[1:] for far in FAR_FIELDS],
-                   comm)
+    print_per_rank([compare(float(phi), comm, far_field=far) for phi in sys.argv[1:] for far in FAR_FIELDS]
+                   + [lone_sphere(comm)], comm)

@@ -58,9 +58,13 @@ def test_agrees_with_dense_one_rank(phi, far_field):
 @pytest.mark.mpi
 def test_agrees_with_dense_two_ranks():
     rows = rows_on_two_ranks("krylov_check.py", "0.1", "0.5")
-    assert len(rows) == 8  # 2 ranks x 2 phi x 2 far fields
+    lone = [out for out in rows if out.get("case") == "lone sphere"]
+    assert len(rows) - len(lone) == 8 and len(lone) == 2  # 2 ranks x (2 phi x 2 far fields + 1)
     for out in rows:
-        _check(out)
+        if out in lone:  # rank 1 holds no particle: the same as on one rank
+            assert out["velocities"] < AGREE + 10 * FAR_ERROR["spectral"] and out["brownian"] < EXACT, out
+        else:
+            _check(out)
 
 
 def test_solve_mobility_every_backend():

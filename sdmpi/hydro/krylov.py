@@ -238,7 +238,7 @@ class LongWaveFactor:
         e1 /= np.linalg.norm(e1, axis=1)[:, None]
         e2 = np.cross(k / k_norm[:, None], e1)
         v = np.stack([amplitude[:, None, :] * trig(phase)[:, None, :] * e.T[None]
-                      for trig in (np.cos, np.sin) for e in (e1, e2)], -1).reshape(3 * len(a), -1)
+                      for trig in (np.cos, np.sin) for e in (e1, e2)], -1).reshape(3 * len(a), 4 * len(k))
         gram = _rank_sum(comm, v.T @ v)  # columns (wave, 4)
         weights = np.repeat(2.0 / (lattice.volume * k_norm ** 2), 4)
         shared = None
