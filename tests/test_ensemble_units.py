@@ -60,7 +60,7 @@ def test_progress_line():
     p = Progress(comm, [0, 3], (2, 10), (400, 2000), io.StringIO())
     p.steps, p.tasks, p.remote[3] = 100, 0, (100, 1)
     # the first line with steps starts the rate clock (start-up time left out)
-    assert p.line(p.start + 10.0).endswith("0 steps/s | elapsed 0:00:10 | ETA ?")
+    assert p.line(p.start + 10.0).endswith("| ? steps/s | elapsed 0:00:10 | ETA ?")
     p.steps, p.tasks, p.remote[3] = 300, 1, (500, 2)
     line = p.line(p.start + 40.0)
     assert line == ("tasks 5/10 done | steps 1200/2000 (60.0%) | 20 steps/s | "

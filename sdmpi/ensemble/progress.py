@@ -167,13 +167,13 @@ class Progress:
         # (imports, compiled-kernel loading, initial configurations) does not skew the ETA
         if self._first is None and session > 0:
             self._first = (now, session)
-        rate, eta = 0.0, "?"
+        rate, eta = "?", "?"  # until two reports are apart (a run shorter than that: "?")
         if self._first is not None and now > self._first[0] and session > self._first[1]:
-            rate = (session - self._first[1]) / (now - self._first[0])
-            eta = hms((self.steps_total - steps) / rate)
+            per_second = (session - self._first[1]) / (now - self._first[0])
+            rate, eta = f"{per_second:.3g}", hms((self.steps_total - steps) / per_second)
         pct = 100.0 * steps / self.steps_total
         return (f"tasks {tasks}/{self.tasks_total} done | steps {steps}/{self.steps_total} "
-                f"({pct:.1f}%) | {rate:.3g} steps/s | elapsed {hms(elapsed)} | ETA {eta}")
+                f"({pct:.1f}%) | {rate} steps/s | elapsed {hms(elapsed)} | ETA {eta}")
 
     def _print(self, now: float, last: bool = False) -> None:
         text = self.line(now)
