@@ -19,8 +19,8 @@ except PetscUnavailable as err:
 
 from krylov_check import FAR_ERROR, TOL, compare  # noqa: E402  (tests/ is on sys.path under pytest)
 from test_ensemble import _env  # noqa: E402
-from test_petsc_dense import (ROOT, _run, assert_isolated_sphere, assert_same_stream, mobility_problem,  # noqa: E402
-                              needs_mpi, rows_on_two_ranks)
+from test_petsc_dense import (MPIRUN, ROOT, SHORT, _run, assert_isolated_sphere, assert_same_stream,  # noqa: E402
+                              mobility_problem, needs_mpi, rows_on_two_ranks)
 
 from sdmpi.dynamics.realisation import midpoint_brownian  # noqa: E402
 from sdmpi.hydro.krylov import lanczos_inverse_sqrt  # noqa: E402
@@ -301,6 +301,27 @@ def test_two_ranks_per_task_same_stream(tmp_path):
     for run in (one, two):
         assert np.all(run["solver_iterations"] > 0) and np.all(run["lanczos_iterations"] > 0)
         assert np.all(run["solver_residual"] < 1e-10)
+
+
+@needs_mpi
+@pytest.mark.mpi
+def test_two_ranks_per_task_killed_and_resumed_is_bit_identical(tmp_path):
+    """The realisation of test_two_ranks_per_task_same_stream on 2 ranks per task, with a
+    checkpoint every 5 steps, SIGKILLed after its second commit and resumed: its run file's
+    task data equal an uninterrupted 2-rank run's bit for bit (the collective solves and
+    the far field's rank split are deterministic for a given rank count)."""
+    from test_ensemble import task_data
+
+    run = [sys.executable, "-m", "sdmpi.cli", "run", str(ROOT / "jobs" / "demo.toml"), *SHORT, *KRYLOV,
+           "--set", "ensemble.ranks_per_task=2", "--set", "output.checkpoint_every=5"]
+    mpirun = [MPIRUN, "--oversubscribe", "-n", "2"]
+    ref, killed = tmp_path / "ref.h5", tmp_path / "killed.h5"
+    for out, env, ok in ((ref, None, True), (killed, {"SDMPI_TEST_KILL": "commit:2"}, False), (killed, None, True)):
+        res = subprocess.run([*mpirun, *run, "-o", str(out)], capture_output=True, text=True, env=_env(env),
+                             timeout=300, cwd=ROOT)
+        assert (res.returncode == 0) == ok, res.stderr
+    assert "resuming" in res.stdout
+    assert task_data(killed) == task_data(ref)
 
 
 @pytest.mark.parametrize("fast, bounds", [((1e-6, 1e-4, 1e-4), (1e-3, 1e-3)),
