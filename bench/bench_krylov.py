@@ -41,7 +41,7 @@ PLOT = HERE / "krylov_cost.png"
 def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, far_field=None):
     """One realisation stepped on COMM_WORLD; returns the row (on every rank). far_field:
     "dense" or "spectral" (solver.far_field) instead of the choice by N
-    (krylov.DENSE_FAR_FIELD_MAX_N)."""
+    (krylov.far_field_kind)."""
     from mpi4py import MPI
 
     from sdmpi.config import enumerate_tasks, load_job
@@ -70,8 +70,7 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
         its.append(int(sample["solver_iterations"][0]))
         lanczos.append(int(sample["lanczos_iterations"][0]))
     rss = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20  # KiB -> GiB
-    far = "-" if backend != "petsc-krylov" else (
-        far_field or ("dense" if n < krylov.DENSE_FAR_FIELD_MAX_N else "spectral"))
+    far = "-" if backend != "petsc-krylov" else krylov.far_field_kind(far_field, n)
     return {"backend": backend, "n": n, "ranks": comm.size, "phi": 0.45, "tolerance": tolerance,
             "lanczos_tolerance": lanczos_tolerance, "ewald_tolerance": ewald_tolerance,
             "far_field": far, "far_field_forced": far_field is not None,

@@ -124,6 +124,7 @@ def summary(job) -> str:
 def _backend(job) -> str:
     """The solver backend as `run` uses it ("auto" resolved), and whether PETSc, which
     the other backends need, can be imported here (`run` refuses the job otherwise)."""
+    from .hydro.krylov import far_field_kind
     from .hydro.petsc_dense import PetscUnavailable, import_petsc4py
     from .hydro.solvers import backend_for
 
@@ -132,6 +133,9 @@ def _backend(job) -> str:
     text = name if used == name else f"{name} (here {used})"
     if used == "dense":
         return text
+    if used == "petsc-krylov":
+        text += f", {far_field_kind(job.solver.far_field, job.system.n_particles)} far field"
+
     try:
         import_petsc4py()
     except PetscUnavailable as err:

@@ -408,6 +408,20 @@ def test_cli_validate_ok(capsys):
     assert f"; {steps} time steps in all;" in out
 
 
+def test_cli_validate_names_the_krylov_far_field(capsys):
+    """For petsc-krylov the summary says which far field runs: by N (dense below
+    krylov.DENSE_FAR_FIELD_MAX_N, spectral from there on) or as solver.far_field says."""
+    from sdmpi.hydro.krylov import DENSE_FAR_FIELD_MAX_N
+
+    cases = [(27, None, "dense"), (DENSE_FAR_FIELD_MAX_N + 16, None, "spectral"), (27, "spectral", "spectral")]
+    for n, far, kind in cases:
+        n = round(n ** (1 / 3)) ** 3  # a lattice start needs a cube
+        extra = ["--set", f'solver.far_field="{far}"'] if far else []
+        assert main(["validate", str(DEMO), "--set", 'solver.backend="petsc-krylov"',
+                     "--set", f"system.n_particles={n}", *extra]) == 0
+        assert f"backend petsc-krylov, {kind} far field" in capsys.readouterr().out, (n, far)
+
+
 def test_cli_validate_with_overrides(capsys):
     assert main(["validate", str(DEMO), "--set", "ensemble.realisations=3",
                  "--set", "system.phi=[0.2, 0.3]"]) == 0

@@ -302,13 +302,19 @@ class DenseFarField:
         return self.matrix @ x
 
 
+def far_field_kind(kind, n_particles, periodic=True):
+    """The far field `far_field_operator` builds for `kind` (None: spectral in a periodic
+    box from DENSE_FAR_FIELD_MAX_N particles on, else dense)."""
+    if kind is not None:
+        return kind
+    return "spectral" if periodic and n_particles >= DENSE_FAR_FIELD_MAX_N else "dense"
+
+
 def far_field_operator(kind, positions, radii, lattice, tol, comm=None, plan=None):
     """The far-field mobility operator `kind` ("dense" or "spectral"; FAR_FIELDS; None:
-    spectral in a periodic lattice from DENSE_FAR_FIELD_MAX_N particles on, else dense)
-    at the given positions; "spectral" needs a periodic lattice. plan: a
-    `farfield.FarFieldPlan` for "dense"."""
-    if kind is None:
-        kind = "dense" if lattice is None or len(positions) < DENSE_FAR_FIELD_MAX_N else "spectral"
+    by `far_field_kind`) at the given positions; "spectral" needs a periodic lattice.
+    plan: a `farfield.FarFieldPlan` for "dense"."""
+    kind = far_field_kind(kind, len(positions), lattice is not None)
     if kind == "dense":
         return DenseFarField(positions, radii, lattice, tol, plan)
     if kind == "spectral":
