@@ -102,14 +102,14 @@ def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):
     jobs = Path(__file__).parents[1] / "jobs"
     assert main(["validate", str(jobs / "demo.toml"), "--set", 'solver.backend="auto"',
                  "--set", "system.n_particles=343"]) == 0
-    assert "backend auto (here petsc-krylov)" in capsys.readouterr().out
+    assert "backend auto (here petsc-krylov), spectral far field" in capsys.readouterr().out
 
     def unavailable():
         raise petsc_dense.PetscUnavailable("petsc4py cannot be imported (test)")
 
     monkeypatch.setattr(petsc_dense, "import_petsc4py", unavailable)
     assert main(["validate", str(jobs / "demo.toml"), "--set", 'solver.backend="petsc-krylov"']) == 0
-    assert "petsc-krylov - NOT RUNNABLE HERE, sdmpi run would refuse it" in capsys.readouterr().out
+    assert "petsc-krylov, dense far field - NOT RUNNABLE HERE, sdmpi run would refuse it" in capsys.readouterr().out
     assert main(["validate", str(jobs / "monolayer_hydro.toml")]) == 0
     out = capsys.readouterr().out
     assert "areal fraction = 0.2, 0.3" in out and "rate = 1 [gamma_dot]" in out
