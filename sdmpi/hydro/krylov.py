@@ -140,6 +140,12 @@ FAR_FIELDS = ("dense", "spectral")
 DENSE_FAR_FIELD_MAX_N = 200
 
 
+def _block_csr(indptr, cols, blocks):
+    """PETSc's blocked CSR input of a block-sparse matrix (block row pointers, block columns,
+    blocks (nb, 6, 6)): the indices as 32-bit ints, the blocks row-major and flat."""
+    return indptr.astype(np.int32), cols.astype(np.int32), np.ascontiguousarray(blocks).reshape(-1)
+
+
 def _near_blocks(pairs, rows, cols, n):
     """Which blocks (rows, cols) of an N x N block pattern belong to a pair of `pairs` (a
     `lubrication.PairList`) closer than PRECONDITIONER_MAX_GAP mean radii."""
@@ -461,12 +467,7 @@ class KrylovSolver:
         lo, hi = bsr.indptr[p0], bsr.indptr[p1]
         blocks, cols, ptr = bsr.data[lo:hi], bsr.indices[lo:hi], bsr.indptr[p0:p1 + 1] - lo
         self.lub = scipy.sparse.bsr_matrix((blocks, cols, ptr), shape=(NDOF * nl, NDOF * n))
-        # L_uu as PETSc BAIJ (6x6 blocks; block kernels, ~2x faster products than AIJ)
-        self.l_uu = PETSc.Mat().createBAIJ([(6 * nl, 6 * n), (6 * nl, 6 * n)], 6,
-                                           csr=(ptr.astype(np.int32), cols.astype(np.int32),
-                                                np.ascontiguousarray(blocks[:, :6, :6]).reshape(-1)),
-                                           comm=self.comm)
-        self.l_uu.assemble()
+        self.l_uu = self._baij(_block_csr(ptr, cols, blocks[:, :6, :6]), self.comm)
         self.u_in, self.u_out = self.l_uu.createVecs()
         # far-field self blocks of the preconditioner (isolated spheres, scaled by
         # self_resistance_scale, weighted by self_resistance_weights; this rank's
@@ -510,23 +511,20 @@ class KrylovSolver:
     # ------------------------------------------------------------------ helpers
 
     def schur_blocks(self):
-        """G (6N x 6N) as (indptr, block columns, 6x6 blocks) of its kept blocks (_g_keep)
-        of L_uu + D_uu^-1, block rows in order, columns sorted within each (as
-        lubrication_sparse stores them), the indices as PETSc's 32-bit ints."""
+        """G (6N x 6N) in blocked CSR (`_block_csr`): its kept blocks (_g_keep) of L_uu +
+        D_uu^-1, block rows in order, columns sorted within each (as lubrication_sparse
+        stores them)."""
         _, cols, rows = self._g_pattern
         keep = self._g_keep
         indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=self.n))])
-        return indptr.astype(np.int32), cols[keep].astype(np.int32), self._g_blocks[keep]
+        return _block_csr(indptr, cols[keep], self._g_blocks[keep])
 
     def schur_solver(self):
         """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
         rank alone, built on first use."""
         if self.inner is None:
             PETSc = self._PETSc
-            indptr, cols, blocks = self.schur_blocks()
-            self.schur = PETSc.Mat().createBAIJ(6 * self.n, 6, csr=(indptr, cols, blocks.reshape(-1)),
-                                                comm=PETSc.COMM_SELF)
-            self.schur.assemble()
+            self.schur = self._baij(self.schur_blocks(), PETSc.COMM_SELF)
             self.inner = PETSc.KSP().create(comm=PETSc.COMM_SELF)
             self.inner.setOperators(self.schur)
             self.inner.setOptionsPrefix(OPTIONS_PREFIX)
@@ -564,12 +562,20 @@ class KrylovSolver:
                 or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):
             return
         self._g_keep = other._g_keep
-        indptr, cols, blocks = self.schur_blocks()
         self.schur, self.inner = other.schur, other.inner
         other.schur = other.inner = None
         self.schur.zeroEntries()
-        self.schur.setValuesBlockedCSR(indptr, cols, blocks.reshape(-1))
+        self.schur.setValuesBlockedCSR(*self.schur_blocks())
         self.schur.assemble()
+
+    def _baij(self, csr, comm):
+        """A PETSc BAIJ matrix (6x6 blocks; block kernels: ~2x faster products and 2-3x
+        faster incomplete factors than AIJ) of 6N columns from this rank's block rows csr
+        (`_block_csr`) on comm."""
+        rows = 6 * (len(csr[0]) - 1)
+        mat = self._PETSc.Mat().createBAIJ([(rows, 6 * self.n), (rows, 6 * self.n)], 6, csr=csr, comm=comm)
+        mat.assemble()
+        return mat
 
     def _ksp(self, mat, kind, precond):
         PETSc = self._PETSc
