@@ -135,7 +135,6 @@ def _backend(job) -> str:
         return text
     if used == "petsc-krylov":
         text += f", {far_field_kind(job.solver.far_field, job.system.n_particles)} far field"
-
     try:
         import_petsc4py()
     except PetscUnavailable as err:

@@ -210,14 +210,14 @@ def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
     reach per axis) are scanned with a cell list, O(N), others pair by pair, O(N^2)."""
     pos = np.ascontiguousarray(positions, dtype=float)
     radii = np.ascontiguousarray(radii, dtype=float)
+    reach = float(reach_abs) + 2.0 * float(reach_rel) * (float(radii.max()) if len(radii) else 0.0)
     if lattice is None:
         cell, periodic, counts = np.ones(4), False, None
     else:
         lx, ly, lz = lattice.box
         cell, periodic = np.array([lx, ly, lz, lattice.strain * ly]), True
-        reach = float(reach_abs) + 2.0 * float(reach_rel) * (float(radii.max()) if len(radii) else 0.0)
         counts = _cell_counts(lattice, reach) if reach > 0 else None
-    size = _expected_pairs(len(pos), lattice, reach_abs + 2.0 * reach_rel * (radii.max() if len(radii) else 0.0))
+    size = _expected_pairs(len(pos), lattice, reach)
     while True:  # a second scan only if the estimate was short
         i, j = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
         s = np.empty((size, 3))
