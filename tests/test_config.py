@@ -361,7 +361,7 @@ def test_canonical_text_ignores_layout_comments_and_order():
 @pytest.fixture
 def all_backends(monkeypatch):
     """Hashing does not depend on which backends this version implements."""
-    monkeypatch.setattr("sdmpi.config.loader.IMPLEMENTED_BACKENDS", ("dense", "petsc-dense", "petsc-krylov"))
+    monkeypatch.setattr("sdmpi.config.checks.IMPLEMENTED_BACKENDS", ("dense", "petsc-dense", "petsc-krylov"))
 
 
 def test_every_backend_is_implemented():

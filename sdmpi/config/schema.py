@@ -1,8 +1,9 @@
 """The job-file schema: one frozen dataclass per TOML section, one field per key.
 
 Each field carries its TOML spelling, kind, allowed values, unit and a one-line doc in
-``dataclasses.field(metadata=...)``; the loader, the canonical writer and
-:func:`schema_text` all read the schema from there, so a key is declared exactly once.
+``dataclasses.field(metadata=...)``; the loader, the canonical writer and the key
+reference (:mod:`.reference`) all read the schema from there, so a key is declared exactly
+once.
 
 Units are the seed's reduced units: sphere radius a = 1 (with size classes: the largest
 radius; kT, D0 and t_D are then those of the largest spheres), medium zero-shear viscosity
@@ -575,33 +576,3 @@ class Job:
 
 SECTIONS: tuple[tuple[str, type], ...] = tuple(
     (f.name, f.default_factory) for f in dataclasses.fields(Job))
-
-
-def schema_text() -> str:
-    """A plain-text table of every key: default, allowed values, unit and meaning."""
-    from .canonical import toml_literal
-
-    lines = []
-    for section, cls in SECTIONS:
-        lines.append(" ".join(cls.__doc__.split("\n\n")[0].split()))
-        for f in dataclasses.fields(cls):
-            lines.extend(_key_line(f, toml_literal, "  "))
-            if f.metadata["table"] is not None:
-                for g in dataclasses.fields(f.metadata["table"]):
-                    lines.extend(_key_line(g, toml_literal, "    ", f"{toml_name(f)}[]."))
-        lines.append("")
-    return "\n".join(lines)
-
-
-def _key_line(f, literal, indent, prefix=""):
-    m = f.metadata
-    name = prefix + toml_name(f)
-    default = literal(m["default"])
-    if m["default"] is None:
-        default = "absent" if m["optional"] else "required"
-    allowed = m["allowed"].describe(name) if m["allowed"] else m["kind"]
-    extra = f"; unit {m['unit']}" if m["unit"] else ""
-    if m["only_if"]:
-        s, k, vals = m["only_if"]
-        extra += f"; only when {s}.{k} is " + " or ".join(f'"{v}"' for v in vals)
-    return [f"{indent}{name} = {default}   ({allowed}{extra})", f"{indent}    {m['doc']}"]
