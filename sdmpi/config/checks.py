@@ -103,34 +103,24 @@ def _time_step(job):
     return problems
 
 
-def _initial_configuration(job):
-    """The hard-sphere generator starts from a simple cubic lattice (sdmpi.dynamics.initial)
-    spaced for the largest diameter, compressed when phi is above the lattice's limit
-    (pi/6) sum_i a_i^3 / N: phi < START_PHI_LIMIT. Monolayers start from a square lattice
-    instead (:func:`_monolayer_start`)."""
-    system = job.system
-    if system.geometry == "monolayer":
-        return _monolayer_start(job)
-    n = system.n_particles
-    problems = []
-    if round(n ** (1 / 3)) ** 3 != n:
-        cubes = ", ".join(str(m ** 3) for m in range(1, 8))
-        problems.append(Problem("system.n_particles", "the initial configuration starts from a "
-                                "simple cubic lattice, so N must be a perfect cube", n,
-                                allowed=f"a cube: {cubes}, ..."))
-    for k, phi in enumerate(system.phi):
-        if phi >= START_PHI_LIMIT:
-            problems.append(Problem(f"system.phi[{k}]", "the initial configuration is a "
-                                    "compressed hard-sphere fluid, made up to "
-                                    f"phi = {START_PHI_LIMIT} (denser ones jam)", phi,
-                                    allowed=f"0 < phi < {START_PHI_LIMIT}"))
-    return problems
+def _bulk_start(job):
+    """The hard-sphere generator (sdmpi.dynamics.initial) starts from a simple cubic
+    lattice spaced for the largest diameter, compressed when phi is above the lattice's
+    limit: phi < START_PHI_LIMIT for any N and size classes."""
+    if job.system.geometry != "bulk":
+        return []
+    return [Problem(f"system.phi[{k}]", "the initial configuration is a compressed hard-sphere "
+                    f"fluid, made up to phi = {START_PHI_LIMIT} (denser ones jam)", phi,
+                    allowed=f"0 < phi < {START_PHI_LIMIT}")
+            for k, phi in enumerate(job.system.phi) if phi >= START_PHI_LIMIT]
 
 
 def _monolayer_start(job):
-    """The monolayer start (sdmpi.dynamics.initial.hard_disk_monolayer): m x m square
+    """Monolayers: the start (sdmpi.dynamics.initial.hard_disk_monolayer): m x m square
     lattice sites, m = ceil(sqrt N), spaced L/m > 2, so phi < pi N / (4 m^2)."""
     system = job.system
+    if system.geometry != "monolayer":
+        return []
     m = math.isqrt(system.n_particles - 1) + 1
     limit = math.pi * system.n_particles / (4 * m * m)
     return [Problem(f"system.phi[{k}]", f"the monolayer start fills {m} x {m} square-lattice "
@@ -326,8 +316,8 @@ CROSS_CHECKS = (
     (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes",
       "system.size_classes") + _INTEGRATION, _time_step),
     (("system.n_particles", "system.size_classes"), _size_classes),
-    (("system.n_particles", "system.phi", "system.size_classes", "system.geometry"),
-     _initial_configuration),
+    (("system.phi", "system.geometry"), _bulk_start),
+    (("system.n_particles", "system.phi", "system.geometry"), _monolayer_start),
     (("system.geometry", "system.n_particles", "system.phi", "system.layer_spacing",
       "system.size_classes", "shear.protocol", "brownian.enabled", "medium.kind",
       "interparticle.kind", "hydrodynamics.lubrication_cutoff"), _monolayer),

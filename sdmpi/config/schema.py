@@ -29,6 +29,17 @@ TWO_PI = 2.0 * math.pi
 START_PHI_LIMIT = 0.6
 
 
+def lattice_sites_per_axis(n: int) -> int:
+    """m, the sites per axis of the smallest simple cubic lattice with at least n sites
+    (m^3 >= n > (m - 1)^3): the lattice of the initial configuration."""
+    m = round(n ** (1 / 3))
+    while m ** 3 < n:
+        m += 1
+    while m > 1 and (m - 1) ** 3 >= n:
+        m -= 1
+    return m
+
+
 # --------------------------------------------------------------------------- allowed values
 
 
@@ -187,8 +198,10 @@ class System:
     n_particles: int = key(27, "int", "number of spheres N per realisation",
                            allowed=Range(1, None))
     phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions (monolayer: areal "
-                                 "fractions N pi a^2 / L^2), one task group each",
-                                 allowed=Range(0.0, 0.64, lo_open=True, hi_open=True))
+                                 "fractions N pi a^2 / L^2), one task group each; the "
+                                 f"initial configurations reach phi < {START_PHI_LIMIT} (bulk) "
+                                 "and pi N / (4 m^2), m = ceil(sqrt N) (monolayer)",
+                                 allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))
     geometry: str = key("bulk", "str", "bulk: spheres in a cubic periodic box; monolayer: "
                         "centres in one plane z = const, in-plane motion, periodic in the "
                         "plane, non-Brownian steady shear only (seed 001)",
@@ -240,11 +253,11 @@ class System:
 
     @property
     def lattice_phi_limit(self) -> float:
-        """The largest phi of the simple-cubic lattice start, whose spacing L/m must exceed
-        the largest diameter 2: (pi/6) sum_i a_i^3 / N (pi/6 = 0.5236 when monodisperse)."""
-        if self.size_classes is None:
-            return math.pi / 6
-        return math.pi / 6 * math.fsum(r ** 3 for r in self.radii) / self.n_particles
+        """The largest phi of the simple-cubic lattice start (m^3 >= N sites, m =
+        :func:`lattice_sites_per_axis`), whose spacing L/m must exceed the largest diameter
+        2: (pi/6) sum_i a_i^3 / m^3 (pi/6 = 0.5236 for N = m^3 equal spheres)."""
+        m = lattice_sites_per_axis(self.n_particles)
+        return math.pi / 6 * (math.fsum(r ** 3 for r in self.radii) / m ** 3)
 
 
 @dataclass(frozen=True)
