@@ -190,7 +190,8 @@ def _add_info(subparsers) -> None:
         description="Check a run file written by 'sdmpi run' and print its job, the "
                     "progress of every task and the versions that wrote it. Read-only; "
                     "works while the run is going on.",
-        epilog="exit status: 0, or 2 if the file is not an intact sdmpi run file")
+        epilog="exit status: 0, or 2 if the file is not an intact sdmpi run file (including "
+               "committed data failing their checksums: each is listed)")
     parser.add_argument("run", metavar="RUN.h5", help="the run file")
     parser.add_argument("--job", action="store_true",
                         help="print the stored job (canonical TOML) instead")
@@ -210,6 +211,14 @@ def _info(args) -> int:
         print(run.job_text, end="")
     else:
         print(info_text(run, lock_holder(args.run)))
+    if run.damage:
+        print(f"{args.run}: DAMAGED: {len(run.damage)} checksum mismatch(es):", file=sys.stderr)
+        for damage in run.damage:
+            print(f"  {damage}", file=sys.stderr)
+        print("'sdmpi run' with the same job recomputes the damaged steps (bit for bit) from "
+              "the last intact checkpoint before them; 'sdmpi reduce' refuses damaged "
+              "samples", file=sys.stderr)
+        return EXIT_BAD_INPUT
     return EXIT_OK
 
 
@@ -238,6 +247,12 @@ def info_text(run, running=None) -> str:
                                                  else f"{100.0 * p / task.n_steps:.0f}%")
         lines.append(f"  {task.task_id:>6}  {task.phi:>6.4g}  {omega:>10}  "
                      f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
+    if not run.checksummed:
+        lines.append("checksums: none (written by an sdmpi without them); data not verified")
+    elif run.damage:
+        lines.append(f"checksums: {len(run.damage)} mismatch(es), see below")
+    else:
+        lines.append("checksums: every committed sample and checkpoint verified")
     lines.append("versions: " + ", ".join(f"{k} {v}" for k, v in run.versions.items()))
     lines.append(f"units: time {a['time_unit']}, stress {a['stress_unit']}, "
                  f"stress components {a['component_order']}")

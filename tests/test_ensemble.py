@@ -118,7 +118,8 @@ def test_reference_layout(reference, job_file):
         assert samples["stress_hydrodynamic_maxwell"].shape == (N_STEPS, 6)
         assert samples["time"].attrs["unit"] == "t_D"
         assert f["tasks/000005"].attrs["realisation"] == 1
-        assert sorted(f["checkpoints/000005"]) == ["slot0", "slot1", "slot_step"]
+        assert sorted(f["checkpoints/000005"]) == ["sample_crc", "slot0", "slot1", "slot_step",
+                                                   "state_crc"]
     assert (logs(reference) / "rank-0.log").read_text().count("complete") == N_TASKS
 
 

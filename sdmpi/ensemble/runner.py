@@ -65,6 +65,7 @@ class Plan:
     slots: tuple       # current checkpoint slot per task (-1: none)
     versions: str      # JSON
     created: str       # UTC ISO 8601
+    notes: tuple = ()  # damage found by the checksums, and where tasks resume instead
 
 
 def run(job_path, overrides, output, *, new=False, realisation_factory=None,
@@ -157,9 +158,14 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
                            f"another output file (-o).") from None
         if resume_hash(summary.job) != resume_hash(job):
             raise BadInput(_different_job(out, summary.job, job))
-        mode = "complete" if summary.complete else "resume"
-        return Plan(canonical_text(job), mode, tuple(int(p) for p in summary.progress),
-                    summary.slots, *meta)
+        progress = tuple(step for step, _ in summary.resume)
+        slots = tuple(slot for _, slot in summary.resume)
+        notes = tuple(f"damaged: {d}" for d in summary.damage) + tuple(
+            f"task {t.task_id}: recomputing from step {step} (committed up to {done}), "
+            f"bit for bit as before the damage"
+            for t, step, done in zip(tasks, progress, summary.progress) if step < done)
+        mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
+        return Plan(canonical_text(job), mode, progress, slots, *meta, notes)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
 
 
@@ -267,7 +273,8 @@ class _Driver:
         self.rank = comm.rank
         self.log = rank_logger(logs_dir(out), self.rank)
         self.stop = _Stop()
-        self.t_step = self.t_io = 0.0  # s: stepping, HDF5 writes + checkpoints
+        self.t_step = self.t_io = self.t_checksum = 0.0  # s: stepping, HDF5 writes +
+        # checkpoints, the checksums' part of the latter
 
     def say(self, text: str) -> None:
         """Rank 0: print (and log) one line."""
@@ -286,6 +293,8 @@ class _Driver:
                       f"{socket.gethostname()}; tasks {mine}")
         todo = [t for t in tasks if plan.progress[t.task_id] < t.n_steps]
         steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
+        for note in plan.notes:
+            self.say(f"WARNING: {note}")
         if plan.mode == "resume":
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")
@@ -321,6 +330,7 @@ class _Driver:
                 wall = time.perf_counter() - t0
                 progress.finish()
             finally:
+                self.t_checksum = run_file.t_checksum
                 run_file.close()
         finally:
             self.stop.restore()
@@ -357,6 +367,8 @@ class _Driver:
         start, slot = self.plan.progress[tid], self.plan.slots[tid]
         if start > 0:
             real.set_state(run_file.read_state(tid, slot))
+        if leader:
+            run_file.begin(tid, slot, start)
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every
@@ -405,11 +417,12 @@ class _Driver:
     def _summary(self, wall: float, unfinished: int, n_tasks: int) -> None:
         wall_all = self.comm.allreduce(wall)
         io_all = self.comm.allreduce(self.t_io)
+        crc_all = self.comm.allreduce(self.t_checksum)
         share = 100.0 * io_all / wall_all if wall_all > 0 else 0.0
         self.log.info(f"done: wall {wall:.3g} s, stepping {self.t_step:.3g} s, HDF5 writes + "
-                      f"checkpoints {self.t_io:.3g} s")
+                      f"checkpoints {self.t_io:.3g} s (checksums {self.t_checksum:.3g} s)")
         io_text = (f"HDF5 writes + checkpoints {io_all:.3g} s = {share:.2f}% of "
-                   f"{wall_all:.3g} s rank time")
+                   f"{wall_all:.3g} s rank time (checksums {crc_all:.2g} s of it)")
         if unfinished == 0:
             self.say(f"{self.out}: complete ({n_tasks} tasks); {io_text}")
         else:
