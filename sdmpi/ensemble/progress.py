@@ -113,6 +113,7 @@ class Progress:
         now = time.monotonic()
         if self.rank == 0:
             self._poll()
+            self._start_clock(now)
             if self._due(now):
                 self._print(now)
         elif self.is_leader and now - self._last_send >= SEND_EVERY:
@@ -125,6 +126,7 @@ class Progress:
             while len(self.finished) < len(self.others):
                 self._poll()
                 now = time.monotonic()
+                self._start_clock(now)
                 if self._due(now):
                     self._print(now)
                 time.sleep(0.05)
@@ -157,17 +159,24 @@ class Progress:
             if final:
                 self.finished.add(source)
 
+    def _session(self) -> int:
+        """Steps done this session, on every rank as far as rank 0 knows."""
+        return self.steps + sum(s for s, _ in self.remote.values())
+
+    def _start_clock(self, now: float) -> None:
+        """Start the rate clock when the first steps are seen, so that start-up (imports,
+        kernel compilation, initial configurations, the first step) does not skew it."""
+        if self._first is None and self._session() > 0:
+            self._first = (now, self._session())
+
     def line(self, now: float) -> str:
         """The progress line: tasks done, steps done, steps/s, ETA."""
-        session = self.steps + sum(s for s, _ in self.remote.values())
+        session = self._session()
         steps = self.steps_before + session
         tasks = self.tasks_before + self.tasks + sum(t for _, t in self.remote.values())
         elapsed = max(now - self.start, 1e-9)
-        # the rate is measured from the first reported step on, so that start-up
-        # (imports, compiled-kernel loading, initial configurations) does not skew the ETA
-        if self._first is None and session > 0:
-            self._first = (now, session)
-        rate, eta = "?", "?"  # until two reports are apart (a run shorter than that: "?")
+        self._start_clock(now)
+        rate, eta = "?", "?"  # until steps were seen at two times (a very short run: "?")
         if self._first is not None and now > self._first[0] and session > self._first[1]:
             per_second = (session - self._first[1]) / (now - self._first[0])
             rate, eta = f"{per_second:.3g}", hms((self.steps_total - steps) / per_second)
