@@ -345,7 +345,12 @@ def main(argv=None, *, realisation_factory=None) -> int:
         return EXIT_BAD_INPUT
     if realisation_factory is not None:
         args.realisation_factory = realisation_factory
-    return args.handler(args)
+    try:
+        return args.handler(args)
+    except BrokenPipeError:  # the reader went away (e.g. `sdmpi info RUN.h5 | head`)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout
+        return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -154,8 +154,9 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
         try:
             summary = store.inspect(out)
         except store.StoreError as err:
-            raise BadInput(f"{err}\nLeft untouched. Use --new to replace it, or choose "
-                           f"another output file (-o).") from None
+            advice = ("Use --new to replace it, or choose another output file (-o)."
+                      if store.is_run_file(out) else "Choose another output file (-o).")
+            raise BadInput(f"{err}\nLeft untouched. {advice}") from None
         if resume_hash(summary.job) != resume_hash(job):
             raise BadInput(_different_job(out, summary.job, job))
         progress = tuple(step for step, _ in summary.resume)
@@ -194,6 +195,9 @@ def _check_output(out: Path, new: bool) -> None:
         raise BadInput(f"{out}: is a directory; -o names the run file (e.g. run.h5)")
     if out.exists() and not new and not os.access(out, os.R_OK | os.W_OK):
         raise BadInput(f"{out}: exists but is not readable and writable")
+    if out.exists() and new and not store.is_run_file(out):
+        raise BadInput(f"{out}: exists and is not an sdmpi run file; --new replaces only "
+                       f"sdmpi run files. Left untouched: choose another output file (-o)")
     logs = logs_dir(out)
     if logs.exists() and not logs.is_dir():
         raise BadInput(f"{logs}: exists and is not a directory (the run's log directory)")

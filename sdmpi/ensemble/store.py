@@ -311,6 +311,26 @@ class RunSummary:
         return all(int(p) == t.n_steps for p, t in zip(self.progress, self.tasks))
 
 
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def is_run_file(path) -> bool:
+    """Whether ``path`` is (or was, before damage) an sdmpi run file: HDF5 with
+    ``format = "sdmpi-run"``, or, if HDF5 cannot open it, an HDF5 signature and that
+    attribute's value among its first 64 KiB (where the root attributes are written)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("format") == FORMAT
+    except Exception:  # not HDF5, or damaged: look at the bytes
+        pass
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return False
+    return head.startswith(HDF5_SIGNATURE) and FORMAT.encode() in head
+
+
 def inspect(path) -> RunSummary:
     """Open ``path`` read-only, check that it is an intact sdmpi run file, summarise it.
 

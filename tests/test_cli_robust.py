@@ -1,0 +1,75 @@
+"""The command line on inputs a new user tries: messages and exit codes, never a
+traceback, nothing overwritten that is not an sdmpi run file."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import test_ensemble as ens
+from sdmpi.hydro import solve_mobility
+
+
+def python_m(*args, **kwargs):
+    return subprocess.run([sys.executable, "-m", "sdmpi", *map(str, args)], capture_output=True,
+                          text=True, env=ens._env(), **kwargs)
+
+
+def test_python_m_sdmpi(tmp_path):
+    res = python_m("--version")
+    assert res.returncode == 0 and res.stdout.startswith("sdmpi ")
+    job = tmp_path / "job.toml"
+    job.write_text(ens.JOB)
+    res = python_m("validate", job)
+    assert res.returncode == 0 and "valid" in res.stdout
+
+
+def test_empty_job_file_refused(tmp_path):
+    job = tmp_path / "empty.toml"
+    job.write_text("")
+    res = python_m("validate", job)
+    assert res.returncode == 2 and "the job file is empty" in res.stderr, res.stderr
+    res = ens.sdmpi("run", job, "-o", tmp_path / "run.h5")
+    assert res.returncode == 2 and "the job file is empty" in res.stderr
+    assert sorted(os.listdir(tmp_path)) == ["empty.toml"]
+
+
+def test_info_into_a_closed_pipe(tmp_path):
+    """`sdmpi info RUN.h5 | head`: the reader is gone before sdmpi writes; no
+    BrokenPipeError traceback, exit 0."""
+    job = tmp_path / "job.toml"
+    job.write_text(ens.JOB)
+    out = tmp_path / "run.h5"
+    assert ens.sdmpi("run", job, "-o", out).returncode == 0
+    proc = subprocess.Popen([sys.executable, str(ens.DRIVER), "info", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ens._env())
+    proc.stdout.close()  # long before the report is written (imports take ~1 s)
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0 and stderr == "", stderr
+
+
+def test_new_replaces_only_run_files(tmp_path):
+    job = tmp_path / "job.toml"
+    job.write_text(ens.JOB)
+    before = job.read_bytes()
+    res = ens.sdmpi("run", job, "--new", "-o", job)
+    assert res.returncode == 2 and "not an sdmpi run file" in res.stderr, res.stderr
+    assert "--new replaces only sdmpi run files" in res.stderr
+    assert job.read_bytes() == before
+    res = ens.sdmpi("run", job, "-o", job)  # without --new: no advice to use it
+    assert res.returncode == 2 and "--new" not in res.stderr
+    assert job.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["job.toml"]
+    run = tmp_path / "run.h5"
+    assert ens.sdmpi("run", job, "-o", run).returncode == 0
+    res = ens.sdmpi("run", job, "--new", "-o", run, "--set", "job.seed=8")
+    assert res.returncode == 0, res.stderr  # an sdmpi run file is replaced
+
+
+def test_solve_mobility_argument_checks():
+    pos, box = np.array([[0.0, 0, 0], [3.0, 0, 0]]), np.full(3, 10.0)
+    with pytest.raises(ValueError, match="ewald_tol must be in"):
+        solve_mobility(pos, box, ewald_tol=0)
+    with pytest.raises(TypeError, match="lubrication must be True or False, got 'no'"):
+        solve_mobility(pos, box, lubrication="no")
