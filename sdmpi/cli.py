@@ -60,19 +60,100 @@ def _add_validate(subparsers) -> None:
                     "print a summary: task groups, time steps, tasks and their steps in all. Every "
                     "problem is listed at once, each with the key, the offending value, "
                     "why, and what is allowed. Writes nothing.",
-        epilog="exit status: 0 if the job is valid, 2 if not (or the file is unreadable)")
+        epilog="exit status: 0 if the job is valid (resource warnings included: the job may "
+               "run elsewhere), 2 if not (or the file is unreadable)")
     add_job_arguments(parser)
+    parser.add_argument("--ranks", type=int, default=1, metavar="P",
+                        help="MPI ranks the job will run on, all on this machine (for the "
+                             "memory check and the wall-time estimate; default 1)")
+    parser.add_argument("-o", "--output", default="run.h5", metavar="RUN.h5",
+                        help="where the run file will go (for the disk-space check; "
+                             "default ./run.h5; nothing is written)")
+    parser.add_argument("--time-steps", type=int, default=0, metavar="K",
+                        help="time K steps of the first task (after one untimed step that "
+                             "compiles or loads the kernels) and estimate the run's "
+                             "core-hours and wall time from them; default 0: no timing")
     parser.set_defaults(handler=_validate)
 
 
 def _validate(args) -> int:
+    from .config import resources
+
     try:
         job = job_from_args(args)
+        problems = resources.start_problems(job)
+        if problems:
+            raise JobError(problems, args.job)
     except JobError as err:
         print(err, file=sys.stderr)
         return EXIT_BAD_INPUT
+    bad = [f"--ranks {args.ranks}: must be at least 1"] if args.ranks < 1 else []
+    bad += [f"--time-steps {args.time_steps}: must be 0 or more"] if args.time_steps < 0 else []
+    rpt = job.ensemble.ranks_per_task
+    if args.ranks % rpt:
+        bad.append(f"--ranks {args.ranks}: must be a multiple of ensemble.ranks_per_task "
+                   f"= {rpt} (sdmpi run would refuse it)")
+    if bad:
+        print("sdmpi validate: " + "\n".join(bad), file=sys.stderr)
+        return EXIT_BAD_INPUT
     print(summary(job))
+    print(resource_text(job, args.ranks, args.output))
+    if args.time_steps:
+        print(cost_text(job, args.ranks, args.time_steps))
     return EXIT_OK
+
+
+def resource_text(job, ranks: int, output) -> str:
+    """The resource estimates of a job and, as WARNING lines, what will not fit here."""
+    from pathlib import Path
+
+    from .config import resources
+    from .ensemble.store import run_file_bytes
+    from .hydro.solvers import backend_for
+
+    gib, rpt = resources.gib, job.ensemble.ranks_per_task
+    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
+    size, memory = run_file_bytes(job), resources.memory_per_rank(job, backend)
+    available = resources.available_memory()
+    busy = min(ranks, len(enumerate_tasks(job)) * rpt)
+    where = Path(output).resolve().parent
+    lines = [f"  run file: about {gib(size)}; memory: about {gib(memory)} per rank"
+             + ("" if available is None else f" ({gib(available)} available here)")]
+    problems = resources.memory_problems(job, backend, busy, available)
+    if where.is_dir():
+        problems += resources.disk_problems(job, size, where)
+    lines += [f"WARNING: {p}\n  (sdmpi run would refuse this job here)" for p in problems]
+    return "\n".join(lines)
+
+
+def cost_text(job, ranks: int, k: int) -> str:
+    """Core-hours and wall time of a job on ``ranks`` ranks, from timing ``k`` steps of
+    its first task on this rank (after one untimed step: kernel compilation or loading,
+    first solves). Every step of a job costs about the same (same N, same solver); the
+    wall time is the largest load of the LPT assignment (sdmpi.ensemble.farm)."""
+    import time
+
+    from .dynamics import Realisation
+    from .ensemble.farm import assign
+    from .ensemble.progress import hms
+
+    tasks = enumerate_tasks(job)
+    print(f"timing {k} step(s) of task 0 (after one untimed step that compiles or loads "
+          "the kernels)...", file=sys.stderr, flush=True)
+    real = Realisation(job, tasks[0])
+    real.advance(1)
+    t0 = time.perf_counter()
+    real.advance(k)
+    per_step = (time.perf_counter() - t0) / k
+    rpt, groups = job.ensemble.ranks_per_task, max(ranks // job.ensemble.ranks_per_task, 1)
+    steps = {t.task_id: float(t.n_steps) for t in tasks}
+    makespan = max(sum(steps[tid] for tid in group) for group in assign(steps, groups))
+    core_hours = sum(steps.values()) * per_step * rpt / 3600.0
+    note = "" if rpt == 1 else (f"; timed on one rank, the {rpt} ranks of a task share "
+                                "its solves, so its steps will be faster")
+    return (f"  cost (measured: {per_step:.3g} s per step of task 0 on this machine{note}): "
+            f"{core_hours:.3g} core-hours, wall time {hms(makespan * per_step)} on "
+            f"{ranks} rank(s)")
 
 
 def summary(job) -> str:

@@ -24,6 +24,7 @@ valid, and running the same command resumes.
 from __future__ import annotations
 
 import datetime
+import errno
 import json
 import os
 import platform
@@ -41,7 +42,7 @@ from mpi4py import MPI
 
 from .. import __version__
 from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
-                      parse_job, resume_hash)
+                      parse_job, resources, resume_hash)
 from . import store
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
@@ -86,13 +87,28 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
         return _execute(comm, plan, Path(output), realisation_factory, stream or sys.stdout)
     except BadInput:
         raise
-    except Exception:  # a bug or a failing realisation: stop every rank, keep the file
-        sys.stderr.write(f"sdmpi run: rank {comm.rank} failed:\n{traceback.format_exc()}")
+    except Exception as err:  # a bug or a failing realisation: stop every rank, keep the file
+        if _file_system_full(err):
+            sys.stderr.write(f"sdmpi run: rank {comm.rank}: cannot write {output}: the file "
+                             f"system is full ({err}). Everything up to the last checkpoint "
+                             "is committed: free some space, then run the same command "
+                             "again to resume.\n")
+        else:
+            sys.stderr.write(f"sdmpi run: rank {comm.rank} failed:\n{traceback.format_exc()}")
         sys.stderr.flush()
         comm.Abort(1)
     finally:
         if lock is not None:
             os.close(lock)
+
+
+def _file_system_full(err: BaseException) -> bool:
+    """Whether an error is a full file system or an exceeded quota (h5py reports HDF5's
+    write failures as OSError with the C errno in the message)."""
+    text = str(err)
+    return isinstance(err, OSError) and (
+        err.errno in (errno.ENOSPC, errno.EDQUOT) or "No space left" in text
+        or "quota exceeded" in text.lower())
 
 
 def _agree(comm, job_path, overrides, out: Path, new: bool):
@@ -147,6 +163,7 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job)
     _check_output(out, new)
+    _check_resources(job, job_path, out, new, size)
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
             datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
@@ -183,6 +200,24 @@ def _check_backend(job) -> None:
         import_petsc4py()  # not load_petsc: PETSc initialisation is collective
     except PetscUnavailable as err:
         raise BadInput(f"solver.backend = {backend!r} needs PETSc here: {err}") from None
+
+
+def _check_resources(job, job_path, out: Path, new: bool, size: int) -> None:
+    """Refuse a job that cannot fit: the memory of the ranks on this machine, and (for a
+    run file still to be created) the room for it in the output's file system."""
+    from ..hydro.solvers import backend_for
+
+    rpt = job.ensemble.ranks_per_task
+    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
+    busy = min(resources.ranks_on_this_node(size), len(enumerate_tasks(job)) * rpt)
+    problems = resources.start_problems(job) or resources.memory_problems(
+        job, backend, busy, resources.available_memory())
+    if new or not out.exists():
+        replaced = out.stat().st_size if out.exists() else 0
+        problems += resources.disk_problems(job, store.run_file_bytes(job) - replaced,
+                                            out.parent)
+    if problems:
+        raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
 
 
 def _check_output(out: Path, new: bool) -> None:
