@@ -2,8 +2,11 @@
 traceback, nothing overwritten that is not an sdmpi run file."""
 
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -73,3 +76,29 @@ def test_solve_mobility_argument_checks():
         solve_mobility(pos, box, ewald_tol=0)
     with pytest.raises(TypeError, match="lubrication must be True or False, got 'no'"):
         solve_mobility(pos, box, lubrication="no")
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("setpriv") is None,
+                    reason="needs root and setpriv to act as another user")
+def test_read_only_install():
+    """As another user (nobody) with no writable HOME, no NUMBA_CACHE_DIR and a source
+    tree it cannot write: every command runs, compiling in memory, and says so once."""
+    work = Path(tempfile.mkdtemp(prefix="sdmpi-ro-"))
+    try:
+        work.chmod(0o777)
+        job = work / "job.toml"
+        job.write_text(ens.JOB)
+        env = {k: v for k, v in ens._env().items() if k != "NUMBA_CACHE_DIR"}
+        env["HOME"] = "/nonexistent"
+        nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+        out = work / "run.h5"
+        for args in (["validate", job], ["run", job, "-o", out], ["info", out],
+                     ["reduce", out, "-o", work / "red", "--no-plots"]):
+            res = subprocess.run([*nobody, sys.executable, str(ens.DRIVER), *map(str, args)],
+                                 capture_output=True, text=True, env=env, timeout=300)
+            assert res.returncode == 0, (args, res.stderr)
+            assert res.stderr.count("compiling them in memory") == 1, res.stderr
+            assert "Traceback" not in res.stderr
+        assert (work / "red" / "moduli.csv").is_file()
+    finally:
+        shutil.rmtree(work)

@@ -41,6 +41,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .. import __version__
+from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
                       parse_job, resources, resume_hash)
 from . import store
@@ -340,6 +341,9 @@ class _Driver:
         self.say(f"job {job.job.name!r}: {len(todo)} tasks to run ({steps_todo} steps) on "
                  f"{comm.size} rank(s), {rpt} per task -> {self.out}")
 
+        if not kernels_cached():
+            self.say("compiling the numba kernels (the first run of this installation, "
+                     "or one without a writable cache: about 30 s before the first step)")
         self.stop.install()
         try:
             # with ranks_per_task > 1 every rank of a group builds and steps the same
