@@ -7,11 +7,13 @@ read a job file call :func:`add_job_arguments` and :func:`job_from_args`, so ``-
 behaves the same everywhere. Heavy imports (numpy, MPI, HDF5) belong inside handlers so
 that ``sdmpi validate`` and ``--help`` stay fast.
 
-Exit codes: 0 success (``run``: every task complete), 1 internal error (``run``: the MPI
-job was aborted; committed data are intact and the same command resumes), 2 bad input
-(job file, ``--set``, command line, output path, or a run file that is foreign, damaged or
-holds another job; nothing is written), 3 ``run`` stopped by SIGTERM/SIGINT/SIGUSR1 after
-a clean checkpoint: resumable by running the same command again.
+Exit codes (docs/cli.md): 0 success (``run``: every task complete); 1 ``run`` did not
+finish: a rank failed (its message on stderr, e.g. a full file system), or mpirun was
+itself terminated (SIGTERM to mpirun: mpirun exits 1); committed data are intact and the
+same command resumes; 2 bad input (job file, ``--set``, command line, output path,
+resources, or a run file that is foreign, damaged or holds another job; nothing is
+written); 3 ``run`` stopped by SIGTERM/SIGINT/SIGUSR1 after a clean checkpoint
+(SIGUSR1 when sent to mpirun): resumable by running the same command again.
 
 One BLAS/OpenMP thread per process (one rank per core): the thread-count variables are set
 to 1 here, before numpy is imported, unless the user set them.
@@ -235,11 +237,14 @@ def _add_run(subparsers) -> None:
                     "output.checkpoint_every may differ), the run resumes from its last "
                     "checkpoint, with any number of ranks. SIGTERM, SIGINT or SIGUSR1 stop "
                     "the run cleanly after a checkpoint (under mpirun send SIGUSR1 to "
-                    "mpirun: it forwards it; on SIGTERM mpirun kills the ranks after 1 s). "
+                    "mpirun: it forwards it, exit 3; SIGTERM to mpirun is forwarded too, but mpirun "
+                    "exits 1 and kills ranks still running after about 1 s: the file is "
+                    "resumable either way). "
                     "Per-rank logs go to RUN.h5.logs/.",
-        epilog="exit status: 0 complete, 1 internal error (the job was aborted; rerun to "
-               "resume), 2 bad input (nothing written), 3 stopped by a signal (rerun to "
-               "resume)")
+        epilog="exit status: 0 complete; 1 not finished: a rank failed (see its message) or "
+               "mpirun itself was terminated (SIGTERM to mpirun), committed data intact, rerun "
+               "to resume; 2 bad input or resources (nothing written); 3 stopped cleanly by a "
+               "signal (rerun to resume)")
     add_job_arguments(parser)
     parser.add_argument("-o", "--output", required=True, metavar="RUN.h5",
                         help="the run file (HDF5): created, or resumed if it exists")

@@ -3,9 +3,11 @@ traceback, nothing overwritten that is not an sdmpi run file."""
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -102,3 +104,31 @@ def test_read_only_install():
         assert (work / "red" / "moduli.csv").is_file()
     finally:
         shutil.rmtree(work)
+
+
+@pytest.mark.skipif(ens.MPIRUN is None, reason="mpirun not found")
+@pytest.mark.mpi
+def test_sigterm_to_mpirun_exits_1_resumable(tmp_path):
+    """The documented outcome of SIGTERM sent to mpirun: exit 1 (mpirun's own status when
+    it is terminated), a resumable file, and a resume that ends bit for bit."""
+    job = tmp_path / "job.toml"
+    job.write_text(ens.JOB)
+    reference = tmp_path / "ref.h5"
+    assert ens.sdmpi("run", job, "-o", reference).returncode == 0
+    out = tmp_path / "run.h5"
+    proc = subprocess.Popen([ens.MPIRUN, "--oversubscribe", "-n", "2", sys.executable,
+                             str(ens.DRIVER), "run", str(job), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ens._env({"SDMPI_DOUBLE_SLEEP": "0.02"}))
+    deadline = time.monotonic() + 30
+    while not out.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    info = ens.sdmpi("info", out)
+    assert info.returncode == 0 and "resumable" in info.stdout
+    res = ens.sdmpi("run", job, "-o", out)
+    assert res.returncode == 0, res.stderr
+    assert ens.task_data(out) == ens.task_data(reference)
