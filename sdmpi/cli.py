@@ -59,9 +59,12 @@ def _add_validate(subparsers) -> None:
     parser = subparsers.add_parser(
         "validate", help="check a job file and summarise it",
         description="Check a job file (with any --set overrides) against the schema and "
-                    "print a summary: task groups, time steps, tasks and their steps in all. Every "
-                    "problem is listed at once, each with the key, the offending value, "
-                    "why, and what is allowed. Writes nothing.",
+                    "print a summary: task groups, time steps, tasks and their steps in all, "
+                    "the run file's size and the memory per rank (estimates), with a "
+                    "WARNING where they do not fit here (sdmpi run would refuse the job), "
+                    "and with --time-steps the measured cost. Every problem is listed at "
+                    "once, each with the key, the offending value, why, and what is "
+                    "allowed. Writes nothing.",
         epilog="exit status: 0 if the job is valid (resource warnings included: the job may "
                "run elsewhere), 2 if not (or the file is unreadable)")
     add_job_arguments(parser)
