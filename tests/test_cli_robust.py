@@ -132,3 +132,11 @@ def test_sigterm_to_mpirun_exits_1_resumable(tmp_path):
     res = ens.sdmpi("run", job, "-o", out)
     assert res.returncode == 0, res.stderr
     assert ens.task_data(out) == ens.task_data(reference)
+
+
+def test_lubrication_key_must_be_a_boolean():
+    from sdmpi.config import JobError, parse_job
+
+    with pytest.raises(JobError, match='hydrodynamics.lubrication = "no": expected true or '
+                                       'false, got a string'):
+        parse_job('[hydrodynamics]\nlubrication = "no"\n')

@@ -162,6 +162,20 @@ def test_sigkill_then_resume_bit_identical(reference, job_file, tmp_path, kills,
     assert res.returncode == 0, res.stderr
     assert "resuming" in res.stdout
     assert task_data(out) == task_data(reference)
+    assert current_checksums(out) == current_checksums(reference)
+
+
+def current_checksums(path):
+    """Per task, the sample and state checksums of the current checkpoint slot; asserts
+    that the file verifies."""
+    from sdmpi.ensemble.store import inspect
+
+    summary = inspect(path)
+    assert summary.checksummed and summary.damage == ()
+    with h5py.File(path, "r") as f:
+        return {t.task_id: (f[f"checkpoints/{t.task_id:06d}/sample_crc"][s].tobytes(),
+                            f[f"checkpoints/{t.task_id:06d}/state_crc"][s].tobytes())
+                for t, s in zip(summary.tasks, summary.slots)}
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
