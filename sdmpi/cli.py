@@ -105,6 +105,9 @@ def _validate(args) -> int:
     print(resource_text(job, args.ranks, args.output))
     if args.time_steps:
         print(cost_text(job, args.ranks, args.time_steps))
+    else:
+        print("  cost: give --time-steps K (e.g. 3) to time K steps here and estimate the "
+              "core-hours and wall time")
     return EXIT_OK
 
 

@@ -55,6 +55,19 @@ def test_info_into_a_closed_pipe(tmp_path):
     assert proc.wait(timeout=60) == 0 and stderr == "", stderr
 
 
+def test_run_into_a_closed_pipe(tmp_path):
+    """`sdmpi run ... | head -1`: the run goes on to the end when its reader is gone."""
+    job = tmp_path / "job.toml"
+    job.write_text(ens.JOB)
+    out = tmp_path / "run.h5"
+    proc = subprocess.Popen([sys.executable, str(ens.DRIVER), "run", str(job), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ens._env())
+    proc.stdout.close()
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 0 and stderr == "", stderr
+    assert ens.sdmpi("info", out).stdout.count(" done\n") == ens.N_TASKS
+
+
 def test_new_replaces_only_run_files(tmp_path):
     job = tmp_path / "job.toml"
     job.write_text(ens.JOB)

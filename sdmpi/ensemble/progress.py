@@ -26,6 +26,36 @@ LINES_EVERY = (5.0, 300.0)  # s, plain lines: bounds of elapsed / 10
 LAUNCHER_VARS = ("OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK")
 
 
+class PipeSafe:
+    """A text stream whose reader may go away (``sdmpi run ... | head``): once a write
+    finds the pipe broken, further output is dropped and the run goes on (the per-rank
+    logs keep everything)."""
+
+    def __init__(self, stream):
+        self.stream, self.broken = stream, False
+
+    def isatty(self) -> bool:
+        return self.stream.isatty()
+
+    def write(self, text: str) -> None:
+        self._guard(self.stream.write, text)
+
+    def flush(self) -> None:
+        self._guard(self.stream.flush)
+
+    def _guard(self, call, *args) -> None:
+        if self.broken:
+            return
+        try:
+            call(*args)
+        except BrokenPipeError:
+            self.broken = True
+            try:  # no second error when the interpreter flushes the stream at exit
+                os.dup2(os.open(os.devnull, os.O_WRONLY), self.stream.fileno())
+            except (OSError, ValueError, AttributeError):
+                pass
+
+
 def logs_dir(output) -> Path:
     """The log directory of a run file: ``RUN.h5.logs`` (per-rank logs and the lock)."""
     return Path(str(output) + ".logs")

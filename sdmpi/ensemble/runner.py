@@ -47,7 +47,7 @@ from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, lo
 from . import store
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
-from .progress import Progress, RunLocked, logs_dir, rank_logger, take_lock
+from .progress import PipeSafe, Progress, RunLocked, logs_dir, rank_logger, take_lock
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
 
@@ -85,7 +85,8 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
     lock = None
     try:
         plan, lock = _agree(comm, job_path, overrides, Path(output), new)
-        return _execute(comm, plan, Path(output), realisation_factory, stream or sys.stdout)
+        return _execute(comm, plan, Path(output), realisation_factory,
+                        PipeSafe(stream or sys.stdout))
     except BadInput:
         raise
     except Exception as err:  # a bug or a failing realisation: stop every rank, keep the file
