@@ -78,6 +78,10 @@ def log_axes(ax, values):
     values = values[np.isfinite(values) & (values > 0)]
     if values.size:
         ax.set_ylim(values.min() / 2.0, values.max() * 2.0)
+    else:   # nothing positive to show (all values <= 0 or unknown): a fixed range
+        ax.set_ylim(1e-3, 1.0)
+        ax.text(0.5, 0.5, "no positive values", transform=ax.transAxes, ha="center",
+                color="0.5")
     for axis, (lo, hi) in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
         _plain_log_ticks(axis, lo, hi)
 
@@ -253,9 +257,16 @@ def plot_all(red, outdir, task_id=None):
     outdir = Path(outdir)
     paths, notes = [], []
     for phi in dict.fromkeys(red.phi.tolist()):
+        if not np.any(red.ensemble.n_realisations[red.phi == phi, 1:] > 0):
+            notes.append(f"no figures for phi = {phi:g}: no realisation has data after the "
+                         f"start-up yet")
+            continue
         tag = f"phi{phi:g}"
         paths.append(plot_moduli(red, outdir / f"moduli_{tag}.png", phi))
         paths.append(plot_viscosities(red, outdir / f"viscosity_{tag}.png", phi))
+    if task_id is None and not np.any(red.per_realisation.n[:, 1] > 0):
+        return paths, notes + ["no Lissajous figure: no task has a whole period after the "
+                               "start-up yet"]
     try:
         paths.append(plot_lissajous(red, outdir / "lissajous.png", task_id))
     except ReduceError as err:

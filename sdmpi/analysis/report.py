@@ -35,12 +35,21 @@ import csv
 import datetime
 import json
 import math
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from .reduce import COMPONENTS
+from .errors import SOURCES
+from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError
+
+#: errors.csv columns after phi and omega (or rate): see the module docstring
+ERROR_COLUMNS = ("component", "quantity", "n_realisations", "err", "err_within",
+                 "err_between", "dof", "dof_within", "dof_between", "source",
+                 "small_ensemble")
 
 UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/t_D",
          "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m", "eta": "eta_m",
@@ -152,20 +161,145 @@ def format_table(red) -> str:
     return "\n".join(text + [f"({units}; ± {bars})"])
 
 
-def write_all(red, outdir, *, plots=True, task_id=None):
-    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear) and the
-    figures (:func:`.plots.plot_all`; steady shear: :func:`.plots.plot_running`) into
-    ``outdir`` (created). Returns (paths written, notes)."""
-    outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
+def error_rows(red) -> list[dict]:
+    """errors.csv: one row per (group, component, quantity) with :data:`ERROR_COLUMNS`
+    (module docstring)."""
+    e, out = red.ensemble, []
+    control = red.columns[1]
+    for g in range(len(red.phi)):
+        for c, name in enumerate(COMPONENTS):
+            for q, quantity in enumerate(red.quantities):
+                r = int(e.n_realisations[g, c, q])
+                out.append({
+                    "phi": float(red.phi[g]), control: float(red.control[g]),
+                    "component": name, "quantity": quantity, "n_realisations": r,
+                    "err": float(e.err[g, c, q]), "err_within": float(e.err_within[g, c, q]),
+                    "err_between": float(e.err_between[g, c, q]), "dof": int(e.dof[g, c, q]),
+                    "dof_within": int(e.dof_within[g, c, q]),
+                    "dof_between": int(e.dof_between[g, c, q]),
+                    "source": SOURCES[int(e.source[g, c, q])],
+                    "small_ensemble": int(name != "medium" and 0 < r < SMALL_ENSEMBLE)})
+    return out
+
+
+def error_columns(red) -> tuple:
+    """The header of errors.csv."""
+    return ("phi", red.columns[1]) + ERROR_COLUMNS
+
+
+def units_of(red) -> dict:
+    """units.json: the unit of every column of the tables written for ``red`` and the
+    conventions they follow (module docstring)."""
+    rate = "1/t_D" if red.job.time_unit == "t_D" else "gamma_dot (time unit 1/gamma_dot)"
+    base = dict(UNITS, rate=rate, component="label", quantity="label", source="label",
+                n_realisations="count", dof="count", dof_within="count",
+                dof_between="count", small_ensemble="flag (1: fewer than "
+                f"{SMALL_ENSEMBLE} realisations)")
     stem = "moduli" if red.kind == "oscillatory" else "viscosity"
-    paths = [write_csv(red, outdir / f"{stem}.csv"), write_h5(red, outdir / f"{stem}.h5")]
-    notes = []
-    if plots and red.kind == "oscillatory":
-        from .plots import plot_all
-        figures, notes = plot_all(red, outdir, task_id)
-        paths += figures
-    elif plots:
-        from .plots import plot_running_all
-        paths += plot_running_all(red, outdir)
-    return paths, notes
+
+    def unit(column):
+        for suffix in ("_err", "_ci95"):
+            if column.endswith(suffix) and column[:-len(suffix)] in base:
+                return base[column[:-len(suffix)]]
+        return base[column]
+    quantity_units = {q: base[q] for q in red.quantities}
+    return {
+        "format": "sdmpi-units", "format_version": 1,
+        "time_unit": red.job.time_unit, "length_unit": "a (sphere radius)",
+        "viscosity_unit": "eta_m (medium zero-shear viscosity)",
+        "tables": {f"{stem}.csv": {c: unit(c) for c in red.columns},
+                   "errors.csv": {c: unit(c) for c in error_columns(red)
+                                  if c not in ("err", "err_within", "err_between")}},
+        "errors.csv err, err_within, err_between": (
+            "the unit of the row's quantity: " + ", ".join(f"{q} {u}" for q, u in
+                                                           quantity_units.items())),
+        "err": "*_err: one standard error, the larger of the within-realisation blocking "
+               "error and the between-realisation spread (errors.csv: source); *_ci95: "
+               "half-width of the 95% confidence interval (Student t, dof)",
+        "physical_units": (None if red.scales is None else red.scales.as_dict()),
+    }
+
+
+def write_errors_csv(red, path) -> Path:
+    """errors.csv (:func:`error_rows`)."""
+    columns = error_columns(red)
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(columns)
+        for row in error_rows(red):
+            out.writerow([_fmt(row[c]) for c in columns])
+    return Path(path)
+
+
+def write_units(red, path) -> Path:
+    """units.json (:func:`units_of`)."""
+    Path(path).write_text(json.dumps(units_of(red), indent=1, sort_keys=True) + "\n")
+    return Path(path)
+
+
+def check_output_dir(outdir) -> None:
+    """Refuse (ReduceError) an output path that is a file, lies below a file, or lies in
+    a directory this process cannot write."""
+    outdir = Path(outdir)
+    for p in (outdir, *outdir.parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ReduceError(f"-o {outdir}: {p} exists and is not a directory; give "
+                                  f"a directory for the outputs")
+            if not os.access(p, os.W_OK | os.X_OK):
+                raise ReduceError(f"-o {outdir}: cannot write into {p} (permission denied)")
+            return
+
+
+def write_all(red, outdir, *, plots=True, task_id=None):
+    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear),
+    ``errors.csv``, ``units.json`` and the figures (:func:`.plots.plot_all`; steady
+    shear: :func:`.plots.plot_running_all`) into ``outdir`` (created). Everything is
+    first written into a temporary directory inside ``outdir`` and then renamed into
+    place, so a failure (ReduceError, e.g. a bad ``task_id``, or a full disk) leaves
+    ``outdir`` as it was and removes a directory it created. Returns (paths written,
+    notes); OSError is raised as ReduceError."""
+    outdir = Path(outdir)
+    check_output_dir(outdir)
+    created = [p for p in (outdir, *outdir.parents) if not p.exists()]
+    stem = "moduli" if red.kind == "oscillatory" else "viscosity"
+    staging = None
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".reduce-", suffix=".tmp", dir=outdir))
+        paths = [write_csv(red, staging / f"{stem}.csv"), write_h5(red, staging / f"{stem}.h5"),
+                 write_errors_csv(red, staging / "errors.csv"),
+                 write_units(red, staging / "units.json")]
+        notes = []
+        if plots and red.kind == "oscillatory":
+            from .plots import plot_all
+            figures, notes = plot_all(red, staging, task_id)
+            paths += figures
+        elif plots:
+            from .plots import plot_running_all
+            paths += plot_running_all(red, staging)
+        final = []
+        for path in paths:
+            os.replace(path, outdir / path.name)
+            final.append(outdir / path.name)
+        return final, notes
+    except OSError as err:
+        _undo(staging, created)
+        raise ReduceError(f"cannot write the outputs into {outdir}: {err}") from None
+    except BaseException:
+        _undo(staging, created)
+        raise
+    finally:
+        if staging is not None and staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _undo(staging, created) -> None:
+    """Remove the staging directory and the directories write_all created."""
+    if staging is not None:
+        shutil.rmtree(staging, ignore_errors=True)
+    for p in created:                      # deepest first
+        try:
+            p.rmdir()
+        except OSError:
+            pass
