@@ -39,11 +39,15 @@ correlations longer than the blocks and any extra spread between realisations.
 
 The reported error is the larger of the two, ``err = max(err_b, err_w)`` (err_w alone
 for R = 1), so that no error is smaller than either estimate supports; ``dof`` is that
-of the larger one and ``source`` says which it was (:data:`SOURCES`). Measured coverage
-of mu +- err (tests/test_error_bars.py, docs/reduce.md): >= the nominal 0.68 at
-R = 2, 3, 7 for AR(1)-correlated periods, where the between estimate alone covers 0.50,
-0.58, 0.64 and is < 1/3 of the true error 26%, 11%, 0.4% of the time. err_b >> err_w
-means correlations longer than a run or structure that differs between realisations.
+of the larger one and ``source`` says which it was (:data:`SOURCES`). Measured on
+AR(1)-correlated per-period values (64 periods per run, correlation time 3 periods;
+tests/test_error_bars.py, docs/reduce.md), mu +- err covers the truth 0.67, 0.70, 0.69
+of the time at R = 2, 3, 7 (nominal 0.68), where the between estimate alone covers 0.50,
+0.59, 0.66 and is below a third of the true error 26%, 10%, 0.6% of the time (the
+combined error: never). Runs of only ~8 correlation times under-cover (0.63-0.65: the
+blocking within them sees too few blocks), as any estimate from so little data does.
+err_b >> err_w means correlations longer than a run or structure that differs between
+realisations.
 """
 
 from typing import NamedTuple

@@ -283,7 +283,7 @@ STEADY_LABEL = {"eta": "η / η_m  (relative viscosity)", "N1": "N1 / (η_m γ̇
 def plot_running(red, path, phi) -> Path:
     """Running averages of eta, N1, N2, Pi vs time for one phi of a steady-shear
     reduction (module docstring)."""
-    from .reduce import STEADY_QUANTITIES, confidence_half_width
+    from .reduce import STEADY_QUANTITIES, ensemble_half_width
     g = int(np.flatnonzero(red.phi == phi)[0])
     run = red.running
     t = run["time"] + red.job.time_step(None)    # average over samples 0..k spans (k+1) dt
@@ -306,7 +306,7 @@ def plot_running(red, path, phi) -> Path:
             ax.plot(t, mean, "-", color=colour, lw=2.0 if comp == "total" else 1.5,
                     label=label)
             m = e.mean[g, c, q]
-            half = float(confidence_half_width(e.err[g, c, q], e.dof[g, c, q]))
+            half = float(ensemble_half_width(e, (g, c, q)))
             if np.isfinite(m) and np.isfinite(half) and half > 0:
                 late = t >= run["discard_time"]
                 ax.fill_between(t[late], m - half, m + half, color=colour, alpha=0.18, lw=0)

@@ -27,8 +27,10 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
    the parts, so its mean is the sum of the parts' means (to round-off) and its error
    includes the correlations between the parts.
 4. Per realisation: mean and blocking error of the per-period values; over the
-   ensemble: period-weighted mean and one standard error from the spread between
-   realisations (:mod:`.errors`, ``blocking`` then ``combine``). eta' = G''/w and
+   ensemble: period-weighted mean and one standard error, the larger of the spread
+   between realisations and the propagated blocking errors within them (:mod:`.errors`,
+   ``blocking`` then ``combine``; errors.csv says which). Ensembles of fewer than
+   :data:`SMALL_ENSEMBLE` realisations are flagged in the notes. eta' = G''/w and
    eta'' = G'/w, relative to eta_m (eq. 19; :func:`.projection.viscosities`).
 
 Steady-shear jobs (seed 001 sec. 2) are reduced to ``viscosity.csv`` instead, one row
@@ -51,10 +53,10 @@ has no normal stresses; exact, errors 0), ``hydrodynamic``, ``brownian``,
 stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
 construction: Pi here is the interparticle (virial) pressure only; the stresslet trace
 (Jeffrey, Morris & Brady 1993) and the kinetic n kT are not computed. Errors: the same
-blocking within a realisation and spread between realisations (:mod:`.errors`) give one
-standard error ``*_err`` with ``dof`` degrees of freedom (R - 1 for R >= 2
-realisations); ``*_ci95`` is the half-width of the 95% confidence interval,
-t_{0.975, dof} x err (Student t; the sub-average method of Allen & Tildesley 1987 that
+blocking within a realisation and spread between realisations (:mod:`.errors`, the
+larger of the two) give one standard error ``*_err`` with ``dof`` degrees of freedom
+(those of the larger estimate); ``*_ci95`` is the half-width of the 95% confidence interval, the wider of
+t_{0.975, R-1} x err_between and t_{0.975, dof_within} x err_within (Student t; the sub-average method of Allen & Tildesley 1987 that
 seed 001 uses). For figures, running averages (1/t) int_0^t of every quantity from t = 0
 (start-up included) are kept per realisation (:attr:`Reduction.running`).
 Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
@@ -215,7 +217,7 @@ class Reduction:
                                eta_prime_err=float(err1), eta_dprime=float(eta2),
                                eta_dprime_err=float(err2))
                 else:
-                    half = confidence_half_width(e.err[g, c], e.dof[g, c])
+                    half = ensemble_half_width(e, (g, c))
                     for q, name in enumerate(STEADY_QUANTITIES):
                         row[name] = float(e.mean[g, c, q])
                         row[f"{name}_err"] = float(e.err[g, c, q])
@@ -277,6 +279,16 @@ def confidence_half_width(err, dof, level=CONFIDENCE):
     with np.errstate(invalid="ignore"):
         q = student_t.ppf(0.5 + 0.5 * level, np.where(dof >= 1, dof, 1))
     return np.where(err == 0, 0.0, np.where(dof >= 1, q * err, np.nan))
+
+
+def ensemble_half_width(e: Ensemble, index=(), level=CONFIDENCE):
+    """Half-width of the confidence interval of the ensemble means ``e`` (at ``index``):
+    the wider of the between interval t_{R-1} err_between and the within interval
+    t_{dof_within} err_within (:func:`confidence_half_width`), so that, as ``err``, it
+    is never narrower than either estimate supports; 0 for exact values."""
+    between = confidence_half_width(e.err_between[index], e.dof_between[index], level)
+    within = confidence_half_width(e.err_within[index], e.dof_within[index], level)
+    return np.where(e.err[index] == 0, 0.0, np.fmax(between, within))
 
 
 def medium_viscosity(job: Job) -> float:

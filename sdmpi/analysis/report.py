@@ -12,14 +12,29 @@ and last ``dof`` (see :mod:`.reduce` for definitions and sign conventions). Jobs
 a ``[physical]`` section get the SI columns :data:`.reduce.PHYSICAL_COLUMNS` appended
 (rates in 1/s, Pe, moduli and stresses in Pa, viscosities in Pa s).
 
+``errors.csv``: where each error comes from, one row per (phi, omega or rate,
+component, quantity) with quantity G_prime or G_dprime (the errors of eta'' and eta'
+are those of G' and G'' divided by omega) or eta, N1, N2, Pi: ``n_realisations``,
+``err`` (the table's ``*_err``), ``err_within`` (propagated blocking error within the
+realisations), ``err_between`` (spread between them; nan below 2), their degrees of
+freedom ``dof``, ``dof_within``, ``dof_between``, ``source`` (:data:`.errors.SOURCES`:
+``between`` or ``within``, whichever is larger and so reported; ``exact`` for the
+medium; ``none`` without data) and ``small_ensemble`` (1 when fewer than
+:data:`.reduce.SMALL_ENSEMBLE` realisations: error bars resting on few runs).
+
+``units.json`` (format ``sdmpi-units`` version 1): the unit of every column of the CSV
+tables (``tables`` -> file -> column -> unit), the time, length and viscosity units,
+what the error columns mean, and the SI value of each reduced unit when the job has a
+``[physical]`` section (else null).
+
 ``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1):
 
 | path | contents |
 |---|---|
-| `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
+| `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML; with ``--medium``, the job with that medium), `medium_applied` (1 when the medium was applied after the fact, :mod:`.medium_view`), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
 | `/table/<column>` | the CSV table, one dataset per column (component as UTF-8 strings) |
 | `/groups/phi`, `/groups/omega` or `/groups/rate` | (G,) the task groups |
-| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between` (:class:`.errors.Ensemble`) |
+| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between`, `dof_within`, `dof_between`, `source` (int8 index into the attr `sources`) (:class:`.errors.Ensemble`) |
 | `/realisations/<field>` | (G, C, Q, R): per-realisation `mean`, `err`, `n` (periods or samples used), `block_size`, `n_blocks` (:class:`.errors.Blocking`) |
 | `/realisations/file_index`, `realisation` | (R,): input file (index into `input_files`) and realisation number in it |
 | `/realisations/task_id`, `committed`, `n_steps` | (G, R): task of each realisation, samples committed and planned |
@@ -95,6 +110,7 @@ def write_h5(red, path) -> Path:
             "units": json.dumps({c: u for c, u in UNITS.items() if c in red.columns
                                  or c in red.quantities}),
             "notes": json.dumps(list(red.notes)), "sdmpi_version": __version__,
+            "medium_applied": int(red.viewed),
             "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")})
         table = f.create_group("table")
         for c in red.columns:
@@ -109,6 +125,7 @@ def write_h5(red, path) -> Path:
         groups[red.columns[1]] = red.control
         ens = f.create_group("ensemble")
         ens.attrs["axes"] = "group, component, quantity"
+        ens.attrs["sources"] = " ".join(SOURCES)
         for name, value in red.ensemble._asdict().items():
             ens[name] = np.asarray(value)
         per = f.create_group("realisations")
@@ -151,14 +168,17 @@ def format_table(red) -> str:
         rate = ("rate (Pe) in 1/t_D" if red.job.time_unit == "t_D"
                 else "rate 1 = gamma_dot (time unit 1/gamma_dot)")
         units = f"{rate}; eta relative to eta_m; N1, N2, Pi in eta_m gamma_dot"
+    small = lambda r: r["component"] != "medium" and 0 < r["n_realisations"] < SMALL_ENSEMBLE  # noqa: E731
     lines = [[f"{r['phi']:g}", f"{r[red.columns[1]]:.5g}", r["component"],
-              str(r["n_realisations"])] + [pm(r[m], r[e]) for m, e in pairs]
-             for r in red.rows()]
+              str(r["n_realisations"]) + ("*" if small(r) else "")]
+             + [pm(r[m], r[e]) for m, e in pairs] for r in red.rows()]
     widths = [max(len(x) for x in col) for col in zip(head, *lines)]
     text = ["  ".join(x.ljust(w) for x, w in zip(row, widths)).rstrip()
             for row in [head] + lines]
     bars = "one standard error" if red.kind == "oscillatory" else "95% confidence interval"
-    return "\n".join(text + [f"({units}; ± {bars})"])
+    flag = ([f"* fewer than {SMALL_ENSEMBLE} realisations: error bars rest on few runs"]
+            if any(small(r) for r in red.rows()) else [])
+    return "\n".join(text + [f"({units}; ± {bars})"] + flag)
 
 
 def error_rows(red) -> list[dict]:
