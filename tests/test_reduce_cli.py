@@ -11,7 +11,7 @@ from sdmpi.cli import main
 from synthetic_run import write_run
 from test_reduce import MODULI, job_text
 
-FILES = {"moduli.csv", "moduli.h5", "units.json", "errors.csv"}
+FILES = {"moduli.csv", "moduli.h5", "units.json", "errors.csv", "trust.csv"}
 
 
 def listing(path):

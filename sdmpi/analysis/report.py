@@ -22,6 +22,11 @@ freedom ``dof``, ``dof_within``, ``dof_between``, ``source`` (:data:`.errors.SOU
 medium; ``none`` without data) and ``small_ensemble`` (1 when fewer than
 :data:`.reduce.SMALL_ENSEMBLE` realisations: error bars resting on few runs).
 
+``trust.csv`` and ``trust.png``: the trust report of the dynamics per group (overlap
+corrections per unit time and per step at the start of a step and at the Brownian
+midpoint, the minimum-gap distribution, solver statistics, steps per unit time;
+:mod:`.trust`), with warnings above its thresholds in the notes.
+
 ``units.json`` (format ``sdmpi-units`` version 1): the unit of every column of the CSV
 tables (``tables`` -> file -> column -> unit), the time, length and viscosity units,
 what the error columns mean, and the SI value of each reduced unit when the job has a
@@ -59,6 +64,7 @@ import numpy as np
 
 from .. import __version__
 from .errors import SOURCES
+from .trust import TRUST_UNITS
 from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError
 
 #: errors.csv columns after phi and omega (or rate): see the module docstring
@@ -229,7 +235,10 @@ def units_of(red) -> dict:
         "viscosity_unit": "eta_m (medium zero-shear viscosity)",
         "tables": {f"{stem}.csv": {c: unit(c) for c in red.columns},
                    "errors.csv": {c: unit(c) for c in error_columns(red)
-                                  if c not in ("err", "err_within", "err_between")}},
+                                  if c not in ("err", "err_within", "err_between")},
+                   "trust.csv": {"phi": "1", red.columns[1]: unit(red.columns[1]),
+                                 **{c: u.replace("time unit", red.job.time_unit)
+                                    for c, u in TRUST_UNITS.items()}}},
         "errors.csv err, err_within, err_between": (
             "the unit of the row's quantity: " + ", ".join(f"{q} {u}" for q, u in
                                                            quantity_units.items())),
@@ -273,8 +282,8 @@ def check_output_dir(outdir) -> None:
 
 def write_all(red, outdir, *, plots=True, task_id=None):
     """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear),
-    ``errors.csv``, ``units.json`` and the figures (:func:`.plots.plot_all`; steady
-    shear: :func:`.plots.plot_running_all`) into ``outdir`` (created). Everything is
+    ``errors.csv``, ``trust.csv`` (:mod:`.trust`), ``units.json`` and the figures (``trust.png``, then :func:`.plots.plot_all`;
+    steady shear: :func:`.plots.plot_running_all`) into ``outdir`` (created). Everything is
     first written into a temporary directory inside ``outdir`` and then renamed into
     place, so a failure (ReduceError, e.g. a bad ``task_id``, or a full disk) leaves
     ``outdir`` as it was and removes a directory it created. Returns (paths written,
@@ -287,14 +296,19 @@ def write_all(red, outdir, *, plots=True, task_id=None):
     try:
         outdir.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=".reduce-", suffix=".tmp", dir=outdir))
+        from .trust import plot_trust, trust_rows, warnings_of, write_trust_csv
+        trust = trust_rows(red)
         paths = [write_csv(red, staging / f"{stem}.csv"), write_h5(red, staging / f"{stem}.h5"),
                  write_errors_csv(red, staging / "errors.csv"),
+                 write_trust_csv(red, trust, staging / "trust.csv"),
                  write_units(red, staging / "units.json")]
-        notes = []
+        if plots and any(row["steps"] for row in trust):
+            paths.append(plot_trust(red, trust, staging / "trust.png"))
+        notes = [f"WARNING (trust report): {w}" for w in warnings_of(red, trust)]
         if plots and red.kind == "oscillatory":
             from .plots import plot_all
-            figures, notes = plot_all(red, staging, task_id)
-            paths += figures
+            figures, more = plot_all(red, staging, task_id)
+            paths, notes = paths + figures, notes + more
         elif plots:
             from .plots import plot_running_all
             paths += plot_running_all(red, staging)
