@@ -278,8 +278,8 @@ def statements(newt, maxw, phi_red, fixed):
     rows.append((
         "medium rows exact (eq. 36)",
         "the medium's eta*_m(omega) is analytic (eq. 36)",
-        f"largest deviation of a medium row from eq. 36, or medium error: Newtonian {diffs[0]:.2g}, "
-        f"Maxwell {diffs[1]:.2g}",
+        f"largest deviation of a medium row from eq. 36, or medium error: Newtonian "
+        f"{diffs[0]:.2g}, Maxwell {diffs[1]:.2g}",
         verdict(max(diffs) <= 1e-12)))
 
     if phi_red is not None:
@@ -321,13 +321,14 @@ def describe_inputs(name, red) -> list[str]:
     job = red.job
     steps = int(red.n_steps.sum())
     n = sorted({int(k) for k in red.ensemble.n_realisations[:, 1, 0]})
+    omegas = sorted(set(red.control.tolist()))
     line = (f"- **{name}**: job `{job.job.name}`, files "
             + ", ".join(f"`{Path(f).name}`" for f in red.files)
             + f" (seeds {', '.join(map(str, red.seeds))}); N = {job.system.n_particles}, "
             f"phi = {', '.join(f'{p:g}' for p in sorted(set(red.phi.tolist())))}, "
-            f"omega/pi = {', '.join(f'{w / math.pi:.3g}' for w in sorted(set(red.control.tolist())))}; "
+            f"omega/pi = {', '.join(f'{w / math.pi:.3g}' for w in omegas)}; "
             f"{job.integration.periods} periods ({job.integration.discard_periods} discarded), "
-            f"dt = {', '.join(f'{job.time_step(w):.3g}' for w in sorted(set(red.control.tolist())))}; "
+            f"dt = {', '.join(f'{job.time_step(w):.3g}' for w in omegas)}; "
             f"realisations per (phi, omega) {'/'.join(map(str, n))}; "
             f"{int(red.committed.sum())}/{steps} steps committed"
             + ("" if red.complete else " (PARTIAL)"))

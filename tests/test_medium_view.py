@@ -62,7 +62,8 @@ def test_filtered_series_equals_the_stored_maxwell_stress(runs):
     with h5py.File(newt) as a, h5py.File(maxw) as b:
         for key in a["tasks"]:
             viscous = a[f"tasks/{key}/samples/stress_hydrodynamic"][()]
-            np.testing.assert_array_equal(viscous, b[f"tasks/{key}/samples/stress_hydrodynamic"][()])
+            same = b[f"tasks/{key}/samples/stress_hydrodynamic"][()]
+            np.testing.assert_array_equal(viscous, same)          # the same trajectories
             stored = b[f"tasks/{key}/samples/stress_hydrodynamic_maxwell"][()]
             got = filtered_stress(viscous, medium, a[f"tasks/{key}"].attrs["dt"])
             assert np.abs(got - stored).max() < 1e-14 * np.abs(stored).max()

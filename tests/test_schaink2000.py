@@ -4,7 +4,6 @@ to `sdmpi reduce --medium`, and byte-identical tables when run again."""
 
 import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest

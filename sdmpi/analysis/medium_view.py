@@ -99,8 +99,9 @@ def _from_toml(path: str) -> Medium:
                           f"(kind = \"maxwell\", modes = [{{eta = 1.0, lambda = 0.5}}])")
     extra = set(table) - {"kind", "modes"}
     if extra:
-        raise MediumError(f"--medium {path}: unknown key(s) medium.{', medium.'.join(sorted(extra))}"
-                          f"; allowed: medium.kind, medium.modes")
+        names = ", ".join(f"medium.{k}" for k in sorted(extra))
+        raise MediumError(f"--medium {path}: unknown key(s) {names}; allowed: medium.kind, "
+                          f"medium.modes")
     kind = table.get("kind")
     if kind == "newtonian" and "modes" not in table:
         return Medium(kind="newtonian", modes=None)

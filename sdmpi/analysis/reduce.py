@@ -556,8 +556,9 @@ def reduce_runs(paths, medium=None) -> Reduction:
                       stacklevel=2)
     control = np.array([c if kind == "oscillatory" else job.shear.rate for _, c in groups])
     if viewed:
+        modes = job.medium.modes or ()
         notes.insert(0, f"medium {job.medium.kind}"
-                     + "".join(f" (eta={m.eta:g}, lambda={m.lam:g})" for m in job.medium.modes or ())
+                     + "".join(f" (eta={m.eta:g}, lambda={m.lam:g})" for m in modes)
                      + f" applied after the fact to the viscous hydrodynamic stress of a "
                      f"{summaries[0].job.medium.kind} run (the trajectories are the same)")
     return Reduction(kind, job, job_text, tuple(paths),

@@ -174,7 +174,8 @@ def format_table(red) -> str:
         rate = ("rate (Pe) in 1/t_D" if red.job.time_unit == "t_D"
                 else "rate 1 = gamma_dot (time unit 1/gamma_dot)")
         units = f"{rate}; eta relative to eta_m; N1, N2, Pi in eta_m gamma_dot"
-    small = lambda r: r["component"] != "medium" and 0 < r["n_realisations"] < SMALL_ENSEMBLE  # noqa: E731
+    def small(r):
+        return r["component"] != "medium" and 0 < r["n_realisations"] < SMALL_ENSEMBLE
     lines = [[f"{r['phi']:g}", f"{r[red.columns[1]]:.5g}", r["component"],
               str(r["n_realisations"]) + ("*" if small(r) else "")]
              + [pm(r[m], r[e]) for m, e in pairs] for r in red.rows()]
@@ -282,8 +283,9 @@ def check_output_dir(outdir) -> None:
 
 def write_all(red, outdir, *, plots=True, task_id=None):
     """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear),
-    ``errors.csv``, ``trust.csv`` (:mod:`.trust`), ``units.json`` and the figures (``trust.png``, then :func:`.plots.plot_all`;
-    steady shear: :func:`.plots.plot_running_all`) into ``outdir`` (created). Everything is
+    ``errors.csv``, ``trust.csv`` (:mod:`.trust`), ``units.json`` and the figures
+    (``trust.png``, then :func:`.plots.plot_all`; steady shear:
+    :func:`.plots.plot_running_all`) into ``outdir`` (created). Everything is
     first written into a temporary directory inside ``outdir`` and then renamed into
     place, so a failure (ReduceError, e.g. a bad ``task_id``, or a full disk) leaves
     ``outdir`` as it was and removes a directory it created. Returns (paths written,
