@@ -33,6 +33,12 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
    :data:`SMALL_ENSEMBLE` realisations are flagged in the notes. eta' = G''/w and
    eta'' = G'/w, relative to eta_m (eq. 19; :func:`.projection.viscosities`).
 
+Another medium after the fact (``reduce_runs(paths, medium=...)``, ``sdmpi reduce
+--medium``; :mod:`.medium_view`): the hydrodynamic stress is then the stored viscous one,
+``stress_hydrodynamic``, filtered by that medium's Maxwell modes (seed eqs. 33-35, 42;
+unfiltered for a Newtonian medium), and the medium row is that medium's (eq. 36); the
+trajectories, and so the Brownian and interparticle stresses, are the same in both media.
+
 Steady-shear jobs (seed 001 sec. 2) are reduced to ``viscosity.csv`` instead, one row
 per (phi, rate, component), from every sample after ``discard_steps`` of the stored
 particle-stress 6-vectors Sigma (xx yy zz xy xz yz) of each contribution. The bulk
