@@ -38,6 +38,7 @@ from scipy.special import gamma as gamma_function
 
 from .basis import BASIS
 from .geometry import Lattice, find_pairs
+from .workspace import work_array
 
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
 #: default relative accuracy of the Ewald sums (every entry point)
@@ -458,14 +459,14 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
     pi, pj = np.triu_indices(n)
     for start in range(0, len(pi), _PAIR_CHUNK):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
-        cos_k, sin_k = np.empty((len(ci), nk)), np.empty((len(ci), nk))
+        cos_k, sin_k = work_array("cos_k", (len(ci), nk)), work_array("sin_k", (len(ci), nk))
         _pair_phases(phase_re, phase_im, ci, cj, cos_k, sin_k)
         vals = []  # (entry values at (a, b), at (b, a)) of the cosine and sine parts
         for part, trig, sign in (("cos", cos_k, 1.0), ("sin", sin_k, -1.0)):
             t = tensors[part]
-            g0 = trig @ t
+            g0 = np.matmul(trig, t, out=work_array(part, (len(ci), t.shape[1])))
             if equal:
-                vals += [g0, sign * g0]
+                vals += [g0, g0 if sign > 0 else np.negative(g0, out=work_array("-sin", g0.shape))]
                 continue
             # f_a(a_i) f_b(a_j) = 1 - (c_a a_i^2 + c_b a_j^2) k^2 + c_a c_b a_i^2 a_j^2 k^4
             g1, g2 = trig @ (ksq * t), trig @ (ksq * ksq * t)
