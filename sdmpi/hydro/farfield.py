@@ -189,14 +189,14 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
     r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
     v = work[3:23].reshape((4, 5))
     _radial_values(table, bounds, xi, r, work[23:23 + _NPOW], v)
-    _block_from_radial(rvec, r, v, ai, aj, basis, work, out)
+    _block_from_radial(rvec, r, v, ai, aj, basis, work[0:3], work[51:66].reshape((5, 3)), work[66:71], out)
 
 
 @numba.njit(cache=True)
-def _block_from_radial(rvec, r, v, ai, aj, basis, work, out):
+def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
-    (work: (80,) scratch, entries 3..50 untouched)."""
-    e = work[0:3]
+    (e (3,), be (5, 3), q (5,): scratch, passed in so that a loop over images makes no
+    array views per image)."""
     for c in range(3):
         e[c] = rvec[c] / r
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
@@ -237,8 +237,6 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, work, out):
         out[3 + m, 3 + m] += 0.25 * (b2 - v[2, 0])
 
     # B^n . e and e . B^n . e
-    be = work[51:66].reshape((5, 3))
-    q = work[66:71]
     be[:, :] = 0.0
     q[:] = 0.0
     for n in range(5):
@@ -313,7 +311,7 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
     triangle, and for a self-image (i == j) adds the -n image. Consecutive images of the
     same pair (find_pairs lists them together) are summed before being added to mob."""
     bounds = _power_bounds(table)
-    work = np.empty(80)
+    pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
     v = np.empty((4, 5))
     block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
@@ -323,8 +321,8 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         for c in range(3):
             rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
         r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
-        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, work[23:23 + _NPOW], v)
-        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, work, block)
+        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
+        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, block)
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
         for a in range(NDOF):
