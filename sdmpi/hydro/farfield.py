@@ -436,9 +436,12 @@ def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entr
                         mob[rj + a, ri + b] += v_ba[p, e]
 
 
-def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
-    """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N)."""
-    n, nk = len(pos), len(kvec)
+def _wave_terms(radii, kvec, xi, volume):
+    """What the reciprocal sum needs besides the positions: the cosine and sine tensors
+    of every wave vector (scaled by 2/V, with the radius factors folded in when all radii
+    are equal), |k|^2 (nk, 1), the Faxen coefficients of their rows and columns, and
+    whether the radii are equal."""
+    nk = len(kvec)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
     _wave_tensors(kvec, xi, BASIS, _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
     tcos *= 2.0 / volume
@@ -451,7 +454,14 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
         a2 = radii[0] ** 2
         tcos *= (1 - c_row["cos"] * a2 * ksq) * (1 - c_col["cos"] * a2 * ksq)
         tsin *= (1 - c_row["sin"] * a2 * ksq) * (1 - c_col["sin"] * a2 * ksq)
-    tensors = {"cos": tcos, "sin": tsin}
+    return {"cos": tcos, "sin": tsin}, ksq, c_row, c_col, equal
+
+
+def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
+    """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N);
+    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand."""
+    n, nk = len(pos), len(kvec)
+    tensors, ksq, c_row, c_col, equal = _wave_terms(radii, kvec, xi, volume) if terms is None else terms
     phase = pos @ kvec.T
     phase_re, phase_im = np.cos(phase), np.sin(phase)
     pi, pj = np.triu_indices(n)
@@ -547,7 +557,8 @@ class FarFieldPlan:
     """What the far-field sums need besides the positions, fixed for a configuration and
     its small displacements (random finite differences must not see pairs cross the
     cut-off): Ewald parameters (None: unbounded), real-space pair images (i, j, shift),
-    wave vectors, radial coefficient table, the self blocks per radius and the volume."""
+    wave vectors, radial coefficient table, the self blocks per radius and the volume;
+    the wave vectors' tensors are kept once computed (a step's midpoint reuses them)."""
 
     params: EwaldParameters | None
     images: tuple
@@ -556,6 +567,7 @@ class FarFieldPlan:
     grid: "RadialGrid"
     self_blocks: dict
     volume: float
+    wave_terms: tuple | None = None  # (radii, their `_wave_terms`), built on first use
 
 
 @functools.lru_cache(maxsize=16)
@@ -628,7 +640,9 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD
     grid = plan.grid
     _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob)
     if plan.params is not None:
-        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob)
+        if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
+            plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, xi_used, plan.volume))
+        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1])
     for i, a in enumerate(radii):
         mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob
