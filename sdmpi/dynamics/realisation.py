@@ -42,6 +42,7 @@ import math
 
 import numpy as np
 
+from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
 from .collisions import Collisions, separate
@@ -88,10 +89,7 @@ def sample_fields(job):
         "time": ((), "f8", job.time_unit, "t_k = k dt"),
         "strain": ((), "f8", "1", "gamma(t_k)"),
         "rate": ((), "f8", "1/" + job.time_unit, "gamma_dot(t_k)"),
-        "stress_hydrodynamic": ((6,), "f8", su, "(1/V) sum S_H, viscous medium"),
-        "stress_brownian": ((6,), "f8", su, "-(kT/V) sum div(R_SU R_FU^-1)"),
-        "stress_interparticle": ((6,), "f8", su, "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
-        "stress_collision": ((6,), "f8", su, "hard-sphere collision stress of the overlap correction"),
+        **{c.dataset: ((6,), "f8", su, c.description) for c in CONTRIBUTIONS},
         "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
         "n_overlaps_midpoint": ((), "i4", "1", "overlapping pairs corrected at the Brownian midpoint"),
         "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
