@@ -111,8 +111,10 @@ def summary(job) -> str:
             for r, m, f in zip(sysm.class_radii, sysm.class_counts, sysm.realised_fractions)))
     for omega in job.frequencies:
         head = "  every task      " if omega is None else f"  omega = {omega:<9.5g}"
+        periods = "" if omega is None else \
+            f" = {job.periods(omega)} periods ({job.discarded_periods(omega)} discarded)"
         lines.append(f"{head}  dt = {job.time_step(omega):<9.3g} "
-                     f"{job.n_steps(omega)} steps ({job.discard_steps(omega)} discarded)")
+                     f"{job.n_steps(omega)} steps ({job.discard_steps(omega)} discarded){periods}")
     omegas = f"{len(s.omega)} omega x " if s.omega else ""
     lines.append(f"  tasks: {len(tasks)} = {len(job.system.phi)} phi x {omegas}"
                  f"{job.ensemble.realisations} realisations; "
