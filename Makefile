@@ -30,6 +30,9 @@ $(VENV)/.installed: pyproject.toml
 	fi
 	$(PY) -m venv --system-site-packages $(VENV)
 	$(VPY) -m pip install -q -e '.[test]'
+	# pyh5md (the H5MD reference reader, tests/test_trajectory.py) without its h5py
+	# dependency, which would shadow Debian's parallel h5py in the virtualenv
+	$(VPY) -m pip install -q --no-deps pyh5md
 	touch $@
 
 run: setup

@@ -549,6 +549,19 @@ def _discard_steps(job):
     return []
 
 
+def _trajectory(job):
+    """Trajectory extras need frames, and stresslets come from the per-particle samples."""
+    out, problems = job.output, []
+    for name in ("trajectory_velocities", "trajectory_stresslets"):
+        if getattr(out, name) and out.trajectory_every == 0:
+            problems.append(Problem(f"output.{name}", "needs a trajectory", True,
+                                    allowed="output.trajectory_every >= 1, or false"))
+    if out.trajectory_stresslets and not out.per_particle:
+        problems.append(Problem("output.trajectory_stresslets", "needs the per-particle "
+                                "stresslets", True, allowed="output.per_particle = true, or false"))
+    return problems
+
+
 def _maxwell_sum(job):
     if job.medium.kind != "maxwell":
         return []
@@ -836,6 +849,8 @@ CROSS_CHECKS = (
     (("shear.protocol", "shear.omega") + _INTEGRATION, _discard_periods),
     (("shear.protocol", "integration.n_steps", "integration.discard_steps"), _discard_steps),
     (("medium.kind", "medium.modes"), _maxwell_sum),
+    (("output.trajectory_every", "output.trajectory_velocities", "output.trajectory_stresslets",
+      "output.per_particle"), _trajectory),
     (("hydrodynamics.min_gap", "hydrodynamics.lubrication_cutoff"), _gaps),
     (("ensemble.ranks_per_task", "solver.backend"), _ranks),
     (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),

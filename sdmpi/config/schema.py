@@ -482,6 +482,13 @@ class Output:
     per_particle: bool = key(False, "bool", "also store per-particle stresslets")
     checkpoint_every: int = key(1000, "int", "time steps between checkpoints",
                                 allowed=Range(1, None))
+    trajectory_every: int = key(0, "int", "write the positions every K time steps into the "
+                                "run file as an H5MD trajectory (docs/trajectories.md); 0: "
+                                "no trajectory", allowed=Range(0, None))
+    trajectory_velocities: bool = key(False, "bool", "trajectory frames also hold each "
+                                      "particle's mean velocity over the frame's time step")
+    trajectory_stresslets: bool = key(False, "bool", "trajectory frames also hold the "
+                                      "hydrodynamic stresslets (needs per_particle = true)")
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ from mpi4py import MPI
 from .. import __version__
 from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
                       parse_job, resume_hash)
-from . import store
+from . import store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
 from .progress import Progress, RunLocked, logs_dir, rank_logger, take_lock
@@ -360,10 +360,13 @@ class _Driver:
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every
+        recorder = None
         if leader:
             datasets = run_file.samples(tid)
             buffers = {k: np.empty((min(chunk, n), *shape), dtype)
                        for k, (shape, dtype, _, _) in real.sample_fields().items()}
+            if self.job.output.trajectory_every:
+                recorder = trajectory.Recorder(self.job, task, real.box, run_file.file)
         self.log.info(f"task {tid}: {'resumed at' if start else 'started at'} step {start} of {n}")
         t_task = time.perf_counter()
         io_before = self.t_io
@@ -373,11 +376,15 @@ class _Driver:
             end = min((step // chunk + 1) * chunk, n)
             t0 = time.perf_counter()
             while step < end:
+                if recorder:
+                    recorder.before(step, real)
                 sample = real.advance(1)
                 fault("step")
                 if leader:
                     for k, buf in buffers.items():
                         buf[step - committed] = sample[k][0]
+                if recorder:
+                    recorder.after(sample, real)
                 step += 1
                 progress.add(steps=1)
                 if self.stop.requested(group):
@@ -387,6 +394,8 @@ class _Driver:
             self.t_step += t1 - t0
             if leader:
                 slot = 0 if slot < 0 else 1 - slot
+                if recorder:
+                    recorder.write()  # frames first: the commit below makes them valid
                 run_file.commit(tid, datasets, committed, step, buffers, real.get_state(), slot)
                 self.t_io += time.perf_counter() - t1
             committed = step

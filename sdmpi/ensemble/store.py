@@ -28,6 +28,7 @@ import numpy as np
 
 from ..config import JobError, Task, enumerate_tasks, job_hash, parse_job, resume_hash
 from ..config import units
+from . import trajectory
 from .faults import fault
 
 FORMAT = "sdmpi-run"
@@ -100,6 +101,7 @@ def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versi
         progress.attrs["description"] = "samples committed per task (valid up to)"
         for task in tasks:
             _create_task(f, job, task, layouts[task.task_id])
+        trajectory.create(f, job, tasks, layouts)
 
 
 def _create_task(f, job, task: Task, layout: TaskLayout) -> None:

@@ -48,6 +48,15 @@ class Lattice:
         frac -= np.floor(frac)
         return frac @ self.vectors
 
+    def nearest_image(self, displacements):
+        """The lattice image of each displacement (..., 3) with fractional coordinates in
+        [-1/2, 1/2]: the displacement itself whenever |d . b_i| < 1/2 for every reciprocal
+        vector b_i, i.e. when it is shorter than half the distance between each pair of
+        opposite cell faces (used to unwrap positions between nearby times)."""
+        frac = displacements @ self.reciprocal.T
+        frac -= np.round(frac)
+        return frac @ self.vectors
+
     def image_shifts(self, reach):
         """Lattice translations n . L with |n_i| <= ceil(reach |b_i|) + 1: every image of a
         point of the primary cell that can lie within `reach` of another point of it."""
