@@ -164,8 +164,14 @@ def _add_run(subparsers) -> None:
     add_job_arguments(parser)
     parser.add_argument("-o", "--output", required=True, metavar="RUN.h5",
                         help="the run file (HDF5): created, or resumed if it exists")
-    parser.add_argument("--new", action="store_true",
-                        help="start afresh, replacing RUN.h5 if it exists (its data are lost)")
+    again = parser.add_mutually_exclusive_group()
+    again.add_argument("--new", action="store_true",
+                       help="start afresh, replacing RUN.h5 if it exists (its data are lost)")
+    again.add_argument("--extend", action="store_true",
+                       help="lengthen the existing RUN.h5 to this job, which may differ from "
+                            "the stored one only in the length keys (integration.periods, "
+                            "duration, n_steps and their discard keys) and not be shorter "
+                            "for any task: what is committed is kept, the run resumes")
     parser.set_defaults(handler=_run, realisation_factory=None)
 
 
@@ -175,7 +181,7 @@ def _run(args) -> int:
 
     try:
         complete = run(args.job, args.overrides, args.output, new=args.new,
-                       realisation_factory=args.realisation_factory)
+                       extend=args.extend, realisation_factory=args.realisation_factory)
     except BadInput as err:
         if err.args and err.args[0]:
             print(err, file=sys.stderr)

@@ -12,7 +12,8 @@ in t_D = a^2/D0 (1/gamma_dot for non-Brownian steady shear); ``Job.time_unit`` s
 This package uses only the standard library, so validating a job is fast.
 """
 
-from .canonical import LAYOUT_KEYS, canonical_text, job_hash, resume_hash, toml_literal
+from .canonical import (LAYOUT_KEYS, LENGTH_KEYS, canonical_text, extension_hash, job_hash,
+                        resume_hash, toml_literal)
 from .loader import JobError, Problem, load_job, parse_job
 from .schema import (Brownian, Ensemble, Hydrodynamics, Integration, Job, JobSection,
                      Medium, Mode, Output, Shear, SizeClass, Solver, System, schema_text)
@@ -20,7 +21,7 @@ from .tasks import Task, enumerate_tasks
 
 __all__ = [
     "Brownian", "Ensemble", "Hydrodynamics", "Integration", "Job", "JobError", "JobSection",
-    "LAYOUT_KEYS", "Medium", "Mode", "Output", "Problem", "Shear", "SizeClass", "Solver", "System", "Task",
-    "canonical_text", "enumerate_tasks", "job_hash", "load_job", "parse_job", "resume_hash",
+    "LAYOUT_KEYS", "LENGTH_KEYS", "Medium", "Mode", "Output", "Problem", "Shear", "SizeClass", "Solver", "System", "Task",
+    "canonical_text", "enumerate_tasks", "extension_hash", "job_hash", "load_job", "parse_job", "resume_hash",
     "schema_text", "toml_literal",
 ]

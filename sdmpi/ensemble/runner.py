@@ -23,6 +23,7 @@ valid, and running the same command resumes.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import json
 import os
@@ -40,9 +41,9 @@ import numpy as np
 from mpi4py import MPI
 
 from .. import __version__
-from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
-                      parse_job, resume_hash)
-from . import store, trajectory
+from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
+                      extension_hash, load_job, parse_job, resume_hash)
+from . import extension, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
 from .progress import Progress, RunLocked, logs_dir, rank_logger, take_lock
@@ -65,12 +66,14 @@ class Plan:
     slots: tuple       # current checkpoint slot per task (-1: none)
     versions: str      # JSON
     created: str       # UTC ISO 8601
+    note: str = ""     # said before the run starts (rank 0)
 
 
-def run(job_path, overrides, output, *, new=False, realisation_factory=None,
+def run(job_path, overrides, output, *, new=False, extend=False, realisation_factory=None,
         comm=None, stream=None) -> bool:
     """Run or resume the job in ``job_path`` (with ``--set`` ``overrides``) into the run
-    file ``output``; ``new`` replaces an existing file. Collective over ``comm``
+    file ``output``; ``new`` replaces an existing file; ``extend`` lengthens the existing
+    run to the job's longer tasks first (:mod:`.extension`). Collective over ``comm``
     (default MPI_COMM_WORLD). Returns True when every task is complete, False when
     stopped by a signal (resumable). Raises :class:`BadInput` (nothing written).
 
@@ -81,7 +84,7 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
     comm = comm or MPI.COMM_WORLD
     lock = None
     try:
-        plan, lock = _agree(comm, job_path, overrides, Path(output), new)
+        plan, lock = _agree(comm, job_path, overrides, Path(output), new, extend)
         return _execute(comm, plan, Path(output), realisation_factory, stream or sys.stdout)
     except BadInput:
         raise
@@ -94,15 +97,18 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
             os.close(lock)
 
 
-def _agree(comm, job_path, overrides, out: Path, new: bool):
-    """Rank 0 checks everything and takes the lock; all ranks get its plan or raise
-    :class:`BadInput`. Returns (plan, lock descriptor or None)."""
+def _agree(comm, job_path, overrides, out: Path, new: bool, extend: bool):
+    """Rank 0 checks everything, takes the lock and extends the run file if asked; all
+    ranks get its plan or raise :class:`BadInput`. Returns (plan, lock descriptor or
+    None)."""
     plan = lock = None
     if comm.rank == 0:
         try:
-            plan = _plan(job_path, overrides, out, new, comm.size)
+            plan = _plan(job_path, overrides, out, new, extend, comm.size)
             if plan.mode != "complete":
                 lock = take_lock(out)
+            if plan.mode == "extend":
+                plan = _extended(plan, out)
         except RunLocked as err:
             plan = BadInput(f"{out}: in use by another sdmpi run ({err}); wait for it to "
                             f"finish or stop it")
@@ -131,7 +137,7 @@ def _execute(comm, plan: Plan, out: Path, factory, stream) -> bool:
 # --------------------------------------------------------------------------- checks (rank 0)
 
 
-def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
+def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) -> Plan:
     try:
         job = load_job(job_path, overrides)
     except JobError as err:
@@ -149,18 +155,41 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
             datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+    if extend and not out.exists():
+        raise BadInput(f"{out}: does not exist; --extend lengthens an existing run file")
     if out.exists() and not new:
         try:
             summary = store.inspect(out)
         except store.StoreError as err:
             raise BadInput(f"{err}\nLeft untouched. Use --new to replace it, or choose "
                            f"another output file (-o).") from None
+        progress = tuple(int(p) for p in summary.progress)
         if resume_hash(summary.job) != resume_hash(job):
-            raise BadInput(_different_job(out, summary.job, job))
+            if not extend or extension_hash(summary.job) != extension_hash(job):
+                raise BadInput(_different_job(out, summary.job, job, extend))
+            problems = extension.problems(summary.job, job)
+            if problems:
+                raise BadInput("\n".join([f"{out}: cannot be extended to this job:",
+                                          *(f"  {p}" for p in problems), "Left untouched."]))
+            return Plan(canonical_text(job), "extend", progress, summary.slots, *meta)
         mode = "complete" if summary.complete else "resume"
-        return Plan(canonical_text(job), mode, tuple(int(p) for p in summary.progress),
-                    summary.slots, *meta)
+        return Plan(canonical_text(job), mode, progress, summary.slots, *meta)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
+
+
+def _extended(plan: Plan, out: Path) -> Plan:
+    """Rank 0: lengthen the run file to the plan's job (:func:`.extension.extend`)."""
+    try:
+        summary = extension.extend(out, parse_job(plan.job_text), plan.job_text, plan.versions)
+    except (OSError, store.StoreError) as err:
+        out.with_name(out.name + ".part").unlink(missing_ok=True)
+        raise BadInput(f"{out}: could not be extended ({err}); left untouched") from None
+    steps = sum(t.n_steps for t in summary.tasks)
+    note = (f"extended {out} to {steps} steps in all ({sum(plan.progress)} committed steps "
+            f"copied)")
+    return dataclasses.replace(plan, mode="complete" if summary.complete else "resume",
+                               progress=tuple(int(p) for p in summary.progress),
+                               slots=summary.slots, note=note)
 
 
 def _check_backend(job) -> None:
@@ -205,13 +234,20 @@ def _key_values(job) -> dict[str, str]:
     return values
 
 
-def _different_job(out: Path, stored, job) -> str:
+def _different_job(out: Path, stored, job, extend: bool) -> str:
     old, now = _key_values(stored), _key_values(job)
     keys = list(old) + [k for k in now if k not in old]
+    differ = [k for k in keys if old.get(k) != now.get(k)]
     diffs = [f"  {k}: file has {old.get(k, '(absent)')}, this job has {now.get(k, '(absent)')}"
-             for k in keys if old.get(k) != now.get(k)]
+             for k in differ]
+    hint = []
+    if extend:
+        hint = [f"--extend allows only the length keys to differ ({', '.join(sorted(LENGTH_KEYS))})"]
+    elif all(k in LENGTH_KEYS for k in differ):
+        hint = ["Only the length differs: add --extend to lengthen the run (what is "
+                "committed is kept)."]
     return "\n".join([f"{out}: holds a different job ({stored.job.name!r}); it differs in:",
-                      *diffs,
+                      *diffs, *hint,
                       "Left untouched. Use --new to replace it (its data are lost), or "
                       "choose another output file (-o)."])
 
@@ -286,6 +322,8 @@ class _Driver:
                       f"{socket.gethostname()}; tasks {mine}")
         todo = [t for t in tasks if plan.progress[t.task_id] < t.n_steps]
         steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
+        if plan.note:
+            self.say(plan.note)
         if plan.mode == "resume":
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import getpass
 
+import h5py
 import numpy as np
 
 from .. import __version__
@@ -168,3 +169,17 @@ class Recorder:
         for element in self.elements:
             self.group[f"{element}/value"][first:stop] = np.stack([fr[element] for fr in frames])
         self.pending = []
+
+
+def copy_frames(old, new, task_id: int, frames: int) -> None:
+    """Copy the first ``frames`` frames of a task's trajectory from the run file ``old``
+    into ``new`` (a longer layout of the same job; see sdmpi.ensemble.extension)."""
+    if not frames:
+        return
+    name = group_name(task_id)
+    for top in ("particles", "observables"):
+        def copy(path, obj):
+            if isinstance(obj, h5py.Dataset) and path.split("/")[-1] in ("step", "time", "value"):
+                new[f"{top}/{name}/{path}"][:frames] = obj[:frames]
+
+        old[f"{top}/{name}"].visititems(copy)
