@@ -71,6 +71,14 @@ def _validate(args) -> int:
     except JobError as err:
         print(err, file=sys.stderr)
         return EXIT_BAD_INPUT
+    if job.system.start == "file":
+        from .ensemble.start_file import StartError, load
+
+        try:
+            load(job)
+        except StartError as err:
+            print(f"{args.job}: 1 problem\n  - {err}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     print(summary(job))
     return EXIT_OK
 

@@ -149,6 +149,7 @@ DLVO = ("interparticle", "kind", ("dlvo",))
 FRICTIONAL = ("interparticle", "kind", ("frictional",))
 BULK = ("system", "geometry", ("bulk",))
 MONOLAYER = ("system", "geometry", ("monolayer",))
+START_FILE = ("system", "start", ("file",))
 
 
 @dataclass(frozen=True)
@@ -199,6 +200,22 @@ class System:
                         "plane, non-Brownian steady shear only (seed 001)",
                         allowed=Choice(("bulk", "monolayer")), controls="system.geometry")
     box: str | None = key("cubic", "str", "box shape", allowed=Choice(("cubic",)), only_if=BULK)
+    start: str | None = key("generated", "str", "starting configuration: generated (an "
+                            "equilibrated hard-sphere fluid drawn from the task's stream) or "
+                            "file (positions read from start_file; docs/trajectories.md)",
+                            allowed=Choice(("generated", "file")), only_if=BULK,
+                            controls="system.start")
+    start_file: str | None = key(
+        None, "str", "HDF5 file (datasets positions (N, 3) or (M, N, 3), box (3,), optional "
+        "radii (N,)), extended XYZ file (Lattice in the comment line, optional 5th column "
+        "radius; M frames), or an sdmpi run file (the last committed positions of its tasks "
+        "at each phi); realisation r starts from configuration r mod M; a relative path is "
+        "taken from the directory sdmpi runs in", allowed=Text(1000), only_if=START_FILE,
+        example="start.h5")
+    start_tolerance: float | None = key(
+        1e-4, "float", "deepest overlap a start file may hold (surface gap >= -tolerance); "
+        "smaller overlaps are removed by the overlap correction of the first step",
+        unit="a", allowed=Range(0.0, 0.1), only_if=START_FILE)
     layer_spacing: float | None = key(
         2.0, "float", "monolayer: distance Lz between the layer and its periodic images "
         "in z (3D fluid around a 2D-periodic layer; seed 001 used 100)", unit="L (in-plane side)",

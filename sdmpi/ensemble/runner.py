@@ -43,7 +43,7 @@ from mpi4py import MPI
 from .. import __version__
 from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
                       extension_hash, load_job, parse_job, resume_hash)
-from . import extension, store, trajectory
+from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
 from .progress import Progress, RunLocked, logs_dir, rank_logger, take_lock
@@ -152,6 +152,10 @@ def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) ->
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job)
     _check_output(out, new)
+    try:
+        start_file.load(job)
+    except start_file.StartError as err:
+        raise BadInput(f"{job_path}: 1 problem\n  - {err}") from None
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
             datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
@@ -336,6 +340,11 @@ class _Driver:
             # realisations on the group's communicator (collective solves); the leader writes
             extra = {"comm": group} if group.size > 1 else {}
             realisations = {tid: self.factory(job, tasks[tid], **extra) for tid in mine}
+            fresh = [tid for tid in mine if plan.progress[tid] == 0]
+            if fresh and job.system.start == "file":
+                configurations = start_file.load(job)
+                for tid in fresh:
+                    start_file.apply(realisations[tid], configurations.positions(tasks[tid]))
             layouts = {tid: store.TaskLayout.of(r) for tid, r in realisations.items()} \
                 if leader else {}
             if plan.mode == "new":
