@@ -162,3 +162,20 @@ def test_real_trajectory_starts_at_the_start_and_stays_in_the_cell(tmp_path):
     for k in range(len(x) - 1):
         moved = Lattice(box, strain[k + 1]).nearest_image(x[k + 1] - x[k])
         np.testing.assert_allclose(v[k] * task.dt, moved, rtol=0, atol=1e-12)
+
+
+def test_the_reader_takes_only_committed_frames(traj_ref, traj_job, tmp_path):
+    from sdmpi.analysis.trajectories import read
+
+    out = tmp_path / "partial.h5"
+    res = sdmpi("run", traj_job, "-o", out, env={"SDMPI_TEST_KILL": "commit:3"})
+    assert res.returncode != 0
+    with h5py.File(out, "r") as f:
+        progress = f["progress"][()]
+    assert 0 < progress.sum() < N_TASKS * N_STEPS
+    for task, done in enumerate(progress):
+        traj = read(out, f"task_{task:06d}")
+        assert len(traj.positions) == frames_done(done, EVERY)
+        full = read(traj_ref, f"task_{task:06d}")
+        np.testing.assert_array_equal(traj.positions, full.positions[:len(traj.positions)])
+        np.testing.assert_array_equal(traj.strain, full.strain[:len(traj.positions)])
