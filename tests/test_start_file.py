@@ -141,3 +141,27 @@ def test_bad_start_files_are_refused_and_nothing_is_written(tmp_path, capsys, ma
 def test_start_tolerance_admits_shallow_overlaps(tmp_path):
     job = job_with_start(tmp_path, overlapping(tmp_path), "start_tolerance = 0.06\n")
     assert main(["validate", str(job)]) == 0
+
+
+def test_the_start_file_is_needed_only_while_tasks_are_unstarted(tmp_path):
+    start = write_h5(tmp_path / "start.h5", lattice_configurations(2))
+    job = job_with_start(tmp_path, start)
+    out = tmp_path / "run.h5"
+    res = sdmpi("run", job, "-o", out, env={"SDMPI_TEST_KILL": "commit:3"})
+    assert res.returncode != 0
+    reference = tmp_path / "ref.h5"
+    assert sdmpi("run", job, "-o", reference).returncode == 0
+    with h5py.File(out, "r") as f:
+        unstarted = int((f["progress"][()] == 0).sum())
+    assert unstarted > 0
+    start.unlink()  # tasks still to start need it: refused, named, nothing written
+    res = sdmpi("run", job, "-o", out)
+    assert res.returncode == 2 and "no such file" in res.stderr
+    write_h5(start, lattice_configurations(2))
+    assert sdmpi("run", job, "-o", out).returncode == 0
+    start.unlink()  # a complete run needs no start file
+    res = sdmpi("run", job, "-o", out)
+    assert res.returncode == 0 and "already complete" in res.stdout
+    assert first_frames(out).keys() == first_frames(reference).keys()
+    for key, x0 in first_frames(out).items():
+        np.testing.assert_array_equal(x0, first_frames(reference)[key])

@@ -152,10 +152,17 @@ def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) ->
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job)
     _check_output(out, new)
-    try:
-        start_file.load(job)
-    except start_file.StartError as err:
-        raise BadInput(f"{job_path}: 1 problem\n  - {err}") from None
+    plan = _mode(job, out, new, extend)
+    if 0 in plan.progress and plan.mode != "complete":  # tasks to start: check their start
+        try:
+            start_file.load(job)
+        except start_file.StartError as err:
+            raise BadInput(f"{job_path}: 1 problem\n  - {err}") from None
+    return plan
+
+
+def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
+    """The plan for this job and output file: new, resume, extend or complete."""
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
             datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
