@@ -50,10 +50,7 @@ def main(argv=None) -> int:
     group = f"task_{args.task:06d}" if args.task is not None else args.group
     try:
         traj = read(args.file, group)
-        r_max = args.r_max
-        if r_max is None:
-            lattice = traj.lattice(0)
-            r_max = 0.5 / np.linalg.norm(lattice.reciprocal, axis=1).max()
+        r_max = traj.largest_r() if args.r_max is None else args.r_max
         r, g = pair_distribution(traj, r_max, args.bins)
         max_lag = min(args.max_lag, len(traj.positions) - 1)
         lags, t, msd = mean_squared_displacement(traj, max_lag)

@@ -157,5 +157,5 @@ def test_the_script_reads_a_run_file_and_writes_tables(tmp_path):
     bad = subprocess.run([sys.executable, str(ROOT / "postprocess" / "trajectory_analysis.py"),
                           str(path), "-o", str(tmp_path / "o2"), "--r-max", "40"],
                          capture_output=True, text=True)
-    assert bad.returncode == 2 and "r_max = 40 exceeds half" in bad.stderr
+    assert bad.returncode == 2 and "r_max = 40 exceeds half the smallest cell width" in bad.stderr
     assert "Traceback" not in bad.stderr

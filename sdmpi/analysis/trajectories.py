@@ -58,6 +58,13 @@ class Trajectory:
         return Lattice(box, cell[1, 0] / cell[1, 1])
 
 
+    def largest_r(self) -> float:
+        """Half the smallest distance between opposite cell faces over all frames: the
+        largest r_max of :func:`pair_distribution`."""
+        return min(0.5 / np.linalg.norm(self.lattice(k).reciprocal, axis=1).max()
+                   for k in range(len(self.cells)))
+
+
 def groups(path) -> list[str]:
     """The particles groups of an H5MD file."""
     with h5py.File(path, "r") as f:
@@ -114,6 +121,10 @@ def _committed_frames(f, group: str, stored: int) -> int:
 def pair_distribution(traj: Trajectory, r_max: float, bins: int = 100):
     """(r (bins,) shell centres, g (bins,)): g(r) for 0 < r < r_max averaged over frames
     (module docstring). ValueError if r_max exceeds half the smallest cell width."""
+    largest = traj.largest_r()
+    if r_max > largest * (1 + 1e-12):
+        raise ValueError(f"r_max = {r_max:g} exceeds half the smallest cell width "
+                         f"({largest:.4g}, over all frames)")
     edges = np.linspace(0.0, r_max, bins + 1)
     counts = np.zeros(bins)
     n = traj.positions.shape[1]
@@ -121,10 +132,6 @@ def pair_distribution(traj: Trajectory, r_max: float, bins: int = 100):
     volume = 0.0
     for frame, x in enumerate(traj.positions):
         lattice = traj.lattice(frame)
-        width = 1.0 / np.linalg.norm(lattice.reciprocal, axis=1).max()
-        if r_max > 0.5 * width * (1 + 1e-12):
-            raise ValueError(f"r_max = {r_max:g} exceeds half the smallest cell width "
-                             f"({0.5 * width:.4g}) in frame {frame}")
         r = np.linalg.norm(lattice.nearest_image(x[j] - x[i]), axis=1)
         counts += np.histogram(r, edges)[0]
         volume += lattice.volume
