@@ -159,3 +159,13 @@ def test_the_script_reads_a_run_file_and_writes_tables(tmp_path):
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "r_max = 40 exceeds half the smallest cell width" in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+def test_largest_r_is_that_of_the_most_sheared_frame(tmp_path):
+    """A cube of side 10 sheared by 0.3 has its x faces 10 / sqrt(1 + 0.3^2) apart."""
+    x = cubic_lattice(2, 5.0)
+    path = write_h5md(tmp_path / "two.h5", np.stack([x, x]), np.full(3, 10.0), [0.0, 0.3])
+    traj = read(path)
+    assert traj.largest_r() == pytest.approx(5.0 / math.sqrt(1 + 0.3 ** 2), rel=1e-12)
+    with pytest.raises(ValueError, match="exceeds half the smallest cell width"):
+        pair_distribution(traj, r_max=4.9)
