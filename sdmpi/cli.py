@@ -25,6 +25,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import sys  # noqa: E402
 
 from . import __version__
@@ -254,6 +255,15 @@ def info_text(run, running=None) -> str:
                                                  else f"{100.0 * p / task.n_steps:.0f}%")
         lines.append(f"  {task.task_id:>6}  {task.phi:>6.4g}  {omega:>10}  "
                      f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
+    every = run.job.output.trajectory_every
+    if every:
+        from .ensemble.trajectory import frames_done
+
+        frames = sum(frames_done(p, every) for p in done)
+        lines.append(f"trajectory: H5MD, a frame every {every} steps, {frames} frames "
+                     f"committed (particles/task_NNNNNN; docs/trajectories.md)")
+    if "extended" in a:
+        lines.append(f"extended {len(json.loads(a['extended']))} time(s) (sdmpi run --extend)")
     lines.append("versions: " + ", ".join(f"{k} {v}" for k, v in run.versions.items()))
     lines.append(f"units: time {a['time_unit']}, stress {a['stress_unit']}, "
                  f"stress components {a['component_order']}")
