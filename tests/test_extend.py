@@ -71,6 +71,7 @@ def test_extended_run_equals_the_longer_run(job_file, short, longer, ranks):
         assert '"job_hash"' in f.attrs["extended"]
     info = sdmpi("info", short)
     assert "extended 1 time(s)" in info.stdout and "80 frames committed" in info.stdout
+    assert "every committed sample and checkpoint verified" in info.stdout
 
 
 def test_stopped_run_extends_and_resumes(job_file, longer, tmp_path):

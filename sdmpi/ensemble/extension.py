@@ -27,12 +27,15 @@ from . import store, trajectory
 from .faults import fault
 
 
-def problems(stored, job) -> list[str]:
-    """Why ``job`` cannot extend a run of the ``stored`` job (same job up to the length
-    keys, checked by the caller): tasks that would be shorter, or a changed time step;
-    one line per frequency."""
+def problems(summary: store.RunSummary, job) -> list[str]:
+    """Why ``job`` cannot extend the run of ``summary`` (same job up to the length keys,
+    checked by the caller): damaged data, tasks that would be shorter, or a changed time
+    step; one line per frequency."""
+    if summary.damage:
+        return [f"it holds damaged data ({summary.damage[0]}); run it once without "
+                "--extend (it recomputes from the last intact checkpoint), then extend"]
     out = {}
-    for old, new in zip(enumerate_tasks(stored), enumerate_tasks(job)):
+    for old, new in zip(summary.tasks, enumerate_tasks(job)):
         where = "every task" if new.omega is None else f"omega = {new.omega:g}"
         if new.dt != old.dt:
             out[where] = f"{where}: time step {new.dt!r} differs from the run's {old.dt!r}"
@@ -89,16 +92,20 @@ def _layout(f, task_id: int) -> store.TaskLayout:
 
 
 def _copy_task(old, new, task_id: int, done: int, every: int) -> None:
-    """Copy a task's committed samples, checkpoint slots and trajectory frames."""
+    """Copy a task's committed samples, checkpoint slots and trajectory frames; the
+    slots' checksums are computed afresh for the longer layout (its checksum blocks may
+    differ)."""
     key = store.task_key(task_id)
     for name, ds in old[f"tasks/{key}/samples"].items():
         if done:
             new[f"tasks/{key}/samples/{name}"][:done] = ds[:done]
-
-    def copy(name, obj):
-        if isinstance(obj, h5py.Dataset):
-            new[f"checkpoints/{key}/{name}"][()] = obj[()]
-
-    old[f"checkpoints/{key}"].visititems(copy)
+    old_ckpt, new_ckpt = old[f"checkpoints/{key}"], new[f"checkpoints/{key}"]
+    new_ckpt["slot_step"][:] = old_ckpt["slot_step"][()]
+    for slot in (0, 1):
+        for name, ds in old_ckpt[f"slot{slot}"].items():
+            new_ckpt[f"slot{slot}/{name}"][()] = ds[()]
+        step = int(old_ckpt["slot_step"][slot])
+        if 0 < step <= done:
+            store.checksum_slot(new, task_id, slot, step)
     if every:
         trajectory.copy_frames(old, new, task_id, trajectory.frames_done(done, every))
