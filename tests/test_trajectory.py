@@ -179,3 +179,18 @@ def test_the_reader_takes_only_committed_frames(traj_ref, traj_job, tmp_path):
         full = read(traj_ref, f"task_{task:06d}")
         np.testing.assert_array_equal(traj.positions, full.positions[:len(traj.positions)])
         np.testing.assert_array_equal(traj.strain, full.strain[:len(traj.positions)])
+
+
+def test_the_size_estimate_counts_the_frames(traj_ref, traj_job):
+    from sdmpi.config import load_job
+    from sdmpi.ensemble.store import run_file_bytes
+    from sdmpi.ensemble.trajectory import file_bytes
+
+    job = load_job(traj_job)
+    plain = load_job(traj_job, ["output.trajectory_every=0", "output.trajectory_velocities=false",
+                                "output.trajectory_stresslets=false"])
+    # per task 10 frames of 8 positions, velocities (3 each) and stresslets (9 each),
+    # a 3x3 cell, the strain and the shared step and time: 8 bytes each; and the headers
+    assert file_bytes(job) == N_TASKS * (10 * 8 * (8 * (3 + 3 + 9) + 9 + 1 + 2) + 16384)
+    assert run_file_bytes(job) - run_file_bytes(plain) == file_bytes(job)
+    assert traj_ref.stat().st_size <= run_file_bytes(job)

@@ -190,13 +190,15 @@ STATE_PER_PARTICLE = 16 * 8
 
 
 def run_file_bytes(job) -> float:
-    """Estimated size of a job's run file: every sample dataset (exact: they are all
-    allocated at creation), two state slots per task and the per-task overhead."""
+    """Estimated size of a job's run file: every sample dataset and trajectory frame
+    (exact: they are all allocated at creation), two state slots per task and the per-task
+    overhead."""
     from ..dynamics.realisation import sample_fields
 
     row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
     per_task = TASK_OVERHEAD + 2 * STATE_PER_PARTICLE * job.system.n_particles
-    return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job)))
+    return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job))
+                 + trajectory.file_bytes(job))
 
 
 # --------------------------------------------------------------------------- write

@@ -16,11 +16,13 @@ frames as an uninterrupted one.
 from __future__ import annotations
 
 import getpass
+import math
 
 import h5py
 import numpy as np
 
 from .. import __version__
+from ..config import enumerate_tasks
 from ..hydro.basis import from_five
 from ..hydro.geometry import Lattice
 
@@ -52,6 +54,24 @@ def elements(job) -> dict[str, tuple]:
         if getattr(job.output, key):
             out[name] = (shape, unit.replace("time unit", job.time_unit))
     return out
+
+
+#: bytes per task for the trajectory's groups, attributes and dataset headers (measured:
+#: about 11 KiB)
+TASK_OVERHEAD = 16 * 2 ** 10
+
+
+def file_bytes(job) -> int:
+    """Bytes of every task's trajectory (0 without one): per frame the elements' values,
+    the cell (3, 3), the strain, and one step and time shared by all, preallocated; plus
+    TASK_OVERHEAD."""
+    every = job.output.trajectory_every
+    if not every:
+        return 0
+    n = job.system.n_particles
+    per_frame = 8 * (sum(n * math.prod(shape) for shape, _ in elements(job).values()) + 9 + 1 + 2)
+    return sum(n_frames(t.n_steps, every) * per_frame + TASK_OVERHEAD
+               for t in enumerate_tasks(job))
 
 
 def create(f, job, tasks, layouts) -> None:
