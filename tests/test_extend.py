@@ -119,3 +119,12 @@ def test_extend_needs_an_existing_run(job_file, tmp_path):
     assert not (tmp_path / "none.h5").exists()
     res = sdmpi("run", job_file, "-o", tmp_path / "none.h5", "--extend", "--new")
     assert res.returncode == 2 and "not allowed with" in res.stderr
+
+
+def test_a_damaged_run_is_not_extended(job_file, short):
+    with h5py.File(short, "r+") as f:  # a committed sample changed behind the checksums
+        f["tasks/000003/samples/stress_brownian"][5, 0] += 1.0
+    before = digest(short)
+    res = sdmpi("run", job_file, "-o", short, *LONGER, "--extend")
+    assert res.returncode == 2 and "holds damaged data" in res.stderr, res.stderr
+    assert "run it once without --extend" in res.stderr and digest(short) == before
