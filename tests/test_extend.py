@@ -128,3 +128,20 @@ def test_a_damaged_run_is_not_extended(job_file, short):
     res = sdmpi("run", job_file, "-o", short, *LONGER, "--extend")
     assert res.returncode == 2 and "holds damaged data" in res.stderr, res.stderr
     assert "run it once without --extend" in res.stderr and digest(short) == before
+
+
+def test_extension_needs_room_for_the_whole_longer_file(job_file, short, monkeypatch):
+    import shutil
+
+    from sdmpi.config import load_job
+    from sdmpi.ensemble import runner, store
+
+    job = load_job(job_file, ["integration.periods=3"])
+    needed = store.run_file_bytes(job)
+    free = needed - 1  # enough for the growth, not for the copy beside the run file
+    assert free > needed - short.stat().st_size
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(
+        10 ** 9, 10 ** 9 - free, free))
+    runner._check_resources(job, job_file, short, False, 1)  # a resume: nothing to create
+    with pytest.raises(runner.BadInput, match="the run file needs about"):
+        runner._check_resources(job, job_file, short, False, 1, extend=True)

@@ -175,7 +175,7 @@ def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) ->
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job)
     _check_output(out, new)
-    _check_resources(job, job_path, out, new, size)
+    _check_resources(job, job_path, out, new, size, extend)
     plan = _mode(job, out, new, extend)
     if 0 in plan.progress and plan.mode != "complete":  # tasks to start: check their start
         try:
@@ -249,9 +249,11 @@ def _check_backend(job) -> None:
         raise BadInput(f"solver.backend = {backend!r} needs PETSc here: {err}") from None
 
 
-def _check_resources(job, job_path, out: Path, new: bool, size: int) -> None:
+def _check_resources(job, job_path, out: Path, new: bool, size: int,
+                     extend: bool = False) -> None:
     """Refuse a job that cannot fit: the memory of the ranks on this machine, and (for a
-    run file still to be created) the room for it in the output's file system."""
+    run file still to be created, or the longer copy an extension writes beside the run
+    file) the room for it in the output's file system."""
     from ..hydro.solvers import backend_for
 
     rpt = job.ensemble.ranks_per_task
@@ -259,8 +261,8 @@ def _check_resources(job, job_path, out: Path, new: bool, size: int) -> None:
     busy = min(resources.ranks_on_this_node(size), len(enumerate_tasks(job)) * rpt)
     problems = resources.start_problems(job) or resources.memory_problems(
         job, backend, busy, resources.available_memory())
-    if new or not out.exists():
-        replaced = out.stat().st_size if out.exists() else 0
+    if new or extend or not out.exists():
+        replaced = out.stat().st_size if out.exists() and not extend else 0
         problems += resources.disk_problems(job, store.run_file_bytes(job) - replaced,
                                             out.parent)
     if problems:
