@@ -339,9 +339,15 @@ def open_run(path):
     if not Path(path).is_file():
         raise ReduceError(f"{path}: no such file")
     try:
-        return inspect(path)
+        summary = inspect(path)
     except StoreError as err:
         raise ReduceError(str(err)) from None
+    damaged = [str(d) for d in summary.damage if d.what == "samples"]
+    if damaged:
+        raise ReduceError("\n  ".join([f"{path}: committed samples are damaged (checksums):",
+                                        *damaged]) + "\n'sdmpi run' with the same job "
+                          "recomputes them (bit for bit); then reduce again")
+    return summary
 
 
 def job_items(job: Job) -> dict:
