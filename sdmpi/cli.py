@@ -393,7 +393,7 @@ def _reduce(args) -> int:
 
     from .analysis.medium_view import MediumError, label, parse_medium
     from .analysis.reduce import PartialRunWarning, ReduceError, reduce_runs
-    from .analysis.report import check_output_dir, write_all
+    from .analysis.report import check_output_dir, format_table, write_all
 
     try:
         media = [parse_medium(spec) for spec in args.medium]
@@ -417,16 +417,6 @@ def _reduce(args) -> int:
     except (ReduceError, MediumError) as err:
         print(f"sdmpi reduce: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    try:
-        _report_reduction(red, views, notes, paths)
-    except BrokenPipeError:    # e.g. `sdmpi reduce ... | head`: the outputs are written
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    return EXIT_OK
-
-
-def _report_reduction(red, views, notes, paths) -> None:
-    """The tables, notes and written paths of ``sdmpi reduce`` on stdout/stderr."""
-    from .analysis.report import format_table
     print(format_table(red))
     for name, view in views:
         print(f"\n{name} (medium applied after the fact):")
@@ -439,7 +429,7 @@ def _report_reduction(red, views, notes, paths) -> None:
         print(f"note: {note}", file=sys.stderr)
     for path in paths:
         print(f"wrote {path}")
-    sys.stdout.flush()
+    return EXIT_OK
 
 
 # --------------------------------------------------------------------------- main
