@@ -30,7 +30,7 @@ from scipy.linalg import lapack
 
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
-from sdmpi.hydro.resistance import grand_resistance
+from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
 
 KT = 1.0  # the errors are relative: any kT
 
@@ -41,19 +41,8 @@ def operators(pos, box, tol, h):
     radii = np.ones(n)
     base = grand_resistance(pos, radii, box, 0.0, ewald_tol=tol)
     mobility = np.linalg.inv(base.blocks()[0])
-    div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
-    for p in range(n):
-        for c in range(3):
-            mats = []
-            for sign in (1, -1):
-                moved = base.positions.copy()
-                moved[p, c] += sign * h
-                r_fu, _, r_su, _ = grand_resistance(moved, radii, box, 0.0, ewald_tol=tol,
-                                                    plan=base.plan).blocks()
-                m = np.linalg.inv(r_fu)
-                mats.append((m[:, 6 * p + c], r_su @ m[:, 6 * p + c]))
-            div_m += (mats[0][0] - mats[1][0]) / (2 * h)
-            div_a += (mats[0][1] - mats[1][1]) / (2 * h)
+    div_m, div_a = mobility_divergence(
+        lambda moved, plan: grand_resistance(moved, radii, box, 0.0, ewald_tol=tol, plan=plan), base, h)
     eta = hydrodynamic_viscosity(base.positions, box, ewald_tol=tol)
     return {"mobility": mobility, "drift": KT * div_m, "stresslets": -KT * div_a,
             "bulk_stresslet": -KT * div_a.reshape(n, 5).sum(axis=0), "eta_H": np.array([eta])}
