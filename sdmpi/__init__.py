@@ -5,3 +5,7 @@ Packages (data flows one way): ``config`` -> ``hydro`` -> ``dynamics`` -> ``ense
 """
 
 __version__ = "0.1.0"
+
+from ._kernel_cache import ensure_kernels_can_load  # noqa: E402
+
+ensure_kernels_can_load()

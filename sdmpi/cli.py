@@ -7,11 +7,13 @@ read a job file call :func:`add_job_arguments` and :func:`job_from_args`, so ``-
 behaves the same everywhere. Heavy imports (numpy, MPI, HDF5) belong inside handlers so
 that ``sdmpi validate`` and ``--help`` stay fast.
 
-Exit codes: 0 success (``run``: every task complete), 1 internal error (``run``: the MPI
-job was aborted; committed data are intact and the same command resumes), 2 bad input
-(job file, ``--set``, command line, output path, or a run file that is foreign, damaged or
-holds another job; nothing is written), 3 ``run`` stopped by SIGTERM/SIGINT/SIGUSR1 after
-a clean checkpoint: resumable by running the same command again.
+Exit codes (docs/cli.md): 0 success (``run``: every task complete); 1 ``run`` did not
+finish: a rank failed (its message on stderr, e.g. a full file system), or mpirun was
+itself terminated (SIGTERM to mpirun: mpirun exits 1); committed data are intact and the
+same command resumes; 2 bad input (job file, ``--set``, command line, output path,
+resources, or a run file that is foreign, damaged or holds another job; nothing is
+written); 3 ``run`` stopped by SIGTERM/SIGINT/SIGUSR1 after a clean checkpoint
+(SIGUSR1 when sent to mpirun): resumable by running the same command again.
 
 One BLAS/OpenMP thread per process (one rank per core): the thread-count variables are set
 to 1 here, before numpy is imported, unless the user set them.
@@ -57,22 +59,109 @@ def _add_validate(subparsers) -> None:
     parser = subparsers.add_parser(
         "validate", help="check a job file and summarise it",
         description="Check a job file (with any --set overrides) against the schema and "
-                    "print a summary: task groups, time steps, tasks and their steps in all. Every "
-                    "problem is listed at once, each with the key, the offending value, "
-                    "why, and what is allowed. Writes nothing.",
-        epilog="exit status: 0 if the job is valid, 2 if not (or the file is unreadable)")
+                    "print a summary: task groups, time steps, tasks and their steps in all, "
+                    "the run file's size and the memory per rank (estimates), with a "
+                    "WARNING where they do not fit here (sdmpi run would refuse the job), "
+                    "and with --time-steps the measured cost. Every problem is listed at "
+                    "once, each with the key, the offending value, why, and what is "
+                    "allowed. Writes nothing.",
+        epilog="exit status: 0 if the job is valid (resource warnings included: the job may "
+               "run elsewhere), 2 if not (or the file is unreadable)")
     add_job_arguments(parser)
+    parser.add_argument("--ranks", type=int, default=1, metavar="P",
+                        help="MPI ranks the job will run on, all on this machine (for the "
+                             "memory check and the wall-time estimate; default 1)")
+    parser.add_argument("-o", "--output", default="run.h5", metavar="RUN.h5",
+                        help="where the run file will go (for the disk-space check; "
+                             "default ./run.h5; nothing is written)")
+    parser.add_argument("--time-steps", type=int, default=0, metavar="K",
+                        help="time K steps of the first task (after one untimed step that "
+                             "compiles or loads the kernels) and estimate the run's "
+                             "core-hours and wall time from them; default 0: no timing")
     parser.set_defaults(handler=_validate)
 
 
 def _validate(args) -> int:
+    from .config import resources
+
     try:
         job = job_from_args(args)
+        problems = resources.start_problems(job)
+        if problems:
+            raise JobError(problems, args.job)
     except JobError as err:
         print(err, file=sys.stderr)
         return EXIT_BAD_INPUT
+    bad = [f"--ranks {args.ranks}: must be at least 1"] if args.ranks < 1 else []
+    bad += [f"--time-steps {args.time_steps}: must be 0 or more"] if args.time_steps < 0 else []
+    rpt = job.ensemble.ranks_per_task
+    if args.ranks % rpt:
+        bad.append(f"--ranks {args.ranks}: must be a multiple of ensemble.ranks_per_task "
+                   f"= {rpt} (sdmpi run would refuse it)")
+    if bad:
+        print("sdmpi validate: " + "\n".join(bad), file=sys.stderr)
+        return EXIT_BAD_INPUT
     print(summary(job))
+    print(resource_text(job, args.ranks, args.output))
+    if args.time_steps:
+        print(cost_text(job, args.ranks, args.time_steps))
+    else:
+        print("  cost: give --time-steps K (e.g. 3) to time K steps here and estimate the "
+              "core-hours and wall time")
     return EXIT_OK
+
+
+def resource_text(job, ranks: int, output) -> str:
+    """The resource estimates of a job and, as WARNING lines, what will not fit here."""
+    from pathlib import Path
+
+    from .config import resources
+    from .ensemble.store import run_file_bytes
+    from .hydro.solvers import backend_for
+
+    gib, rpt = resources.gib, job.ensemble.ranks_per_task
+    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
+    size, memory = run_file_bytes(job), resources.memory_per_rank(job, backend)
+    available = resources.available_memory()
+    busy = min(ranks, len(enumerate_tasks(job)) * rpt)
+    where = Path(output).resolve().parent
+    lines = [f"  run file: about {gib(size)}; memory: about {gib(memory)} per rank"
+             + ("" if available is None else f" ({gib(available)} available here)")]
+    problems = resources.memory_problems(job, backend, busy, available)
+    if where.is_dir():
+        problems += resources.disk_problems(job, size, where)
+    lines += [f"WARNING: {p}\n  (sdmpi run would refuse this job here)" for p in problems]
+    return "\n".join(lines)
+
+
+def cost_text(job, ranks: int, k: int) -> str:
+    """Core-hours and wall time of a job on ``ranks`` ranks, from timing ``k`` steps of
+    its first task on this rank (after one untimed step: kernel compilation or loading,
+    first solves). Every step of a job costs about the same (same N, same solver); the
+    wall time is the largest load of the LPT assignment (sdmpi.ensemble.farm)."""
+    import time
+
+    from .dynamics import Realisation
+    from .ensemble.farm import assign
+    from .ensemble.progress import hms
+
+    tasks = enumerate_tasks(job)
+    print(f"timing {k} step(s) of task 0 (after one untimed step that compiles or loads "
+          "the kernels)...", file=sys.stderr, flush=True)
+    real = Realisation(job, tasks[0])
+    real.advance(1)
+    t0 = time.perf_counter()
+    real.advance(k)
+    per_step = (time.perf_counter() - t0) / k
+    rpt, groups = job.ensemble.ranks_per_task, max(ranks // job.ensemble.ranks_per_task, 1)
+    steps = {t.task_id: float(t.n_steps) for t in tasks}
+    makespan = max(sum(steps[tid] for tid in group) for group in assign(steps, groups))
+    core_hours = sum(steps.values()) * per_step * rpt / 3600.0
+    note = "" if rpt == 1 else (f"; timed on one rank, the {rpt} ranks of a task share "
+                                "its solves, so its steps will be faster")
+    return (f"  cost (measured: {per_step:.3g} s per step of task 0 on this machine{note}): "
+            f"{core_hours:.3g} core-hours, wall time {hms(makespan * per_step)} on "
+            f"{ranks} rank(s)")
 
 
 def summary(job) -> str:
@@ -154,11 +243,14 @@ def _add_run(subparsers) -> None:
                     "output.checkpoint_every may differ), the run resumes from its last "
                     "checkpoint, with any number of ranks. SIGTERM, SIGINT or SIGUSR1 stop "
                     "the run cleanly after a checkpoint (under mpirun send SIGUSR1 to "
-                    "mpirun: it forwards it; on SIGTERM mpirun kills the ranks after 1 s). "
+                    "mpirun: it forwards it, exit 3; SIGTERM to mpirun is forwarded too, but mpirun "
+                    "exits 1 and kills ranks still running after about 1 s: the file is "
+                    "resumable either way). "
                     "Per-rank logs go to RUN.h5.logs/.",
-        epilog="exit status: 0 complete, 1 internal error (the job was aborted; rerun to "
-               "resume), 2 bad input (nothing written), 3 stopped by a signal (rerun to "
-               "resume)")
+        epilog="exit status: 0 complete; 1 not finished: a rank failed (see its message) or "
+               "mpirun itself was terminated (SIGTERM to mpirun), committed data intact, rerun "
+               "to resume; 2 bad input or resources (nothing written); 3 stopped cleanly by a "
+               "signal (rerun to resume)")
     add_job_arguments(parser)
     parser.add_argument("-o", "--output", required=True, metavar="RUN.h5",
                         help="the run file (HDF5): created, or resumed if it exists")
@@ -190,7 +282,8 @@ def _add_info(subparsers) -> None:
         description="Check a run file written by 'sdmpi run' and print its job, the "
                     "progress of every task and the versions that wrote it. Read-only; "
                     "works while the run is going on.",
-        epilog="exit status: 0, or 2 if the file is not an intact sdmpi run file")
+        epilog="exit status: 0, or 2 if the file is not an intact sdmpi run file (including "
+               "committed data failing their checksums: each is listed)")
     parser.add_argument("run", metavar="RUN.h5", help="the run file")
     parser.add_argument("--job", action="store_true",
                         help="print the stored job (canonical TOML) instead")
@@ -210,6 +303,14 @@ def _info(args) -> int:
         print(run.job_text, end="")
     else:
         print(info_text(run, lock_holder(args.run)))
+    if run.damage:
+        print(f"{args.run}: DAMAGED: {len(run.damage)} checksum mismatch(es):", file=sys.stderr)
+        for damage in run.damage:
+            print(f"  {damage}", file=sys.stderr)
+        print("'sdmpi run' with the same job recomputes the damaged steps (bit for bit) from "
+              "the last intact checkpoint before them; 'sdmpi reduce' refuses damaged "
+              "samples", file=sys.stderr)
+        return EXIT_BAD_INPUT
     return EXIT_OK
 
 
@@ -238,6 +339,12 @@ def info_text(run, running=None) -> str:
                                                  else f"{100.0 * p / task.n_steps:.0f}%")
         lines.append(f"  {task.task_id:>6}  {task.phi:>6.4g}  {omega:>10}  "
                      f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
+    if not run.checksummed:
+        lines.append("checksums: none (written by an sdmpi without them); data not verified")
+    elif run.damage:
+        lines.append(f"checksums: {len(run.damage)} mismatch(es), see below")
+    else:
+        lines.append("checksums: every committed sample and checkpoint verified")
     lines.append("versions: " + ", ".join(f"{k} {v}" for k, v in run.versions.items()))
     lines.append(f"units: time {a['time_unit']}, stress {a['stress_unit']}, "
                  f"stress components {a['component_order']}")
@@ -253,9 +360,11 @@ def _add_reduce(subparsers) -> None:
         description="Reduce one or several run files of the same system (jobs differing "
                     "only in seed and number of realisations) to G', G'', eta', eta'' per "
                     "(phi, omega) and contribution (medium, hydrodynamic, brownian, "
-                    "interparticle, total), each with one standard error from the spread "
-                    "between realisations (blocking within one). Writes OUTDIR/moduli.csv, "
-                    "OUTDIR/moduli.h5 and PNG figures; steady-shear jobs give "
+                    "interparticle, total), each with one standard error: the larger of the "
+                    "spread between realisations and the blocking error within them "
+                    "(OUTDIR/errors.csv says which). Writes OUTDIR/moduli.csv, "
+                    "OUTDIR/moduli.h5, errors.csv, units.json (the unit of every column) "
+                    "and PNG figures, each written whole or not at all; steady-shear jobs give "
                     "viscosity.csv/.h5 instead. Uses the committed samples only, so it works "
                     "on a run that is unfinished or still going (and says so). Units: omega "
                     "in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m.",
@@ -268,25 +377,50 @@ def _add_reduce(subparsers) -> None:
                         help="task (of the first file) for the Lissajous figure; default: "
                              "the first (phi, omega) task with the most analysed periods")
     parser.add_argument("--no-plots", action="store_true", help="write the tables only")
+    parser.add_argument(
+        "--medium", action="append", default=[], metavar="SPEC",
+        help="also reduce the run as if its medium were SPEC, applied after the fact to "
+             "the stored viscous hydrodynamic stress (Schaink et al. 2000 eqs. 33-35: the "
+             "trajectories are the same), into OUTDIR/<medium>/ (e.g. maxwell_lambda0.5); "
+             "SPEC is 'newtonian', 'maxwell:eta=E,lambda=L[;eta=E,lambda=L...]' (eta "
+             "relative to eta_m, summing to 1; lambda in t_D) or a TOML file with a "
+             "[medium] table; may be repeated (see docs/reduce.md)")
     parser.set_defaults(handler=_reduce)
 
 
 def _reduce(args) -> int:
     import warnings
 
+    from .analysis.medium_view import MediumError, label, parse_medium
     from .analysis.reduce import PartialRunWarning, ReduceError, reduce_runs
-    from .analysis.report import format_table, write_all
+    from .analysis.report import check_output_dir, format_table, write_all
 
     try:
+        media = [parse_medium(spec) for spec in args.medium]
+        names = [label(m) for m in media]
+        if len(set(names)) < len(names):
+            raise ReduceError(f"--medium: the same medium is given twice ({', '.join(names)})")
+        check_output_dir(args.output)
+        views = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
             red = reduce_runs(args.runs)
+            for medium, name in zip(media, names):
+                views.append((name, reduce_runs(args.runs, medium=medium)))
         paths, notes = write_all(red, args.output, plots=not args.no_plots,
                                  task_id=args.task)
-    except ReduceError as err:
+        for name, view in views:
+            more, view_notes = write_all(view, os.path.join(args.output, name),
+                                         plots=not args.no_plots, task_id=args.task)
+            paths += more
+            notes += [f"{name}: {n}" for n in view_notes]
+    except (ReduceError, MediumError) as err:
         print(f"sdmpi reduce: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     print(format_table(red))
+    for name, view in views:
+        print(f"\n{name} (medium applied after the fact):")
+        print(format_table(view))
     if not red.complete:
         print(f"PARTIAL RUN: {int((red.committed < red.n_steps).sum())} of "
               f"{red.committed.size} tasks unfinished; reduced what is committed",
@@ -330,7 +464,12 @@ def main(argv=None, *, realisation_factory=None) -> int:
         return EXIT_BAD_INPUT
     if realisation_factory is not None:
         args.realisation_factory = realisation_factory
-    return args.handler(args)
+    try:
+        return args.handler(args)
+    except BrokenPipeError:  # the reader went away (e.g. `sdmpi info RUN.h5 | head`)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout
+        return EXIT_OK
 
 
 if __name__ == "__main__":

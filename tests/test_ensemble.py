@@ -118,7 +118,8 @@ def test_reference_layout(reference, job_file):
         assert samples["stress_hydrodynamic_maxwell"].shape == (N_STEPS, 6)
         assert samples["time"].attrs["unit"] == "t_D"
         assert f["tasks/000005"].attrs["realisation"] == 1
-        assert sorted(f["checkpoints/000005"]) == ["slot0", "slot1", "slot_step"]
+        assert sorted(f["checkpoints/000005"]) == ["sample_crc", "slot0", "slot1", "slot_step",
+                                                   "state_crc"]
     assert (logs(reference) / "rank-0.log").read_text().count("complete") == N_TASKS
 
 
@@ -161,6 +162,20 @@ def test_sigkill_then_resume_bit_identical(reference, job_file, tmp_path, kills,
     assert res.returncode == 0, res.stderr
     assert "resuming" in res.stdout
     assert task_data(out) == task_data(reference)
+    assert current_checksums(out) == current_checksums(reference)
+
+
+def current_checksums(path):
+    """Per task, the sample and state checksums of the current checkpoint slot; asserts
+    that the file verifies."""
+    from sdmpi.ensemble.store import inspect
+
+    summary = inspect(path)
+    assert summary.checksummed and summary.damage == ()
+    with h5py.File(path, "r") as f:
+        return {t.task_id: (f[f"checkpoints/{t.task_id:06d}/sample_crc"][s].tobytes(),
+                            f[f"checkpoints/{t.task_id:06d}/state_crc"][s].tobytes())
+                for t, s in zip(summary.tasks, summary.slots)}
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
@@ -283,7 +298,8 @@ def test_bad_run_file_refused_untouched(reference, job_file, tmp_path, name):
     assert info.returncode == 2 and message in info.stderr, info.stderr
     res = sdmpi("run", job_file, "-o", out)
     assert res.returncode == 2 and message in res.stderr, res.stderr
-    assert "--new" in res.stderr
+    # --new is offered only for what is (or was, before damage) an sdmpi run file
+    assert ("--new" in res.stderr) == (name not in ("foreign HDF5", "text")), res.stderr
     assert digest(out) == before
     assert os.listdir(tmp_path) == ["run.h5"]
 

@@ -68,6 +68,24 @@ def test_progress_line():
     assert hms(3725.4) == "1:02:05"
 
 
+def test_progress_rate_on_the_first_line(monkeypatch):
+    """The rate clock starts at the first counted step, not at the first printed line, so
+    the first line printed after it (5 s later) already shows a rate and an ETA."""
+    from sdmpi.ensemble import progress
+
+    clock = [100.0]
+    monkeypatch.setattr(progress.time, "monotonic", lambda: clock[0])
+    stream = io.StringIO()
+    comm = types.SimpleNamespace(rank=0, iprobe=lambda **kwargs: False)
+    p = Progress(comm, [0], (0, 4), (0, 1000), stream)
+    clock[0] = 103.0
+    p.add(steps=10)                # the first step (start-up and compilation before it)
+    clock[0] = 105.0               # first line due (plain lines: every 5 s at first)
+    p.add(steps=90)
+    assert stream.getvalue() == ("tasks 0/4 done | steps 100/1000 (10.0%) | 45 steps/s | "
+                                 "elapsed 0:00:05 | ETA 0:00:20\n")
+
+
 
 def test_petsc_backend_without_petsc4py_is_bad_input(monkeypatch):
     """A job whose backend needs PETSc (named, or "auto" with ranks_per_task > 1), on a

@@ -41,6 +41,10 @@ def load_job(path, overrides=()) -> Job:
     except UnicodeDecodeError as err:
         why = f"not UTF-8 text (bad byte at offset {err.start}); TOML files are UTF-8"
         raise JobError([Problem(source, why)], source) from None
+    if not text.strip():
+        why = ("the job file is empty; write at least a [job] table with name = \"...\" "
+               "(every other key has a default: docs/job_keys.md)")
+        raise JobError([Problem(source, why)], source)
     return parse_job(text, overrides, source=source)
 
 

@@ -26,6 +26,36 @@ LINES_EVERY = (5.0, 300.0)  # s, plain lines: bounds of elapsed / 10
 LAUNCHER_VARS = ("OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK")
 
 
+class PipeSafe:
+    """A text stream whose reader may go away (``sdmpi run ... | head``): once a write
+    finds the pipe broken, further output is dropped and the run goes on (the per-rank
+    logs keep everything)."""
+
+    def __init__(self, stream):
+        self.stream, self.broken = stream, False
+
+    def isatty(self) -> bool:
+        return self.stream.isatty()
+
+    def write(self, text: str) -> None:
+        self._guard(self.stream.write, text)
+
+    def flush(self) -> None:
+        self._guard(self.stream.flush)
+
+    def _guard(self, call, *args) -> None:
+        if self.broken:
+            return
+        try:
+            call(*args)
+        except BrokenPipeError:
+            self.broken = True
+            try:  # no second error when the interpreter flushes the stream at exit
+                os.dup2(os.open(os.devnull, os.O_WRONLY), self.stream.fileno())
+            except (OSError, ValueError, AttributeError):
+                pass
+
+
 def logs_dir(output) -> Path:
     """The log directory of a run file: ``RUN.h5.logs`` (per-rank logs and the lock)."""
     return Path(str(output) + ".logs")
@@ -113,6 +143,7 @@ class Progress:
         now = time.monotonic()
         if self.rank == 0:
             self._poll()
+            self._start_clock(now)
             if self._due(now):
                 self._print(now)
         elif self.is_leader and now - self._last_send >= SEND_EVERY:
@@ -125,6 +156,7 @@ class Progress:
             while len(self.finished) < len(self.others):
                 self._poll()
                 now = time.monotonic()
+                self._start_clock(now)
                 if self._due(now):
                     self._print(now)
                 time.sleep(0.05)
@@ -157,17 +189,24 @@ class Progress:
             if final:
                 self.finished.add(source)
 
+    def _session(self) -> int:
+        """Steps done this session, on every rank as far as rank 0 knows."""
+        return self.steps + sum(s for s, _ in self.remote.values())
+
+    def _start_clock(self, now: float) -> None:
+        """Start the rate clock when the first steps are seen, so that start-up (imports,
+        kernel compilation, initial configurations, the first step) does not skew it."""
+        if self._first is None and self._session() > 0:
+            self._first = (now, self._session())
+
     def line(self, now: float) -> str:
         """The progress line: tasks done, steps done, steps/s, ETA."""
-        session = self.steps + sum(s for s, _ in self.remote.values())
+        session = self._session()
         steps = self.steps_before + session
         tasks = self.tasks_before + self.tasks + sum(t for _, t in self.remote.values())
         elapsed = max(now - self.start, 1e-9)
-        # the rate is measured from the first reported step on, so that start-up
-        # (imports, compiled-kernel loading, initial configurations) does not skew the ETA
-        if self._first is None and session > 0:
-            self._first = (now, session)
-        rate, eta = "?", "?"  # until two reports are apart (a run shorter than that: "?")
+        self._start_clock(now)
+        rate, eta = "?", "?"  # until steps were seen at two times (a very short run: "?")
         if self._first is not None and now > self._first[0] and session > self._first[1]:
             per_second = (session - self._first[1]) / (now - self._first[0])
             rate, eta = f"{per_second:.3g}", hms((self.steps_total - steps) / per_second)

@@ -24,6 +24,7 @@ valid, and running the same command resumes.
 from __future__ import annotations
 
 import datetime
+import errno
 import json
 import os
 import platform
@@ -40,12 +41,13 @@ import numpy as np
 from mpi4py import MPI
 
 from .. import __version__
+from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
-                      parse_job, resume_hash)
+                      parse_job, resources, resume_hash)
 from . import store
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
-from .progress import Progress, RunLocked, logs_dir, rank_logger, take_lock
+from .progress import PipeSafe, Progress, RunLocked, logs_dir, rank_logger, take_lock
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
 
@@ -65,6 +67,7 @@ class Plan:
     slots: tuple       # current checkpoint slot per task (-1: none)
     versions: str      # JSON
     created: str       # UTC ISO 8601
+    notes: tuple = ()  # damage found by the checksums, and where tasks resume instead
 
 
 def run(job_path, overrides, output, *, new=False, realisation_factory=None,
@@ -82,16 +85,32 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
     lock = None
     try:
         plan, lock = _agree(comm, job_path, overrides, Path(output), new)
-        return _execute(comm, plan, Path(output), realisation_factory, stream or sys.stdout)
+        return _execute(comm, plan, Path(output), realisation_factory,
+                        PipeSafe(stream or sys.stdout))
     except BadInput:
         raise
-    except Exception:  # a bug or a failing realisation: stop every rank, keep the file
-        sys.stderr.write(f"sdmpi run: rank {comm.rank} failed:\n{traceback.format_exc()}")
+    except Exception as err:  # a bug or a failing realisation: stop every rank, keep the file
+        if _file_system_full(err):
+            sys.stderr.write(f"sdmpi run: rank {comm.rank}: cannot write {output}: the file "
+                             f"system is full ({err}). Everything up to the last checkpoint "
+                             "is committed: free some space, then run the same command "
+                             "again to resume.\n")
+        else:
+            sys.stderr.write(f"sdmpi run: rank {comm.rank} failed:\n{traceback.format_exc()}")
         sys.stderr.flush()
         comm.Abort(1)
     finally:
         if lock is not None:
             os.close(lock)
+
+
+def _file_system_full(err: BaseException) -> bool:
+    """Whether an error is a full file system or an exceeded quota (h5py reports HDF5's
+    write failures as OSError with the C errno in the message)."""
+    text = str(err)
+    return isinstance(err, OSError) and (
+        err.errno in (errno.ENOSPC, errno.EDQUOT) or "No space left" in text
+        or "quota exceeded" in text.lower())
 
 
 def _agree(comm, job_path, overrides, out: Path, new: bool):
@@ -150,6 +169,7 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job)
     _check_output(out, new)
+    _check_resources(job, job_path, out, new, size)
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
             datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
@@ -157,13 +177,19 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
         try:
             summary = store.inspect(out)
         except store.StoreError as err:
-            raise BadInput(f"{err}\nLeft untouched. Use --new to replace it, or choose "
-                           f"another output file (-o).") from None
+            advice = ("Use --new to replace it, or choose another output file (-o)."
+                      if store.is_run_file(out) else "Choose another output file (-o).")
+            raise BadInput(f"{err}\nLeft untouched. {advice}") from None
         if resume_hash(summary.job) != resume_hash(job):
             raise BadInput(_different_job(out, summary.job, job))
-        mode = "complete" if summary.complete else "resume"
-        return Plan(canonical_text(job), mode, tuple(int(p) for p in summary.progress),
-                    summary.slots, *meta)
+        progress = tuple(step for step, _ in summary.resume)
+        slots = tuple(slot for _, slot in summary.resume)
+        notes = tuple(f"damaged: {d}" for d in summary.damage) + tuple(
+            f"task {t.task_id}: recomputing from step {step} (committed up to {done}), "
+            f"bit for bit as before the damage"
+            for t, step, done in zip(tasks, progress, summary.progress) if step < done)
+        mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
+        return Plan(canonical_text(job), mode, progress, slots, *meta, notes)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
 
 
@@ -182,6 +208,24 @@ def _check_backend(job) -> None:
         raise BadInput(f"solver.backend = {backend!r} needs PETSc here: {err}") from None
 
 
+def _check_resources(job, job_path, out: Path, new: bool, size: int) -> None:
+    """Refuse a job that cannot fit: the memory of the ranks on this machine, and (for a
+    run file still to be created) the room for it in the output's file system."""
+    from ..hydro.solvers import backend_for
+
+    rpt = job.ensemble.ranks_per_task
+    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
+    busy = min(resources.ranks_on_this_node(size), len(enumerate_tasks(job)) * rpt)
+    problems = resources.start_problems(job) or resources.memory_problems(
+        job, backend, busy, resources.available_memory())
+    if new or not out.exists():
+        replaced = out.stat().st_size if out.exists() else 0
+        problems += resources.disk_problems(job, store.run_file_bytes(job) - replaced,
+                                            out.parent)
+    if problems:
+        raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
+
+
 def _check_output(out: Path, new: bool) -> None:
     parent = out.parent
     if not parent.is_dir():
@@ -192,6 +236,9 @@ def _check_output(out: Path, new: bool) -> None:
         raise BadInput(f"{out}: is a directory; -o names the run file (e.g. run.h5)")
     if out.exists() and not new and not os.access(out, os.R_OK | os.W_OK):
         raise BadInput(f"{out}: exists but is not readable and writable")
+    if out.exists() and new and not store.is_run_file(out):
+        raise BadInput(f"{out}: exists and is not an sdmpi run file; --new replaces only "
+                       f"sdmpi run files. Left untouched: choose another output file (-o)")
     logs = logs_dir(out)
     if logs.exists() and not logs.is_dir():
         raise BadInput(f"{logs}: exists and is not a directory (the run's log directory)")
@@ -271,7 +318,8 @@ class _Driver:
         self.rank = comm.rank
         self.log = rank_logger(logs_dir(out), self.rank)
         self.stop = _Stop()
-        self.t_step = self.t_io = 0.0  # s: stepping, HDF5 writes + checkpoints
+        self.t_step = self.t_io = self.t_checksum = 0.0  # s: stepping, HDF5 writes +
+        # checkpoints, the checksums' part of the latter
 
     def say(self, text: str) -> None:
         """Rank 0: print (and log) one line."""
@@ -290,12 +338,17 @@ class _Driver:
                       f"{socket.gethostname()}; tasks {mine}")
         todo = [t for t in tasks if plan.progress[t.task_id] < t.n_steps]
         steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
+        for note in plan.notes:
+            self.say(f"WARNING: {note}")
         if plan.mode == "resume":
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")
         self.say(f"job {job.job.name!r}: {len(todo)} tasks to run ({steps_todo} steps) on "
                  f"{comm.size} rank(s), {rpt} per task -> {self.out}")
 
+        if not kernels_cached():
+            self.say("compiling the numba kernels (the first run of this installation, "
+                     "or one without a writable cache: about 30 s before the first step)")
         self.stop.install()
         try:
             # with ranks_per_task > 1 every rank of a group builds and steps the same
@@ -325,6 +378,7 @@ class _Driver:
                 wall = time.perf_counter() - t0
                 progress.finish()
             finally:
+                self.t_checksum = run_file.t_checksum
                 run_file.close()
         finally:
             self.stop.restore()
@@ -361,6 +415,8 @@ class _Driver:
         start, slot = self.plan.progress[tid], self.plan.slots[tid]
         if start > 0:
             real.set_state(run_file.read_state(tid, slot))
+        if leader:
+            run_file.begin(tid, slot, start)
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every
@@ -409,11 +465,12 @@ class _Driver:
     def _summary(self, wall: float, unfinished: int, n_tasks: int) -> None:
         wall_all = self.comm.allreduce(wall)
         io_all = self.comm.allreduce(self.t_io)
+        crc_all = self.comm.allreduce(self.t_checksum)
         share = 100.0 * io_all / wall_all if wall_all > 0 else 0.0
         self.log.info(f"done: wall {wall:.3g} s, stepping {self.t_step:.3g} s, HDF5 writes + "
-                      f"checkpoints {self.t_io:.3g} s")
+                      f"checkpoints {self.t_io:.3g} s (checksums {self.t_checksum:.3g} s)")
         io_text = (f"HDF5 writes + checkpoints {io_all:.3g} s = {share:.2f}% of "
-                   f"{wall_all:.3g} s rank time")
+                   f"{wall_all:.3g} s rank time (checksums {crc_all:.2g} s of it)")
         if unfinished == 0:
             self.say(f"{self.out}: complete ({n_tasks} tasks); {io_text}")
         else:

@@ -10,9 +10,15 @@ Three ways in:
 * :func:`inspect` (one process, read-only): validate a file and summarise it, or raise
   :class:`StoreError` saying what is wrong. Used before resuming and by ``sdmpi info``.
 
-A checkpoint commits ``[samples -> state slot -> slot step -> fsync -> /progress]`` in that
-order, into the slot that is *not* current, so ``/progress`` only ever points at data that
-are completely on disk.
+A checkpoint commits ``[samples -> state slot and checksums -> slot step -> fsync ->
+/progress]`` in that order, into the slot that is *not* current, so ``/progress`` only ever
+points at data that are completely on disk.
+
+Checksums: CRC-32 (``zlib.crc32``, ISO 3309) of every sample dataset over fixed blocks of
+rows (``checksum_block`` rows, fixed when the file is created) and of every state dataset
+of a slot. Each slot holds the sample checksums of all rows before its step, so a slot is
+a self-contained, verifiable picture of the task up to its step. :func:`inspect` verifies
+them and says, per task, from where a resume may safely continue.
 """
 
 from __future__ import annotations
@@ -21,6 +27,8 @@ import hashlib
 import json
 import math
 import os
+import time
+import zlib
 from dataclasses import dataclass
 
 import h5py
@@ -35,6 +43,10 @@ FORMAT_VERSION = 1
 COMPONENT_ORDER = "xx yy zz xy xz yz"
 #: stress unit of each time unit (eta_m / time unit)
 STRESS_UNITS = {"t_D": "eta_m/t_D", "1/gamma_dot": "eta_m gamma_dot"}
+
+
+#: at most this many checksum blocks per task (larger blocks for longer tasks)
+MAX_CHECKSUM_BLOCKS = 4096
 
 
 class StoreError(Exception):
@@ -71,6 +83,18 @@ class TaskLayout:
         radii = getattr(realisation, "radii", None)
         radii = (1.0,) * n if radii is None else tuple(float(a) for a in radii)
         return cls(samples, state, tuple(float(x) for x in realisation.box), n, radii)
+
+
+def crc32(values, dtype=None, running: int = 0) -> int:
+    """CRC-32 of an array's bytes (C order, as ``dtype``, default its own), continuing
+    ``running`` (the CRC of what precedes it)."""
+    return zlib.crc32(np.ascontiguousarray(values, dtype=dtype).view(np.uint8), running)
+
+
+def checksum_block(job, task: Task) -> int:
+    """Rows of a task's sample stream covered by one checksum: ``output.checkpoint_every``
+    at creation, larger for tasks of more than MAX_CHECKSUM_BLOCKS such blocks."""
+    return max(job.output.checkpoint_every, -(-task.n_steps // MAX_CHECKSUM_BLOCKS))
 
 
 def _nan_if_none(x):
@@ -137,10 +161,40 @@ def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
         ds.attrs.update({"unit": unit, "description": description})
     ckpt = f.create_group(f"checkpoints/{key}")
     ckpt.create_dataset("slot_step", (2,), "i8", fillvalue=-1, track_times=False)
+    block = checksum_block(job, task)
+    fields = sorted(layout.sample_fields)
+    table = ckpt.create_dataset("sample_crc", (2, -(-task.n_steps // block), len(fields)), "u4",
+                                fillvalue=0, track_times=False)
+    table.attrs.update({"block": block, "fields": " ".join(fields), "description":
+                        "per slot: CRC-32 of each sample dataset's rows [b*block, "
+                        "min((b+1)*block, slot step)) for block b"})
+    names = sorted(layout.state_fields)
+    slot_crc = ckpt.create_dataset("state_crc", (2, len(names) + 1), "u4", fillvalue=0,
+                                   track_times=False)
+    slot_crc.attrs.update({"fields": " ".join(names + ["sample_crc"]), "description":
+                           "per slot: CRC-32 of each state dataset, then of the slot's row "
+                           "of sample_crc"})
     for slot in (0, 1):
         sg = ckpt.create_group(f"slot{slot}")
         for name, (shape, dtype) in layout.state_fields.items():
             sg.create_dataset(name, shape, dtype, track_times=False)
+
+
+#: bytes per task for groups, attributes and dataset headers (measured: about 12 KiB)
+TASK_OVERHEAD = 16 * 2 ** 10
+#: state bytes per particle and slot assumed by the estimate (positions, Maxwell modes,
+#: contact history: a generous bound)
+STATE_PER_PARTICLE = 16 * 8
+
+
+def run_file_bytes(job) -> float:
+    """Estimated size of a job's run file: every sample dataset (exact: they are all
+    allocated at creation), two state slots per task and the per-task overhead."""
+    from ..dynamics.realisation import sample_fields
+
+    row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
+    per_task = TASK_OVERHEAD + 2 * STATE_PER_PARTICLE * job.system.n_particles
+    return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job)))
 
 
 # --------------------------------------------------------------------------- write
@@ -156,6 +210,8 @@ class RunFile:
         self.file = _open_collective(path, "r+", comm)
         self._fd = os.open(path, os.O_RDONLY)  # for fsync, independent of MPI-IO
         self._progress = self.file["progress"]
+        self._checksums = {}  # task id -> (sample checksum table, block) being extended
+        self.t_checksum = 0.0  # s spent computing checksums
 
     def close(self) -> None:
         """Collective: close the file."""
@@ -183,6 +239,20 @@ class RunFile:
         group = self.file[f"checkpoints/{task_key(task_id)}/slot{slot}"]
         return {name: ds[()] for name, ds in group.items()}
 
+    def begin(self, task_id: int, slot: int, step: int) -> None:
+        """Prepare a task's commits from checkpoint ``slot`` at ``step`` (-1 and 0: from
+        scratch): take the slot's sample checksums as the running ones, and move
+        ``/progress`` back to ``step`` if the file is ahead of it (a resume that falls back
+        past a damaged checkpoint or damaged samples)."""
+        ckpt = self.file[f"checkpoints/{task_key(task_id)}"]
+        if "sample_crc" in ckpt:  # files written before checksums existed have none
+            table = ckpt["sample_crc"]
+            rows = table[slot] if slot >= 0 else np.zeros(table.shape[1:], "u4")
+            self._checksums[task_id] = (rows, int(table.attrs["block"]))
+        if self._progress[task_id] != step:
+            self._progress[task_id] = step
+            os.fsync(self._fd)
+
     def samples(self, task_id: int) -> dict:
         """name -> dataset of a task's sample stream."""
         group = self.file[f"tasks/{task_key(task_id)}/samples"]
@@ -205,6 +275,16 @@ class RunFile:
         group = ckpt[f"slot{slot}"]
         for name, value in state.items():
             group[name][()] = value
+        if task_id in self._checksums:
+            t0 = time.perf_counter()
+            table, block = self._checksums[task_id]
+            for j, name in enumerate(sorted(datasets)):
+                _extend_checksums(table[:, j], block, start, buffers[name][:n],
+                                  datasets[name].dtype)
+            crcs = [crc32(state[k], group[k].dtype) for k in sorted(state)] + [crc32(table)]
+            self.t_checksum += time.perf_counter() - t0
+            ckpt["sample_crc"][slot] = table
+            ckpt["state_crc"][slot] = crcs
         fault("state")
         slot_step[slot] = stop
         os.fsync(self._fd)                        # all of the above on disk first
@@ -212,12 +292,41 @@ class RunFile:
         self._progress[task_id] = stop
 
 
+def _extend_checksums(column, block: int, start: int, rows, dtype) -> None:
+    """Extend one dataset's block checksums (``column``, one per block) by ``rows``, the
+    samples from row ``start`` on."""
+    lo, stop = start, start + len(rows)
+    while lo < stop:
+        b = lo // block
+        hi = min((b + 1) * block, stop)
+        running = 0 if lo == b * block else int(column[b])
+        column[b] = crc32(rows[lo - start:hi - start], dtype, running)
+        lo = hi
+
+
 # --------------------------------------------------------------------------- inspect
 
 
 @dataclass(frozen=True)
+class Damage:
+    """Committed data that fail their checksum: ``what`` is "samples" (committed samples,
+    which a reduction would read) or "state" (a checkpoint slot); ``where`` names the
+    dataset and step range, or the slot and its step."""
+
+    task_id: int
+    what: str
+    where: str
+
+    def __str__(self) -> str:
+        return f"task {self.task_id}: {self.where}"
+
+
+@dataclass(frozen=True)
 class RunSummary:
-    """A validated run file: its job, per-task progress and current checkpoint slot."""
+    """A validated run file: its job, per-task progress and current checkpoint slot; the
+    checksum verification's findings (``damage``) and, per task, the (step, slot) from
+    which a resume continues safely (``resume``: the current checkpoint when intact, else
+    the latest intact one before any damage, else (0, -1), the task's start)."""
 
     path: str
     job: object
@@ -227,10 +336,33 @@ class RunSummary:
     tasks: tuple
     progress: np.ndarray
     slots: tuple  # current slot per task; -1 when nothing is committed
+    checksummed: bool = False  # False: written before checksums existed (not verified)
+    damage: tuple = ()
+    resume: tuple = ()
 
     @property
     def complete(self) -> bool:
         return all(int(p) == t.n_steps for p, t in zip(self.progress, self.tasks))
+
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def is_run_file(path) -> bool:
+    """Whether ``path`` is (or was, before damage) an sdmpi run file: HDF5 with
+    ``format = "sdmpi-run"``, or, if HDF5 cannot open it, an HDF5 signature and that
+    attribute's value among its first 64 KiB (where the root attributes are written)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("format") == FORMAT
+    except Exception:  # not HDF5, or damaged: look at the bytes
+        pass
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return False
+    return head.startswith(HDF5_SIGNATURE) and FORMAT.encode() in head
 
 
 def inspect(path) -> RunSummary:
@@ -292,5 +424,78 @@ def _inspect(f, path) -> RunSummary:
             for ds in f[f"checkpoints/{key}/slot{current[0]}"].values():
                 ds[()]  # readable
         slots.append(current[0] if current else -1)
+    checksummed = all("sample_crc" in f[f"checkpoints/{task_key(t.task_id)}"] for t in tasks)
+    damage, resume = [], []
+    for task, done, slot in zip(tasks, progress, slots):
+        if checksummed:
+            found, start = _verify_task(f, task, int(done))
+            damage += found
+            resume.append(start)
+        else:
+            resume.append((int(done), slot))
     return RunSummary(path, job, text, attrs, json.loads(attrs["versions"]), tasks, progress,
-                      tuple(slots))
+                      tuple(slots), checksummed, tuple(damage), tuple(resume))
+
+
+def _verify_task(f, task, done: int):
+    """Verify one task's checkpoint slots (state) and committed samples against their
+    checksums. Returns (list of :class:`Damage`, (step, slot) to resume from)."""
+    tid, key = task.task_id, task_key(task.task_id)
+    ckpt = f[f"checkpoints/{key}"]
+    slot_step = ckpt["slot_step"][()]
+    damage, intact = [], []
+    for slot in sorted((0, 1), key=lambda s: -slot_step[s]):
+        step = int(slot_step[slot])
+        if not 0 < step <= done:
+            continue  # never written, being written, or ahead of /progress (not committed)
+        if _slot_intact(ckpt, slot):
+            intact.append((step, slot))
+        else:
+            damage.append(Damage(tid, "state", f"checkpoint slot {slot} (state at step "
+                                               f"{step}) fails its checksum"))
+    verified = intact[0][0] if intact else 0
+    first_bad = done
+    if verified < done:
+        damage.append(Damage(tid, "samples", f"samples of steps {verified}..{done - 1} "
+                                             "cannot be verified (their checkpoint is damaged)"))
+        first_bad = verified
+    if intact:
+        first_bad = min(first_bad, _verify_samples(f[f"tasks/{key}/samples"], ckpt,
+                                                   intact[0], tid, damage))
+    return damage, next((s for s in intact if s[0] <= first_bad), (0, -1))
+
+
+def _slot_intact(ckpt, slot: int) -> bool:
+    """Whether a slot's state datasets and its sample checksums match its state_crc."""
+    group = ckpt[f"slot{slot}"]
+    found = [crc32(group[name][()]) for name in sorted(group)]
+    found.append(crc32(ckpt["sample_crc"][slot]))
+    return found == [int(c) for c in ckpt["state_crc"][slot]]
+
+
+def _verify_samples(samples, ckpt, trusted, tid: int, damage: list) -> int:
+    """Check the sample rows before the intact slot ``trusted`` = (step, slot) against its
+    checksums; append a :class:`Damage` per dataset and damaged step range; return the
+    first damaged row (``trusted`` step if none)."""
+    step, slot = trusted
+    table = ckpt["sample_crc"]
+    block, fields = int(table.attrs["block"]), table.attrs["fields"].split()
+    if fields != sorted(samples):
+        raise StoreError(f"{samples.file.filename}: damaged run file (task {tid}: sample checksums name the datasets "
+                         f"{fields}, the file has {sorted(samples)})")
+    expected = table[slot]
+    first_bad = step
+    for j, name in enumerate(fields):
+        ds, bad = samples[name], []
+        for b in range(-(-step // block)):
+            lo, hi = b * block, min((b + 1) * block, step)
+            if crc32(ds[lo:hi]) != int(expected[b, j]):
+                if bad and bad[-1][1] == lo:
+                    bad[-1][1] = hi
+                else:
+                    bad.append([lo, hi])
+        for lo, hi in bad:
+            damage.append(Damage(tid, "samples", f"samples/{name} of steps {lo}..{hi - 1} "
+                                                 "fail their checksum"))
+        first_bad = min([first_bad] + [lo for lo, _ in bad])
+    return first_bad

@@ -69,6 +69,10 @@ def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torqu
         positions, box, radii, strain, forces, torques, rate_of_strain)
     if not 0.0 < tolerance < 1.0:
         raise ValueError(f"tolerance must be in (0, 1), got {tolerance}")
+    if not 0.0 < ewald_tol < 1.0:
+        raise ValueError(f"ewald_tol must be in (0, 1), got {ewald_tol}")
+    if not isinstance(lubrication, (bool, np.bool_)):
+        raise TypeError(f"lubrication must be True or False, got {lubrication!r}")
     name = resolve_backend(solver, pos.shape[0], comm)
     res = assemble(name, pos, radii, box, strain, lubrication, ewald_tol, max_overlap=MAX_OVERLAP, comm=comm)
     backend = make_solver(name, res, comm, tolerance)

@@ -1,0 +1,135 @@
+"""What a job needs of the machine, estimated from the job alone, and the checks made
+against what is available before any rank starts (``sdmpi validate`` warns, ``sdmpi run``
+refuses with exit 2).
+
+Memory per rank, in bytes (estimates, documented in docs/cli.md):
+
+* the dense solvers hold about ``DENSE_MATRICES`` matrices of the 11N x 11N FTS grand
+  mobility / resistance problem (6 force/torque and 5 stresslet unknowns per sphere),
+  8 bytes per entry; ``petsc-dense`` distributes them over the task's ranks; the
+  matrix-free ``petsc-krylov`` backend needs O(N) and is not estimated;
+* the hard-sphere start's cell list: one 8-byte head per cell of side >= the contact
+  distance 2 a_max, (L / 2 a_max)^3 cells for a cubic box of side L; a very dilute job
+  (phi -> 0) makes L, and this list, explode: more than ``MAX_CELL_BYTES`` is refused on
+  any machine;
+* ``BASE_BYTES`` for the interpreter, numpy, numba and the compiled kernels.
+
+Only the standard library is used, so that ``sdmpi validate`` stays fast.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+
+from .loader import Problem
+
+DENSE_MATRICES = 3          # 11N x 11N matrices alive at once (peak of a dense solve)
+BASE_BYTES = 300 * 2 ** 20  # interpreter, libraries, compiled kernels
+MEMORY_SHARE = 0.9          # of the available memory that a run may plan to use
+MAX_CELL_BYTES = 2 ** 30    # largest start cell list accepted on any machine
+
+
+def gib(n_bytes: float) -> str:
+    """A byte count for people: '1.5 GiB', '300 MiB'."""
+    for unit, scale in (("TiB", 2 ** 40), ("GiB", 2 ** 30), ("MiB", 2 ** 20)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes / 2 ** 10:.3g} KiB"
+
+
+def dense_bytes(job, backend: str) -> float:
+    """Bytes per rank of the dense solver matrices (0 for the matrix-free petsc-krylov)."""
+    if backend == "petsc-krylov":
+        return 0.0
+    size = DENSE_MATRICES * (11 * job.system.n_particles) ** 2 * 8.0
+    return size / job.ensemble.ranks_per_task if backend == "petsc-dense" else size
+
+
+def start_cells_bytes(job) -> float:
+    """Bytes of the start's cell list at the smallest volume (areal) fraction."""
+    system = job.system
+    radii = system.radii if system.size_classes else (1.0,) * system.n_particles
+    reach = 2.0 * max(radii)
+    phi = min(system.phi)
+    if system.geometry == "monolayer":  # areal fraction of discs in a square cell
+        side = math.sqrt(sum(math.pi * r * r for r in radii) / phi)
+        return max(side / reach, 1.0) ** 2 * 8.0
+    side = (sum(4.0 / 3.0 * math.pi * r ** 3 for r in radii) / phi) ** (1.0 / 3.0)
+    return max(side / reach, 1.0) ** 3 * 8.0
+
+
+def memory_per_rank(job, backend: str) -> float:
+    """Estimated peak bytes of one rank running ``job`` with the resolved ``backend``."""
+    return BASE_BYTES + max(dense_bytes(job, backend), start_cells_bytes(job))
+
+
+def available_memory() -> float | None:
+    """Bytes of memory available on this machine (MemAvailable of /proc/meminfo), or None
+    where that is not known."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    return None
+
+
+def ranks_on_this_node(world_size: int) -> int:
+    """Ranks sharing this machine's memory: the launcher's local size if it says
+    (Open MPI, MPICH/Hydra, Slurm), else all ``world_size`` ranks."""
+    for var in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE"):
+        value = os.environ.get(var, "")
+        if value.isdigit() and int(value) > 0:
+            return int(value)
+    return world_size
+
+
+def start_problems(job) -> list[Problem]:
+    """Problems of a job too dilute to start on any machine: a start cell list larger
+    than MAX_CELL_BYTES."""
+    cells = start_cells_bytes(job)
+    if cells <= MAX_CELL_BYTES:
+        return []
+    return [Problem("system.phi", f"so dilute a box needs a start cell list of about "
+                    f"{gib(cells)} (at most {gib(MAX_CELL_BYTES)})", min(job.system.phi),
+                    allowed=f"phi >= {min_phi(job, MAX_CELL_BYTES):.3g} for "
+                            f"N = {job.system.n_particles}")]
+
+
+def memory_problems(job, backend: str, ranks: int, available: float | None) -> list[Problem]:
+    """Problems when ``ranks`` ranks of ``job`` on one machine would need more than
+    MEMORY_SHARE of the ``available`` bytes (none when that is unknown)."""
+    if available is None:
+        return []
+    need, allowed = memory_per_rank(job, backend), MEMORY_SHARE * available / ranks
+    if need <= allowed:
+        return []
+    return [Problem("system.n_particles", f"the job needs about {gib(need)} per rank "
+                    f"({backend} solver: {DENSE_MATRICES} matrices of (11 N)^2 doubles; "
+                    f"start cell list {gib(start_cells_bytes(job))}), more than the "
+                    f"{gib(allowed)} available to each of {ranks} rank(s) here",
+                    job.system.n_particles,
+                    allowed="fewer particles, fewer ranks per machine, or "
+                            "solver.backend = \"petsc-krylov\" (O(N) memory)")]
+
+
+def min_phi(job, cell_bytes: float) -> float:
+    """The smallest volume (areal) fraction whose start cell list fits in ``cell_bytes``
+    (the number of cells, (side / reach)^d, is proportional to 1 / phi)."""
+    return min(job.system.phi) * start_cells_bytes(job) / max(cell_bytes, 8.0)
+
+
+def disk_problems(job, run_file_bytes: float, directory) -> list[Problem]:
+    """Problems when a run file of ``run_file_bytes`` will not fit in ``directory``."""
+    free = shutil.disk_usage(directory).free
+    if run_file_bytes <= free:
+        return []
+    return [Problem("integration.periods", f"the run file needs about "
+                    f"{gib(run_file_bytes)}, but {directory} has {gib(free)} free",
+                    job.integration.periods,
+                    allowed="fewer periods, steps per period, realisations or frequencies, "
+                            "output.per_particle = false, or a file system with more room")]

@@ -1,0 +1,90 @@
+"""Resource checks before any rank starts: memory (dense solvers, the start's cell list),
+run-file size against free disk; `validate` estimates and warns, `run` refuses (exit 2,
+the key named, nothing written)."""
+
+import errno
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+import test_ensemble as ens
+from sdmpi.cli import main
+from sdmpi.config import load_job, parse_job, resources
+from sdmpi.ensemble import runner
+from sdmpi.ensemble.store import run_file_bytes
+
+DEMO = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
+
+
+@pytest.fixture()
+def job_file(tmp_path):
+    path = tmp_path / "job.toml"
+    path.write_text(ens.JOB)
+    return path
+
+
+def test_run_file_size_estimate(job_file, tmp_path):
+    """The estimate is within 5% of the file sdmpi writes (the samples are exact)."""
+    out = tmp_path / "run.h5"
+    assert ens.sdmpi("run", job_file, "-o", out).returncode == 0
+    assert run_file_bytes(load_job(job_file)) == pytest.approx(out.stat().st_size, rel=0.05)
+
+
+def test_dense_job_too_big_for_memory(job_file, tmp_path, capsys):
+    big = ["--set", "system.n_particles=125000"]
+    assert main(["validate", str(job_file), *big]) == 0  # may run elsewhere: a warning
+    out = capsys.readouterr().out
+    assert "memory: about 41.3 TiB per rank" in out  # 3 (11 N)^2 doubles + 300 MiB
+    assert "WARNING: system.n_particles = 125000: the job needs about" in out
+    res = ens.sdmpi("run", job_file, "-o", tmp_path / "run.h5", *big)
+    assert res.returncode == 2 and "system.n_particles = 125000" in res.stderr, res.stderr
+    assert "Nothing written" in res.stderr and "Traceback" not in res.stderr
+    assert sorted(os.listdir(tmp_path)) == ["job.toml"]
+
+
+def test_absurdly_dilute_job_refused(job_file, tmp_path, capsys):
+    dilute = ["--set", "system.phi=[1e-9]"]
+    assert main(["validate", str(job_file), *dilute]) == 2
+    err = capsys.readouterr().err
+    # a box of side (4 pi N / 3 phi)^(1/3) = 3222 in cells of side 2: 31.2 GiB of heads
+    assert "system.phi = 1e-09: so dilute a box needs a start cell list of about 31.2 GiB" in err
+    assert "allowed: phi >= 3.12e-08 for N = 8" in err
+    res = ens.sdmpi("run", job_file, "-o", tmp_path / "run.h5", *dilute)
+    assert res.returncode == 2 and "start cell list" in res.stderr
+    assert sorted(os.listdir(tmp_path)) == ["job.toml"]
+    # the limit itself: a cell list of at most MAX_CELL_BYTES
+    job = parse_job(ens.JOB, ["system.phi=[3.13e-8]"])
+    assert resources.start_cells_bytes(job) <= resources.MAX_CELL_BYTES
+    assert resources.start_problems(job) == []
+
+
+def test_run_file_too_big_for_the_disk(job_file, tmp_path, monkeypatch, capsys):
+    job = load_job(job_file)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(
+        10 ** 9, 10 ** 9 - 1000, 1000))
+    with pytest.raises(runner.BadInput, match=r"integration.periods = 3: the run file needs "
+                                              r"about 357 KiB, but .* has 0.977 KiB free"):
+        runner._check_resources(job, job_file, tmp_path / "run.h5", False, 1)
+    assert main(["validate", str(job_file), "-o", str(tmp_path / "run.h5")]) == 0
+    assert "WARNING: integration.periods = 3: the run file needs" in capsys.readouterr().out
+    assert os.listdir(tmp_path) == ["job.toml"]
+
+
+def test_validate_measures_the_cost(capsys):
+    assert main(["validate", DEMO, "--ranks", "2", "--time-steps", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "run file: about" in out and "memory: about" in out
+    line = next(x for x in out.splitlines() if "cost (measured:" in x)
+    assert "s per step of task 0 on this machine): " in line and "core-hours" in line
+    assert line.endswith("on 2 rank(s)")
+    assert main(["validate", DEMO, "--ranks", "3", "--set", "ensemble.ranks_per_task=2"]) == 2
+
+
+def test_full_file_system_is_recognised():
+    assert runner._file_system_full(OSError(errno.ENOSPC, "No space left on device"))
+    assert runner._file_system_full(OSError("Can't write data (file write failed: errno = "
+                                            "28, error message = 'No space left on device')"))
+    assert not runner._file_system_full(OSError(errno.EACCES, "Permission denied"))
+    assert not runner._file_system_full(ValueError("No space left"))
