@@ -11,7 +11,7 @@ from sdmpi.analysis.projection import project_periods
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.media import MaxwellFilter
-from sdmpi.dynamics.realisation import midpoint_brownian
+from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
 from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
 from sdmpi.hydro.solvers import make_solver
@@ -58,24 +58,50 @@ def _divergences(h=1e-5):
     return base, div_m.reshape(-1, 6), div_a.reshape(-1, 5)
 
 
+def _model(scheme):
+    return ResistanceModel(np.ones(len(CONFIG)), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0,
+                           min_gap=1e-4, scheme=scheme)
+
+
 def test_midpoint_drift_and_brownian_stress_match_finite_difference_divergence():
     """The expectation over z of the midpoint estimates is a quadratic form in z, so the
     symmetric quadrature z = +-e_k (weights 1/2) gives it exactly up to O(dt^2) terms:
     it must equal kT div R_FU^-1 and -kT div(R_SU R_FU^-1) from finite differences."""
     kt, dt = 1.0, 1e-7
     base, div_m, div_a = _divergences()
-    solver = make_solver("dense", base)
+    at = _model("midpoint").at(CONFIG, STRAIN)
     n = len(CONFIG)
     drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
     for k in range(6 * n):
         for sign in (1.0, -1.0):
             z = np.zeros(6 * n)
             z[k] = sign
-            u, s = midpoint_brownian(base, solver, z.reshape(n, 6), kt, dt, _resistance)
-            drift += 0.5 * u
-            stress += 0.5 * s
+            terms = at.brownian_terms(z.reshape(n, 6), kt, dt)
+            drift += 0.5 * terms.velocities
+            stress += 0.5 * terms.stresslets
     assert np.abs(drift[:, :3] - kt * div_m[:, :3]).max() < 1e-3 * np.abs(div_m[:, :3]).max()
     assert np.abs(stress + kt * div_a).max() < 1e-3 * np.abs(div_a).max()
+
+
+def test_rfd_drift_and_brownian_stress_match_finite_difference_divergence():
+    """The rfd estimates are a linear (mean 0) plus a quadratic form in z up to O(epsilon^2)
+    terms, so the quadrature z = +-e_k (weights 1/2) gives their mean exactly: equal to
+    kT div R_FU^-1 and -kT div(R_SU R_FU^-1) from finite differences of step 1e-5 to their
+    truncation and the rounding of a difference over epsilon (1e-5 relative)."""
+    kt, dt = 1.0, 1e-3
+    base, div_m, div_a = _divergences()
+    at = _model("rfd").at(CONFIG, STRAIN)
+    n = len(CONFIG)
+    drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
+    for k in range(6 * n):
+        for sign in (1.0, -1.0):
+            z = np.zeros(6 * n)
+            z[k] = sign
+            terms = at.brownian_terms(z.reshape(n, 6), kt, dt)
+            drift += 0.5 * terms.velocities
+            stress += 0.5 * terms.stresslets
+    assert np.abs(drift - kt * div_m).max() < 1e-5 * np.abs(div_m[:, :3]).max()
+    assert np.abs(stress + kt * div_a).max() < 1e-5 * np.abs(div_a).max()
 
 
 def test_single_sphere_self_diffusion_in_periodic_box():
