@@ -13,7 +13,7 @@ from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.media import MaxwellFilter
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
-from sdmpi.hydro.resistance import grand_resistance
+from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
 from sdmpi.hydro.solvers import make_solver
 
 BOX = np.array([7.0, 7.0, 7.0])
@@ -54,21 +54,8 @@ def _divergences(h=1e-5):
     """Centred finite differences over the 3N translations (pair sets frozen) of
     M = R_FU^-1 (6N x 6N) and A = R_SU R_FU^-1 (5N x 6N): sum_j dM_ij/dx_j, sum_j dA_ij/dx_j."""
     base = _resistance(CONFIG)
-    n = len(CONFIG)
-    div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
-    for p in range(n):
-        for c in range(3):
-            mats = []
-            for sign in (1, -1):
-                pos = base.positions.copy()
-                pos[p, c] += sign * h
-                r_fu, _, r_su, _ = _resistance(pos, base.plan).blocks()
-                m = np.linalg.inv(r_fu)
-                mats.append((m, r_su @ m))
-            col = 6 * p + c
-            div_m += (mats[0][0][:, col] - mats[1][0][:, col]) / (2 * h)
-            div_a += (mats[0][1][:, col] - mats[1][1][:, col]) / (2 * h)
-    return base, div_m.reshape(n, 6), div_a.reshape(n, 5)
+    div_m, div_a = mobility_divergence(_resistance, base, h)
+    return base, div_m.reshape(-1, 6), div_a.reshape(-1, 5)
 
 
 def _model(scheme):

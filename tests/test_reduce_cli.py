@@ -106,3 +106,19 @@ def test_a_failure_while_writing_leaves_earlier_outputs_untouched(tmp_path, monk
     monkeypatch.setattr(report, "write_h5", broken)
     assert main(["reduce", str(run), "-o", str(out), "--no-plots"]) == 2
     assert {n: (out / n).read_bytes() for n in listing(out)} == before
+
+
+def test_a_closed_pipe_is_no_error(tmp_path):
+    """`sdmpi reduce ... | true` (a reader that is gone before the table is printed, as
+    `| head` after its lines): exit 0, no BrokenPipeError traceback, outputs whole."""
+    import subprocess
+    import sys
+    run = tmp_path / "run.h5"
+    write_run(run, job_text(realisations=2), MODULI, noise=0.002, seed=3)
+    out = tmp_path / "out"
+    cmd = (f"{sys.executable} -m sdmpi.cli reduce {run} -o {out} --no-plots | true; "
+           f"exit ${{PIPESTATUS[0]}}")
+    res = subprocess.run(["bash", "-c", cmd], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "Traceback" not in res.stderr and "BrokenPipe" not in res.stderr
+    assert FILES <= set(listing(out))
