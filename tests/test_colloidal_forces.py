@@ -143,8 +143,8 @@ def test_force_law_from_job_in_force_units():
      ["interparticle.debye_length", "double-layer force", "shorter debye_length"]),
     ('kind = "vdw"\nhamaker = 1.0\ncap_gap = 0.01\n[hydrodynamics]\nlubrication_cutoff = 0.005\n',
      ["interparticle.cap_gap", "lubrication_cutoff (= 0.005)"]),
-    ('kind = "vdw"\nhamaker = 1.0\ncap_gap = 0.01\n[hydrodynamics]\nlubrication = false\n',
-     ["hydrodynamics.lubrication", "pair list"]),
+    ('kind = "vdw"\nhamaker = 1.0\ncap_gap = 0.01\n[hydrodynamics]\nmodel = "free-draining"\n'
+     'lubrication = false\n', ["hydrodynamics.lubrication", "stokesian model only"]),
     ('kind = "van der waals"\n', ["interparticle.kind", "not a valid choice"]),
 ])
 def test_colloidal_keys_are_validated(extra, fragments):
