@@ -51,6 +51,7 @@ test: setup
 bench: setup
 	$(VPY) bench/bench_hydro.py --out bench/results.json
 	$(VPY) bench/bench_ensemble.py
+	$(VPY) bench/bench_step.py --out bench/step.json
 
 clean:
 	rm -rf $(VENV) .numba_cache build *.egg-info

@@ -301,13 +301,33 @@ def _frictional(job):
     return problems
 
 
-def _forces_need_pairs(job):
-    if job.interparticle.kind != "none" and not job.hydrodynamics.lubrication:
-        return [Problem("hydrodynamics.lubrication", "interparticle forces act on the "
-                        "lubrication pair list; without lubrication only overlapping pairs "
-                        "would feel them", False,
-                        allowed='true, or interparticle.kind = "none"')]
-    return []
+def _model(job):
+    """What the hydrodynamic models support (sdmpi.dynamics.models): lubrication is the
+    Stokesian model's; monolayers and frictional contacts are built on lubrication; the
+    rfd drift needs a direct solver (a difference over a length ~1e-6 a would be swamped
+    by an iterative solver's tolerance)."""
+    hyd, problems = job.hydrodynamics, []
+    if hyd.model != "stokesian" and not hyd.lubrication:
+        problems.append(Problem("hydrodynamics.lubrication", "applies to the stokesian model "
+                                "only (lubrication = false there is the far-field model)", False,
+                                allowed=f'true (the default) with hydrodynamics.model = "{hyd.model}"'))
+    if hyd.model != "stokesian" and job.system.geometry == "monolayer":
+        problems.append(Problem("hydrodynamics.model", "monolayers are simulated with full "
+                                "Stokesian dynamics only", hyd.model, allowed='"stokesian"'))
+    if hyd.model != "stokesian" and job.interparticle.kind == "frictional":
+        problems.append(Problem("hydrodynamics.model", "frictional contacts need the "
+                                "lubrication of the stokesian model", hyd.model, allowed='"stokesian"'))
+    if hyd.model == "free-draining" and job.ensemble.ranks_per_task > 1:
+        problems.append(Problem("ensemble.ranks_per_task", "a free-draining realisation has "
+                                "nothing to solve on several ranks", job.ensemble.ranks_per_task,
+                                allowed='1 with hydrodynamics.model = "free-draining"'))
+    if job.brownian.scheme == "rfd" and hyd.model != "free-draining" and \
+            job.solver.backend == "petsc-krylov":
+        problems.append(Problem("brownian.scheme", "the random finite difference takes a "
+                                "difference over ~1e-6 a, which an iterative solver's tolerance "
+                                "would swamp", "rfd",
+                                allowed='"midpoint" (or absent) with solver.backend = "petsc-krylov"'))
+    return problems
 
 
 #: backends implemented in this version (the others are named by the job schema)
@@ -354,7 +374,8 @@ CROSS_CHECKS = (
     (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
     (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
       "hydrodynamics.lubrication_cutoff", "system.size_classes"), _force_range),
-    (("interparticle.kind", "hydrodynamics.lubrication"), _forces_need_pairs),
+    (("hydrodynamics.model", "hydrodynamics.lubrication", "system.geometry", "interparticle.kind",
+      "ensemble.ranks_per_task", "brownian.scheme", "solver.backend"), _model),
     (("interparticle.kind", "interparticle.mu", "interparticle.k_n", "interparticle.k_t",
       "interparticle.f_r0", "interparticle.repulsion_length", "brownian.enabled",
       "hydrodynamics.lubrication_cutoff", "hydrodynamics.min_gap", "shear.protocol",

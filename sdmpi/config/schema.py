@@ -331,6 +331,12 @@ class Brownian:
     """[brownian]: thermal motion (Brownian forces and the Brownian stress, Schaink et al. 2000, eq. 16)."""
 
     enabled: bool = key(True, "bool", "include Brownian motion")
+    scheme: str | None = key(None, "str", "how the Brownian drift kT div R_FU^-1 and the Brownian "
+                             "stresslets are estimated: rfd = random finite difference at every "
+                             "step (exact in the mean at every gap), midpoint = Fixman's midpoint "
+                             "(too small a drift at gaps below ~4 dt); absent: rfd on the direct "
+                             "backends, midpoint on petsc-krylov (see docs/physics.md)",
+                             allowed=Choice(("rfd", "midpoint")), optional=True)
 
 
 @dataclass(frozen=True)
@@ -496,6 +502,10 @@ class Hydrodynamics:
     """[hydrodynamics]: accuracy knobs of the hydrodynamic interactions. Gaps are
     surface-to-surface distances in units of the pair's mean radius."""
 
+    model: str = key("stokesian", "str", "hydrodynamic interactions: stokesian = far field + "
+                     "lubrication (Stokesian dynamics), far-field = the periodic far-field "
+                     "(Rotne-Prager-level FTS) mobility alone, free-draining = none (Stokes drag "
+                     "of isolated spheres)", allowed=Choice(("stokesian", "far-field", "free-draining")))
     ewald_tolerance: float = key(1e-6, "float", "relative accuracy of the Ewald sums",
                                  allowed=Range(0.0, 1e-2, lo_open=True))
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
