@@ -125,6 +125,7 @@ def overlapping(tmp_path):
     (lambda p: write_xyz(p / "bad.xyz", lattice_configurations(1), lattice="no box"),
      "the comment line gives no box"),
     (lambda p: text_file(p / "bad.txt", "hello\n"), "not an XYZ particle count"),
+    (lambda p: write_h5(p / "bad.h5", np.array([b"x"] * 3)), "cannot be read (ValueError"),
 ])
 def test_bad_start_files_are_refused_and_nothing_is_written(tmp_path, capsys, make, message):
     job = job_with_start(tmp_path, make(tmp_path))

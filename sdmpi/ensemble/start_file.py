@@ -94,8 +94,8 @@ def _read(path) -> dict:
         if h5py.is_hdf5(file):
             return _read_hdf5(path)
         return {None: _read_xyz(path, file.read_text())}
-    except (OSError, UnicodeDecodeError) as err:
-        _fail(path, f"cannot be read ({err})")
+    except (OSError, UnicodeDecodeError, KeyError, TypeError, ValueError) as err:
+        _fail(path, f"cannot be read ({type(err).__name__}: {err})")
 
 
 def _read_hdf5(path) -> dict:
