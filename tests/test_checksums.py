@@ -150,3 +150,22 @@ def test_files_without_checksums_are_read_unverified(reference, tmp_path):
     assert not summary.checksummed and summary.damage == ()
     info = ens.sdmpi("info", out)
     assert info.returncode == 0 and "checksums: none" in info.stdout
+
+
+def test_damaged_unused_slot_of_a_complete_run_is_discarded(reference, job_file, tmp_path):
+    """The older checkpoint slot of a complete task, damaged: nothing to recompute, the
+    run marks the slot as never written and the file verifies again, data untouched."""
+    out = tmp_path / "run.h5"
+    shutil.copy(reference, out)
+    with h5py.File(out, "r") as f:
+        ckpt = f["checkpoints/000003"]
+        older = int(np.argmin(ckpt["slot_step"][()]))
+        offset = ckpt[f"slot{older}/positions"].id.get_offset()
+    flip(out, offset + 7, 6)
+    assert [str(d) for d in inspect(out).damage] == [
+        f"task 3: checkpoint slot {older} (state at step 40) fails its checksum"]
+    res = ens.sdmpi("run", job_file, "-o", out)
+    assert res.returncode == 0 and "already complete" in res.stdout, res.stderr
+    assert "WARNING: damaged: task 3: checkpoint slot" in res.stdout
+    assert inspect(out).damage == ()
+    assert ens.task_data(out) == ens.task_data(reference)

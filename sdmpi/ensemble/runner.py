@@ -68,6 +68,8 @@ class Plan:
     versions: str      # JSON
     created: str       # UTC ISO 8601
     notes: tuple = ()  # damage found by the checksums, and where tasks resume instead
+    rewind: tuple = ()    # (task id, step): /progress to move back before running
+    damaged: tuple = ()   # (task id, slot): checkpoint slots that fail their checksums
 
 
 def run(job_path, overrides, output, *, new=False, realisation_factory=None,
@@ -120,8 +122,10 @@ def _agree(comm, job_path, overrides, out: Path, new: bool):
     if comm.rank == 0:
         try:
             plan = _plan(job_path, overrides, out, new, comm.size)
-            if plan.mode != "complete":
+            if plan.mode != "complete" or plan.damaged:
                 lock = take_lock(out)
+            if plan.rewind or plan.damaged:
+                store.fall_back(out, dict(plan.rewind), list(plan.damaged))
         except RunLocked as err:
             plan = BadInput(f"{out}: in use by another sdmpi run ({err}); wait for it to "
                             f"finish or stop it")
@@ -137,6 +141,9 @@ def _agree(comm, job_path, overrides, out: Path, new: bool):
 
 def _execute(comm, plan: Plan, out: Path, factory, stream) -> bool:
     """Everything after the checks (see the module docstring)."""
+    if comm.rank == 0:
+        for note in plan.notes:
+            print(f"WARNING: {note}", file=stream, flush=True)
     if plan.mode == "complete":
         if comm.rank == 0:
             print(f"{out}: already complete ({len(plan.progress)} tasks); nothing to do",
@@ -185,7 +192,10 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
             f"bit for bit as before the damage"
             for t, step, done in zip(tasks, progress, summary.progress) if step < done)
         mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
-        return Plan(canonical_text(job), mode, progress, slots, *meta, notes)
+        rewind = tuple((t.task_id, step) for t, step, done in
+                       zip(tasks, progress, summary.progress) if step < done)
+        damaged = tuple((d.task_id, d.slot) for d in summary.damage if d.what == "state")
+        return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
 
 
@@ -334,8 +344,6 @@ class _Driver:
                       f"{socket.gethostname()}; tasks {mine}")
         todo = [t for t in tasks if plan.progress[t.task_id] < t.n_steps]
         steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
-        for note in plan.notes:
-            self.say(f"WARNING: {note}")
         if plan.mode == "resume":
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")
@@ -412,7 +420,7 @@ class _Driver:
         if start > 0:
             real.set_state(run_file.read_state(tid, slot))
         if leader:
-            run_file.begin(tid, slot, start)
+            run_file.begin(tid, slot)
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every
