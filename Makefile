@@ -1,6 +1,8 @@
 # sdmpi: `make run` (demonstration, end to end) and `make test` (the suite).
 # Both bootstrap a fresh Debian 12 machine: Debian packages (idempotent), a
-# virtualenv that sees them (--system-site-packages), and `pip install -e .[test]`.
+# virtualenv that sees them (--system-site-packages), sdmpi installed editable without
+# its dependencies (Debian provides them; pip does not recognise Debian's parallel h5py
+# and would install a serial one over it), and the test tools of the `test` extra.
 
 PY        := /usr/bin/python3
 VENV      := .venv
@@ -29,7 +31,9 @@ $(VENV)/.installed: pyproject.toml
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
 	fi
 	$(PY) -m venv --system-site-packages $(VENV)
-	$(VPY) -m pip install -q -e '.[test]'
+	$(VPY) -m pip install -q --no-deps -e .
+	$(VPY) -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['optional-dependencies']['test']))" \
+	  | xargs -d '\n' $(VPY) -m pip install -q
 	touch $@
 
 run: setup

@@ -29,14 +29,20 @@ def main(argv=None):
     p.add_argument("--omega", type=float, default=6 * math.pi,
                    help="frequency [1/t_D] (nearest available is used; default 6 pi)")
     args = p.parse_args(argv)
-    reductions = reduce_systems(args.runs, medium="newtonian")
+    draw(reduce_systems(args.runs, medium="newtonian"), args.output, args.omega)
+    return 0
+
+
+def draw(reductions, path, omega=6 * math.pi):
+    """The figure (at ``path``) and the table of eta' vs phi at the frequency nearest
+    ``omega`` of oscillatory Newtonian reductions."""
     points = []  # (phi, omega, 1 + eta_H, err, total, err)
     for red in reductions:
         print(describe(red))
         for phi in phis([red]):
             w, h, he = series(red, phi, "hydrodynamic", "eta_prime")
             _, t, te = series(red, phi, "total", "eta_prime")
-            i = int(np.argmin(np.abs(np.log(w / args.omega))))
+            i = int(np.argmin(np.abs(np.log(w / omega))))
             points.append((phi, w[i], 1 + h[i], he[i], t[i], te[i]))
     points.sort()
     if len({p[0] for p in points}) < 2:
@@ -60,13 +66,12 @@ def main(argv=None):
                  f"{reductions[0].job.job.name}; bars ± one standard error", fontsize=9)
     ax.grid(True, alpha=0.25)
     ax.legend(fontsize=8)
-    save(fig, args.output)
+    save(fig, path)
     print_table("\nFig. 2: ours vs the seed (eq. 38 reproduces the seed's SD eta_H within 1%)",
                 ["phi", "omega", "1+eta'_H (SD)", "1+eta_H eq.38", "dev.", "eq. 37", "total eta' (SD)"],
                 [(f"{p:g}", f"{w:.4g}", pm(h, he), f"{1 + schaink_eta_h(p):.4g}",
                   f"{100 * (h / (1 + schaink_eta_h(p)) - 1):+.1f}%", f"{batchelor_green(p):.4g}",
                   pm(t, te)) for p, w, h, he, t, te in points])
-    return 0
 
 
 if __name__ == "__main__":

@@ -28,7 +28,13 @@ from sdmpi.analysis.plots import legend_below, log_axes  # noqa: E402
 
 def main(argv=None):
     args = parser(__doc__.split("\n")[1], "schaink2000_fig4.png").parse_args(argv)
-    reductions = reduce_systems(args.runs, medium="newtonian")
+    draw(reduce_systems(args.runs, medium="newtonian"), args.output)
+    return 0
+
+
+def draw(reductions, path):
+    """The figure (at ``path``) and the plateau table of oscillatory Newtonian
+    reductions, one panel per (reduction, phi)."""
     panels = [(red, phi) for red in reductions for phi in phis([red])]
     fig, axes = figure(len(panels), width=5.6 * len(panels), height=5.6)
     for ax, (red, phi) in zip(axes, panels):
@@ -68,8 +74,7 @@ def main(argv=None):
                       f"{a / g1[ref]:.3g}" if np.isfinite(a / g1[ref]) else "nan", pm(b, be),
                       f"{x * (1 + schaink_eta_h(phi)):.4g}")
                      for x, a, ae, b, be in zip(w, g1, e1, g2, e2)])
-    save(fig, args.output)
-    return 0
+    save(fig, path)
 
 
 if __name__ == "__main__":

@@ -23,21 +23,30 @@ from schaink_common import (describe, figure, parser, phis, pm, print_table,  # 
 
 
 def line_fit(x, y, e):
-    """Weighted least squares y = a + b x; returns (a, b, chi2/dof) (nan if < 3 points)."""
+    """Weighted least squares y = a + b x with weights 1/e^2; returns (a, b, b_err,
+    chi2/dof), b_err the slope's standard error for these absolute errors (nan where
+    undetermined: fewer than 2 usable points; chi2/dof needs 3)."""
     ok = np.isfinite(y) & np.isfinite(e) & (e > 0)
     if ok.sum() < 2:
-        return np.nan, np.nan, np.nan
+        return np.nan, np.nan, np.nan, np.nan
     wts = 1 / e[ok] ** 2
     A = np.vstack([np.ones(ok.sum()), x[ok]]).T
     coef = np.linalg.lstsq(A * np.sqrt(wts)[:, None], y[ok] * np.sqrt(wts), rcond=None)[0]
     dof = ok.sum() - 2
     chi2 = np.sum(wts * (y[ok] - A @ coef) ** 2) / dof if dof > 0 else np.nan
-    return coef[0], coef[1], chi2
+    xbar = np.sum(wts * x[ok]) / wts.sum()
+    b_err = np.sum(wts * (x[ok] - xbar) ** 2) ** -0.5
+    return coef[0], coef[1], b_err, chi2
 
 
 def main(argv=None):
     args = parser(__doc__.split("\n")[1], "schaink2000_fig5.png").parse_args(argv)
-    reductions = reduce_systems(args.runs, medium="newtonian")
+    draw(reduce_systems(args.runs, medium="newtonian"), args.output)
+    return 0
+
+
+def draw(reductions, path):
+    """The figure (at ``path``) and the fit table of oscillatory Newtonian reductions."""
     fig, (ax,) = figure(width=6.8, height=6.4)
     rows = []
     colours = iter(["tab:red", "tab:blue", "tab:green", "tab:purple", "tab:brown"] * 4)
@@ -51,7 +60,7 @@ def main(argv=None):
                 ax.errorbar(x, v, yerr=e, fmt=marker, ms=9 if marker == "+" else 5,
                             mfc="none", color=colour, capsize=3,
                             label=f"SD {name}/η_m, φ = {phi:g}")
-                a, b, chi2 = line_fit(x, v, e)
+                a, b, _, chi2 = line_fit(x, v, e)
                 if np.isfinite(b):
                     grid = np.linspace(0, x.max() * 1.1, 50)
                     ax.plot(grid, a + b * grid, "--", color=colour, lw=0.8)
@@ -65,11 +74,10 @@ def main(argv=None):
                  f"{reductions[0].job.job.name}; bars ± one standard error", fontsize=9)
     ax.grid(True, alpha=0.25)
     legend_below(ax)
-    save(fig, args.output)
+    save(fig, path)
     print_table("\nFig. 5: straight lines eta = a + b omega^(-1/2) fitted to our points "
                 "(seed: eta'' linear like the experiments; eta' levels off)",
                 ["phi", "", "a", "b", "chi2/dof", "values (ascending omega)"], rows)
-    return 0
 
 
 if __name__ == "__main__":

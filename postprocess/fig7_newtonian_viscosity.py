@@ -25,7 +25,12 @@ from sdmpi.analysis.plots import legend_below  # noqa: E402
 
 def main(argv=None):
     args = parser(__doc__.split("\n")[1], "schaink2000_fig7.png").parse_args(argv)
-    reductions = reduce_systems(args.runs, medium="newtonian")
+    draw(reduce_systems(args.runs, medium="newtonian"), args.output)
+    return 0
+
+
+def draw(reductions, path):
+    """The figure (at ``path``) and the eta_H table of oscillatory Newtonian reductions."""
     fig, (a1, a2) = figure(2, width=11.5, height=6.4)
     colours = iter(["tab:blue", "tab:green", "tab:purple", "tab:brown"] * 4)
     for red in reductions:
@@ -69,8 +74,7 @@ def main(argv=None):
         ax.grid(True, which="both", alpha=0.25)
         legend_below(ax)
     fig.suptitle("hard spheres in a Newtonian medium; bars ± one standard error", fontsize=9)
-    save(fig, args.output)
-    return 0
+    save(fig, path)
 
 
 if __name__ == "__main__":

@@ -40,8 +40,14 @@ def main(argv=None):
     p.add_argument("--newtonian", nargs="+", default=[], metavar="RUN.h5",
                    help="Newtonian run files: eta_H(0) from our own SD as well")
     args = p.parse_args(argv)
-    reductions = reduce_systems(args.runs, medium="maxwell")
     newtonian = reduce_systems(args.newtonian, medium="newtonian") if args.newtonian else []
+    draw(reduce_systems(args.runs, medium="maxwell"), newtonian, args.output)
+    return 0
+
+
+def draw(reductions, newtonian, path):
+    """The figure (at ``path``) and the eqs. 41-42 table of Maxwell-medium reductions;
+    ``newtonian``: Newtonian reductions for our own eta_H(0) (may be empty)."""
     fig, (a1, a2) = figure(2, width=11.5, height=5.2)
     for red in reductions:
         print(describe(red))
@@ -93,8 +99,7 @@ def main(argv=None):
     modes = ", ".join(f"η={m.eta:g}, λ={m.lam:g} t_D" for m in reductions[0].job.medium.modes)
     fig.suptitle(f"hard spheres in a Maxwell medium ({modes}); bars ± one standard error",
                  fontsize=9)
-    save(fig, args.output)
-    return 0
+    save(fig, path)
 
 
 if __name__ == "__main__":

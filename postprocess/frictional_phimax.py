@@ -122,9 +122,10 @@ def table(paths):
             eta = float(ens.mean[g, TOTAL, 0])
             rows.append(dict(mu=mu, k_n=k_n, k_t=k_t, f_r0=f_r0, rate=1 / f_r0, phi=float(phi),
                              n_real=int(present.sum()), eta=eta,
-                             eta_err=float(np.fmax(between, within)),
+                             eta_err=float(ens.err[g, TOTAL, 0]),
                              eta_err_between=float(between), eta_err_within=float(within),
-                             dof=int(ens.dof[g, TOTAL, 0]), eta_contact=eta_c, z=z,
+                             dof=int(ens.dof_between[g, TOTAL, 0] if present.sum() >= 2
+                                     else ens.dof[g, TOTAL, 0]), eta_contact=eta_c, z=z,
                              sliding=slide, stress=eta / (6 * math.pi * f_r0)))
     return rows
 

@@ -98,8 +98,7 @@ def eta_of(red, phi, component):
     g = int(np.flatnonzero(np.isclose(red.phi, phi, rtol=1e-9))[0])
     c = COMPONENTS.index(component)
     e = red.ensemble
-    between = np.nan_to_num(e.err_between[g, c, 0])
-    return float(e.mean[g, c, 0]), float(max(between, e.err_within[g, c, 0]))
+    return float(e.mean[g, c, 0]), float(e.err[g, c, 0])
 
 
 def seed_says(kind, phi):

@@ -360,9 +360,11 @@ def _add_reduce(subparsers) -> None:
         description="Reduce one or several run files of the same system (jobs differing "
                     "only in seed and number of realisations) to G', G'', eta', eta'' per "
                     "(phi, omega) and contribution (medium, hydrodynamic, brownian, "
-                    "interparticle, total), each with one standard error from the spread "
-                    "between realisations (blocking within one). Writes OUTDIR/moduli.csv, "
-                    "OUTDIR/moduli.h5 and PNG figures; steady-shear jobs give "
+                    "interparticle, total), each with one standard error: the larger of the "
+                    "spread between realisations and the blocking error within them "
+                    "(OUTDIR/errors.csv says which). Writes OUTDIR/moduli.csv, "
+                    "OUTDIR/moduli.h5, errors.csv, units.json (the unit of every column) "
+                    "and PNG figures, each written whole or not at all; steady-shear jobs give "
                     "viscosity.csv/.h5 instead. Uses the committed samples only, so it works "
                     "on a run that is unfinished or still going (and says so). Units: omega "
                     "in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m.",
@@ -375,25 +377,50 @@ def _add_reduce(subparsers) -> None:
                         help="task (of the first file) for the Lissajous figure; default: "
                              "the first (phi, omega) task with the most analysed periods")
     parser.add_argument("--no-plots", action="store_true", help="write the tables only")
+    parser.add_argument(
+        "--medium", action="append", default=[], metavar="SPEC",
+        help="also reduce the run as if its medium were SPEC, applied after the fact to "
+             "the stored viscous hydrodynamic stress (Schaink et al. 2000 eqs. 33-35: the "
+             "trajectories are the same), into OUTDIR/<medium>/ (e.g. maxwell_lambda0.5); "
+             "SPEC is 'newtonian', 'maxwell:eta=E,lambda=L[;eta=E,lambda=L...]' (eta "
+             "relative to eta_m, summing to 1; lambda in t_D) or a TOML file with a "
+             "[medium] table; may be repeated (see docs/reduce.md)")
     parser.set_defaults(handler=_reduce)
 
 
 def _reduce(args) -> int:
     import warnings
 
+    from .analysis.medium_view import MediumError, label, parse_medium
     from .analysis.reduce import PartialRunWarning, ReduceError, reduce_runs
-    from .analysis.report import format_table, write_all
+    from .analysis.report import check_output_dir, format_table, write_all
 
     try:
+        media = [parse_medium(spec) for spec in args.medium]
+        names = [label(m) for m in media]
+        if len(set(names)) < len(names):
+            raise ReduceError(f"--medium: the same medium is given twice ({', '.join(names)})")
+        check_output_dir(args.output)
+        views = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
             red = reduce_runs(args.runs)
+            for medium, name in zip(media, names):
+                views.append((name, reduce_runs(args.runs, medium=medium)))
         paths, notes = write_all(red, args.output, plots=not args.no_plots,
                                  task_id=args.task)
-    except ReduceError as err:
+        for name, view in views:
+            more, view_notes = write_all(view, os.path.join(args.output, name),
+                                         plots=not args.no_plots, task_id=args.task)
+            paths += more
+            notes += [f"{name}: {n}" for n in view_notes]
+    except (ReduceError, MediumError) as err:
         print(f"sdmpi reduce: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     print(format_table(red))
+    for name, view in views:
+        print(f"\n{name} (medium applied after the fact):")
+        print(format_table(view))
     if not red.complete:
         print(f"PARTIAL RUN: {int((red.committed < red.n_steps).sum())} of "
               f"{red.committed.size} tasks unfinished; reduced what is committed",

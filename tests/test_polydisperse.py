@@ -84,7 +84,6 @@ def test_canonical_text_round_trip():
      ["system.size_classes[1]", "gets no sphere among N = 8"]),
     (BIDISPERSE, 27, "[0.05, 0.62]",
      ["system.phi[1] = 0.62", "compressed hard-sphere fluid", "0 < phi < 0.6"]),
-    (BIDISPERSE, 30, "[0.1]", ["system.n_particles = 30", "perfect cube"]),
 ])
 def test_validation_errors(classes, n, phi, expected):
     with pytest.raises(JobError) as err:

@@ -101,7 +101,8 @@ def test_ensemble_of_synthetic_signals_unbiased_and_covers():
     (G'' + b_r + b(t)) cos wt] + e(t), with slow AR(1) amplitude noise a, b (correlation
     time 3 periods), per-realisation offsets a_r, b_r (structure differing between
     realisations), fast AR(1) additive noise e and a start-up transient in the discarded
-    periods. Equal-length Gaussian realisations: +-err covers with P(|t_6| < 1) = 0.644."""
+    periods. Equal-length Gaussian realisations: the between estimate +-err_between covers
+    with P(|t_6| < 1) = 0.644; the reported err = max(err_between, err_within) covers more."""
     rng = np.random.default_rng(20000803)
     M, R, n, discard, kept, tail = 2000, 7, 16, 3, 24, 5
     gamma0, omega, g1, g2 = 0.02, 6.283, 0.7, 2.3
@@ -117,18 +118,20 @@ def test_ensemble_of_synthetic_signals_unbiased_and_covers():
     for values, truth in ((G1, g1), (G2, g2)):
         ens = ensemble_average(values)
         assert np.all(ens.n_realisations == R) and np.all(ens.n_periods == R * kept)
-        assert np.all(ens.dof == R - 1)
+        assert np.all(ens.dof_between == R - 1)
         bias = ens.mean.mean() - truth
         assert abs(bias) < Z * ens.mean.std() / np.sqrt(M), bias
         expected = t_coverage(R - 1)
-        covered = np.mean(np.abs(ens.mean - truth) < ens.err)
+        covered = np.mean(np.abs(ens.mean - truth) < ens.err_between)
         assert abs(covered - expected) < Z * np.sqrt(expected * (1 - expected) / M), covered
         # the error is the size of the scatter: E[err^2] = var(mean) (chi2 / dof),
         # checked to 4 sigma of that ratio's sampling error (~3.5%)
-        ratio = np.mean(ens.err ** 2) / ens.mean.var()
+        ratio = np.mean(ens.err_between ** 2) / ens.mean.var()
         assert abs(ratio - 1) < Z * np.sqrt(2 / M + 2 / (M * (R - 1))), ratio
         # per-realisation offsets: the blocking errors alone miss the between spread
         assert np.median(ens.err_between / ens.err_within) > 1.2
+        assert np.all(ens.err >= ens.err_between) and np.all(ens.err >= ens.err_within)
+        assert np.mean(np.abs(ens.mean - truth) < ens.err) >= covered
 
 
 @pytest.mark.parametrize("tau", [0.01, 4.0])
@@ -156,7 +159,7 @@ def test_blocking_single_run_coverage(tau):
 def test_combine_coverage_many_partial_realisations():
     """R = 30 realisations of unequal length (8-40 periods, as in a partial run) of
     AR(1) per-period values (correlation time 3 periods) plus per-realisation offsets:
-    +-err covers at P(|t_29| < 1) = 0.674 within 4 binomial sigma plus a 1.5% allowance
+    +-err_between covers at P(|t_29| < 1) = 0.674 within 4 binomial sigma plus a 1.5% allowance
     (period weights are not inverse-variance weights when realisations differ:
     measured 0.663, err^2 about 6% low)."""
     rng = np.random.default_rng(11)
@@ -165,9 +168,9 @@ def test_combine_coverage_many_partial_realisations():
     lengths = rng.integers(8, P + 1, size=R)
     parts = [blocking(x[:, r, :lengths[r]]) for r in range(R)]
     ens = combine(Blocking(*(np.stack(f, axis=-1) for f in zip(*parts))))
-    assert np.all(ens.n_periods == lengths.sum()) and np.all(ens.dof == R - 1)
+    assert np.all(ens.n_periods == lengths.sum()) and np.all(ens.dof_between == R - 1)
     expected = t_coverage(R - 1)
-    covered = np.mean(np.abs(ens.mean) < ens.err)
+    covered = np.mean(np.abs(ens.mean) < ens.err_between)
     assert abs(covered - expected) < Z * np.sqrt(expected * (1 - expected) / M) + 0.015, (
         covered, expected)
 
@@ -178,21 +181,25 @@ def test_combine_estimators_and_counts():
     ens = ensemble_average(runs)
     means = np.array([r.mean() for r in runs])
     np.testing.assert_allclose(ens.mean, means.mean())
-    np.testing.assert_allclose(ens.err, means.std(ddof=1) / np.sqrt(3))
-    assert (ens.n_realisations, ens.n_periods, ens.dof) == (3, 120, 2)
+    np.testing.assert_allclose(ens.err_between, means.std(ddof=1) / np.sqrt(3))
+    np.testing.assert_allclose(ens.err, max(ens.err_between, ens.err_within))
+    assert (ens.n_realisations, ens.n_periods, ens.dof_between) == (3, 120, 2)
+    assert ens.dof == (2 if ens.err_between >= ens.err_within else ens.dof_within)
 
     # a partial run (fewer periods) and an empty one (not past the discarded periods)
     ragged = runs[:2] + [runs[2][:10], np.array([])]
     ens = ensemble_average(ragged)
     allp = np.concatenate(ragged)
     np.testing.assert_allclose(ens.mean, allp.mean())    # weights = periods per run
-    assert (ens.n_realisations, ens.n_periods, ens.dof) == (3, 90, 2)
+    assert (ens.n_realisations, ens.n_periods, ens.dof_between) == (3, 90, 2)
     w = np.array([40, 40, 10])
     m = np.array([r.mean() for r in ragged[:3]])
     between = np.sqrt(np.sum(w * (m - allp.mean()) ** 2) / (2 * w.sum()))
-    np.testing.assert_allclose(ens.err, between)
+    np.testing.assert_allclose(ens.err_between, between)
     within = np.sqrt(sum((len(r) * blocking(r).err) ** 2 for r in ragged[:3])) / 90
     np.testing.assert_allclose(ens.err_within, within)
+    np.testing.assert_allclose(ens.err, max(between, within))
+    assert ens.dof_within == sum(blocking(r).n_blocks - 1 for r in ragged[:3])
 
     # one realisation: the blocking error, dof = n_blocks - 1
     one = ensemble_average([runs[0]])

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
-from sdmpi.analysis.reduce import (STEADY_QUANTITIES, VISCOSITY_COLUMNS, confidence_half_width,
-                                   reduce_runs, steady_quantities)
+from sdmpi.analysis.errors import SOURCES
+from sdmpi.analysis.reduce import (COMPONENTS, STEADY_QUANTITIES, VISCOSITY_COLUMNS,
+                                   confidence_half_width, reduce_runs, steady_quantities)
 from sdmpi.analysis.report import format_table, write_all
 from sdmpi.config import enumerate_tasks, load_job, parse_job
 from synthetic_run import ar1, write_run
@@ -103,12 +104,20 @@ def test_viscosity_csv_split_normal_stresses_pressure_and_ci(tmp_path):
     total = np.array([1.0, 0, 0, 0]) + sum(expected(v) for v in STRESS.values())
     q975 = student_t.ppf(0.975, 4)
     bound = student_t.ppf(1 - 0.5e-4, 4)
+    e = red.ensemble
     for comp, want in [(c, expected(v)) for c, v in STRESS.items()] + [("total", total)]:
         r = by[comp]
-        assert int(r["dof"]) == 4 and int(r["n_realisations"]) == 5
-        for q, w in zip(STEADY_QUANTITIES, want):
+        c = COMPONENTS.index(comp)
+        assert int(r["n_realisations"]) == 5
+        assert int(r["dof"]) == (4 if e.source[0, c, 0] == SOURCES.index("between")
+                                 else e.dof_within[0, c, 0])
+        for k, (q, w) in enumerate(zip(STEADY_QUANTITIES, want)):
             m, err, ci = float(r[q]), float(r[f"{q}_err"]), float(r[f"{q}_ci95"])
-            assert ci == pytest.approx(q975 * err, rel=1e-12)
+            # the wider of the between (t_4) and within (t_dof_within) intervals
+            within = student_t.ppf(0.975, e.dof_within[0, c, k]) * e.err_within[0, c, k]
+            between = q975 * e.err_between[0, c, k]
+            assert ci == pytest.approx(max(between, within), rel=1e-12)
+            assert ci >= between and err >= e.err_between[0, c, k]
             assert abs(m - w) < bound * err, (comp, q, m, w, err)
     # the total is the sum of the parts, value by value
     for q in STEADY_QUANTITIES:

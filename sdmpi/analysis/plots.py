@@ -78,6 +78,10 @@ def log_axes(ax, values):
     values = values[np.isfinite(values) & (values > 0)]
     if values.size:
         ax.set_ylim(values.min() / 2.0, values.max() * 2.0)
+    else:   # nothing positive to show (all values <= 0 or unknown): a fixed range
+        ax.set_ylim(1e-3, 1.0)
+        ax.text(0.5, 0.5, "no positive values", transform=ax.transAxes, ha="center",
+                color="0.5")
     for axis, (lo, hi) in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
         _plain_log_ticks(axis, lo, hi)
 
@@ -253,9 +257,16 @@ def plot_all(red, outdir, task_id=None):
     outdir = Path(outdir)
     paths, notes = [], []
     for phi in dict.fromkeys(red.phi.tolist()):
+        if not np.any(red.ensemble.n_realisations[red.phi == phi, 1:] > 0):
+            notes.append(f"no figures for phi = {phi:g}: no realisation has data after the "
+                         f"start-up yet")
+            continue
         tag = f"phi{phi:g}"
         paths.append(plot_moduli(red, outdir / f"moduli_{tag}.png", phi))
         paths.append(plot_viscosities(red, outdir / f"viscosity_{tag}.png", phi))
+    if task_id is None and not np.any(red.per_realisation.n[:, 1] > 0):
+        return paths, notes + ["no Lissajous figure: no task has a whole period after the "
+                               "start-up yet"]
     try:
         paths.append(plot_lissajous(red, outdir / "lissajous.png", task_id))
     except ReduceError as err:
@@ -272,7 +283,7 @@ STEADY_LABEL = {"eta": "η / η_m  (relative viscosity)", "N1": "N1 / (η_m γ̇
 def plot_running(red, path, phi) -> Path:
     """Running averages of eta, N1, N2, Pi vs time for one phi of a steady-shear
     reduction (module docstring)."""
-    from .reduce import STEADY_QUANTITIES, confidence_half_width
+    from .reduce import STEADY_QUANTITIES, ensemble_half_width
     g = int(np.flatnonzero(red.phi == phi)[0])
     run = red.running
     t = run["time"] + red.job.time_step(None)    # average over samples 0..k spans (k+1) dt
@@ -295,7 +306,7 @@ def plot_running(red, path, phi) -> Path:
             ax.plot(t, mean, "-", color=colour, lw=2.0 if comp == "total" else 1.5,
                     label=label)
             m = e.mean[g, c, q]
-            half = float(confidence_half_width(e.err[g, c, q], e.dof[g, c, q]))
+            half = float(ensemble_half_width(e, (g, c, q)))
             if np.isfinite(m) and np.isfinite(half) and half > 0:
                 late = t >= run["discard_time"]
                 ax.fill_between(t[late], m - half, m + half, color=colour, alpha=0.18, lw=0)

@@ -27,9 +27,17 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
    the parts, so its mean is the sum of the parts' means (to round-off) and its error
    includes the correlations between the parts.
 4. Per realisation: mean and blocking error of the per-period values; over the
-   ensemble: period-weighted mean and one standard error from the spread between
-   realisations (:mod:`.errors`, ``blocking`` then ``combine``). eta' = G''/w and
+   ensemble: period-weighted mean and one standard error, the larger of the spread
+   between realisations and the propagated blocking errors within them (:mod:`.errors`,
+   ``blocking`` then ``combine``; errors.csv says which). Ensembles of fewer than
+   :data:`SMALL_ENSEMBLE` realisations are flagged in the notes. eta' = G''/w and
    eta'' = G'/w, relative to eta_m (eq. 19; :func:`.projection.viscosities`).
+
+Another medium after the fact (``reduce_runs(paths, medium=...)``, ``sdmpi reduce
+--medium``; :mod:`.medium_view`): the hydrodynamic stress is then the stored viscous one,
+``stress_hydrodynamic``, filtered by that medium's Maxwell modes (seed eqs. 33-35, 42;
+unfiltered for a Newtonian medium), and the medium row is that medium's (eq. 36); the
+trajectories, and so the Brownian and interparticle stresses, are the same in both media.
 
 Steady-shear jobs (seed 001 sec. 2) are reduced to ``viscosity.csv`` instead, one row
 per (phi, rate, component), from every sample after ``discard_steps`` of the stored
@@ -51,10 +59,10 @@ has no normal stresses; exact, errors 0), ``hydrodynamic``, ``brownian``,
 stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
 construction: Pi here is the interparticle (virial) pressure only; the stresslet trace
 (Jeffrey, Morris & Brady 1993) and the kinetic n kT are not computed. Errors: the same
-blocking within a realisation and spread between realisations (:mod:`.errors`) give one
-standard error ``*_err`` with ``dof`` degrees of freedom (R - 1 for R >= 2
-realisations); ``*_ci95`` is the half-width of the 95% confidence interval,
-t_{0.975, dof} x err (Student t; the sub-average method of Allen & Tildesley 1987 that
+blocking within a realisation and spread between realisations (:mod:`.errors`, the
+larger of the two) give one standard error ``*_err`` with ``dof`` degrees of freedom
+(those of the larger estimate); ``*_ci95`` is the half-width of the 95% confidence interval, the wider of
+t_{0.975, R-1} x err_between and t_{0.975, dof_within} x err_within (Student t; the sub-average method of Allen & Tildesley 1987 that
 seed 001 uses). For figures, running averages (1/t) int_0^t of every quantity from t = 0
 (start-up included) are kept per realisation (:attr:`Reduction.running`).
 Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
@@ -84,7 +92,7 @@ import numpy as np
 
 from ..config import Job, units
 from ..config.schema import toml_name
-from .errors import Blocking, Ensemble, blocking, combine
+from .errors import SOURCES, Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
 from .projection import project_periods, viscosities
 
@@ -109,6 +117,8 @@ PHYSICAL_COLUMNS = {
     "steady": ("rate_per_s", "Pe", "eta_Pa_s", "eta_err_Pa_s", "eta_ci95_Pa_s",
                "shear_stress_Pa"),
 }
+#: ensembles of fewer realisations than this are flagged (notes, errors.csv)
+SMALL_ENSEMBLE = 4
 #: confidence level of the *_ci95 columns
 CONFIDENCE = 0.95
 #: at most this many points per running-average curve (Reduction.running)
@@ -150,6 +160,9 @@ class Reduction:
     task_id       (G, R): the task of group g, realisation r in its file
     committed, n_steps  (G, R): samples committed and planned per task
     notes         human-readable remarks (partial runs, single realisations, ...)
+    viewed        True when ``job`` holds a medium other than the run's (``--medium``,
+                  :mod:`.medium_view`): the hydrodynamic stress is the stored viscous one,
+                  filtered by that medium here
     running       steady shear only (else None): {"time": (T,) sample times in the job's
                   time unit, "values": (G, C, Q, R, T) running averages (1/t) sum over
                   samples 0..k of each quantity per realisation, NaN after a partial
@@ -173,6 +186,7 @@ class Reduction:
     n_steps: np.ndarray
     notes: tuple
     running: dict | None = None
+    viewed: bool = False
 
     @property
     def complete(self) -> bool:
@@ -209,7 +223,7 @@ class Reduction:
                                eta_prime_err=float(err1), eta_dprime=float(eta2),
                                eta_dprime_err=float(err2))
                 else:
-                    half = confidence_half_width(e.err[g, c], e.dof[g, c])
+                    half = ensemble_half_width(e, (g, c))
                     for q, name in enumerate(STEADY_QUANTITIES):
                         row[name] = float(e.mean[g, c, q])
                         row[f"{name}_err"] = float(e.err[g, c, q])
@@ -273,6 +287,16 @@ def confidence_half_width(err, dof, level=CONFIDENCE):
     return np.where(err == 0, 0.0, np.where(dof >= 1, q * err, np.nan))
 
 
+def ensemble_half_width(e: Ensemble, index=(), level=CONFIDENCE):
+    """Half-width of the confidence interval of the ensemble means ``e`` (at ``index``):
+    the wider of the between interval t_{R-1} err_between and the within interval
+    t_{dof_within} err_within (:func:`confidence_half_width`), so that, as ``err``, it
+    is never narrower than either estimate supports; 0 for exact values."""
+    between = confidence_half_width(e.err_between[index], e.dof_between[index], level)
+    within = confidence_half_width(e.err_within[index], e.dof_within[index], level)
+    return np.where(e.err[index] == 0, 0.0, np.fmax(between, within))
+
+
 def medium_viscosity(job: Job) -> float:
     """Zero-shear (steady-state) viscosity of the medium, relative to eta_m."""
     if job.medium.kind == "maxwell":
@@ -280,11 +304,29 @@ def medium_viscosity(job: Job) -> float:
     return 1.0
 
 
+#: the sample datasets of the viscous-medium stress contributions
+VISCOUS_DATASETS = ("stress_hydrodynamic", "stress_brownian", "stress_interparticle")
+
+
 def stress_datasets(job: Job) -> tuple:
     """Sample datasets of the hydrodynamic, Brownian and interparticle xy stress (the
     Maxwell-filtered hydrodynamic stress for Maxwell media; see the module docstring)."""
-    hydro = "stress_hydrodynamic_maxwell" if job.medium.kind == "maxwell" else "stress_hydrodynamic"
-    return (hydro, "stress_brownian", "stress_interparticle")
+    if job.medium.kind == "maxwell":
+        return ("stress_hydrodynamic_maxwell",) + VISCOUS_DATASETS[1:]
+    return VISCOUS_DATASETS
+
+
+def read_stress(f, job: Job, task, committed, viewed=False, columns=XY):
+    """(3, committed) hydrodynamic, Brownian and interparticle xy stress of one task
+    (``columns = slice(None)``: (3, committed, 6)): as stored for the run's own medium,
+    or (``viewed``) the viscous stress with the hydrodynamic part filtered by
+    ``job.medium`` (:func:`.medium_view.filtered_stress`)."""
+    if not viewed:
+        return _read_xy(f, task, committed, stress_datasets(job), columns)
+    from .medium_view import filtered_stress
+    stress = _read_xy(f, task, committed, VISCOUS_DATASETS, columns)
+    stress[0] = filtered_stress(stress[0], job.medium, task.dt)
+    return stress
 
 
 # --------------------------------------------------------------------------- files
@@ -424,24 +466,34 @@ def periods_needed(job: Job, task) -> str:
 # --------------------------------------------------------------------------- reduce
 
 
-def reduce_runs(paths) -> Reduction:
+def reduce_runs(paths, medium=None) -> Reduction:
     """Reduce one or several run files of the same system (module docstring).
 
-    Raises ReduceError for unusable input; warns (:class:`PartialRunWarning`) when some
-    tasks are unfinished (details in ``Reduction.notes``)."""
+    medium: None (the run's own medium), or a :class:`sdmpi.config.Medium` applied after
+    the fact to the stored viscous hydrodynamic stress (:mod:`.medium_view`); the
+    reduction's job then holds that medium. Raises ReduceError for unusable input
+    (including a medium that the job cannot take); warns (:class:`PartialRunWarning`)
+    when some tasks are unfinished (details in ``Reduction.notes``)."""
     paths = [str(p) for p in paths]
     if not paths:
         raise ReduceError("no run file given")
     summaries = [open_run(p) for p in paths]
     check_same_system(summaries)
-    job = summaries[0].job
+    job, job_text, viewed = summaries[0].job, summaries[0].job_text, False
+    if medium is not None and medium != job.medium:
+        from ..config import canonical_text
+        from .medium_view import MediumError, view_job
+        try:
+            job = view_job(job, medium, paths[0])
+        except MediumError as err:
+            raise ReduceError(str(err)) from None
+        job_text, viewed = canonical_text(job), True
     if job.shear.protocol == "none":
         raise ReduceError(
             f"{paths[0]}: a quiescent job (shear.protocol = \"none\") imposes no "
             f"deformation, so it has no moduli or viscosity; only oscillatory (moduli.csv) "
             f"and steady-shear (viscosity.csv) jobs are reduced")
     kind = "oscillatory" if job.shear.protocol == "oscillatory" else "steady"
-    names = stress_datasets(job)
     columns_read = XY if kind == "oscillatory" else slice(None)
 
     groups = list(dict.fromkeys((t.phi, t.omega) for t in summaries[0].tasks))
@@ -476,7 +528,7 @@ def reduce_runs(paths) -> Reduction:
                     continue
                 for g, task in enumerate(tasks):
                     done = int(s.progress[task.task_id])
-                    stress = _read_xy(f, task, done, names, columns_read)
+                    stress = read_stress(f, job, task, done, viewed, columns_read)
                     stress, stop_note = _until_stop(stress, s.path, task)
                     notes += [stop_note] if stop_note else []
                     x = task_series(job, task, stress)
@@ -505,17 +557,28 @@ def reduce_runs(paths) -> Reduction:
         elif r == 1:
             notes.append(f"{where}: a single realisation; its error comes from blocking "
                          f"within that run (dof {int(ens.dof[g, 1, 0])}) and may be too small")
+        elif r < SMALL_ENSEMBLE:
+            notes.append(f"{where}: only {r} realisations (fewer than {SMALL_ENSEMBLE}): "
+                         f"the spread between them is a poor error estimate, so each error "
+                         f"is the larger of it and the blocking error within the runs "
+                         f"(errors.csv says which)")
     if not np.all(committed == planned):
         warnings.warn(f"partial run: {int(np.sum(committed < planned))} of {committed.size} "
                       f"tasks unfinished; reducing what is committed", PartialRunWarning,
                       stacklevel=2)
     control = np.array([c if kind == "oscillatory" else job.shear.rate for _, c in groups])
-    return Reduction(kind, job, summaries[0].job_text, tuple(paths),
+    if viewed:
+        modes = job.medium.modes or ()
+        notes.insert(0, f"medium {job.medium.kind}"
+                     + "".join(f" (eta={m.eta:g}, lambda={m.lam:g})" for m in modes)
+                     + f" applied after the fact to the viscous hydrodynamic stress of a "
+                     f"{summaries[0].job.medium.kind} run (the trajectories are the same)")
+    return Reduction(kind, job, job_text, tuple(paths),
                      tuple(s.job.job.seed for s in summaries),
                      np.array([p for p, _ in groups]), control,
                      ("G_prime", "G_dprime") if kind == "oscillatory" else STEADY_QUANTITIES,
                      ens, stacked, np.array(file_index), np.array(realisation), task_id,
-                     committed, planned, tuple(notes), running)
+                     committed, planned, tuple(notes), running, viewed)
 
 
 def _until_stop(stress, path, task):
@@ -555,12 +618,14 @@ def _exact_medium(ens: Ensemble, job: Job, groups, kind) -> Ensemble:
     stresses) into row 0 with zero errors, instead
     of the average of identical numbers (equal to round-off) or NaN when no data."""
     mean, err = ens.mean.copy(), ens.err.copy()
-    within, between = ens.err_within.copy(), ens.err_between.copy()
+    within, between, source = ens.err_within.copy(), ens.err_between.copy(), ens.source.copy()
     for g, (_, omega) in enumerate(groups):
         mean[g, 0] = (medium_moduli(job, omega) if kind == "oscillatory"
                       else (medium_viscosity(job), 0.0, 0.0, 0.0))
         err[g, 0] = within[g, 0] = between[g, 0] = 0.0
-    return ens._replace(mean=mean, err=err, err_within=within, err_between=between)
+        source[g, 0] = SOURCES.index("exact")
+    return ens._replace(mean=mean, err=err, err_within=within, err_between=between,
+                        source=source)
 
 
 def _partial_note(path, job: Job, task, done: int, n_values: int) -> str:
@@ -586,8 +651,8 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     whole periods it contributes: for each phase j = 0..n-1 of a period (w t = 2 pi j/n)
     the mean over those periods of each contribution's xy stress.
 
-    task_id: a task of file ``file_index``; default the task of the first group with the
-    most analysed periods (file 0). Returns dict with ``task_id, file, phi, omega,
+    task_id: a task of file ``file_index``; default, in the first group that has analysed
+    periods, the task with the most of them. Returns dict with ``task_id, file, phi, omega,
     gamma0, n_periods``, ``strain`` (n,) = gamma(t_j), ``stress`` (C, n) per COMPONENTS
     in eta_m/t_D (medium analytic: gamma0 (G'_m sin + G''_m cos)), and ``last`` (n,) the
     total stress of the last analysed period, unaveraged."""
@@ -596,8 +661,9 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     job = red.job
     if task_id is None:
         cols = np.flatnonzero(red.file_index == file_index)
-        used = red.per_realisation.n[0, 1, 0, cols]
-        task_id = int(red.task_id[0, cols[int(np.argmax(used))]])
+        used = red.per_realisation.n[:, 1, 0][:, cols]                 # (G, R of the file)
+        g = int(np.argmax(used.max(axis=1) > 0))     # the first group with data (else 0)
+        task_id = int(red.task_id[g, cols[int(np.argmax(used[g]))]])
     path = red.files[file_index]
     tasks = {t.task_id: t for t in open_run(path).tasks}
     if task_id not in tasks:
@@ -608,7 +674,7 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     cols = np.flatnonzero(red.file_index == file_index)
     done = int(red.committed[:, cols][red.task_id[:, cols] == task_id][0])
     with _open_h5(path) as f:
-        xy = _read_xy(f, task, done, stress_datasets(job))
+        xy = read_stress(f, job, task, done, red.viewed)
     n_periods = max(done // n - first, 0)
     if n_periods == 0:
         raise ReduceError(f"task {task_id} has no whole period after the start-up yet")

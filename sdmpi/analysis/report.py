@@ -12,14 +12,34 @@ and last ``dof`` (see :mod:`.reduce` for definitions and sign conventions). Jobs
 a ``[physical]`` section get the SI columns :data:`.reduce.PHYSICAL_COLUMNS` appended
 (rates in 1/s, Pe, moduli and stresses in Pa, viscosities in Pa s).
 
+``errors.csv``: where each error comes from, one row per (phi, omega or rate,
+component, quantity) with quantity G_prime or G_dprime (the errors of eta'' and eta'
+are those of G' and G'' divided by omega) or eta, N1, N2, Pi: ``n_realisations``,
+``err`` (the table's ``*_err``), ``err_within`` (propagated blocking error within the
+realisations), ``err_between`` (spread between them; nan below 2), their degrees of
+freedom ``dof``, ``dof_within``, ``dof_between``, ``source`` (:data:`.errors.SOURCES`:
+``between`` or ``within``, whichever is larger and so reported; ``exact`` for the
+medium; ``none`` without data) and ``small_ensemble`` (1 when fewer than
+:data:`.reduce.SMALL_ENSEMBLE` realisations: error bars resting on few runs).
+
+``trust.csv`` and ``trust.png``: the trust report of the dynamics per group (overlap
+corrections per unit time and per step at the start of a step and at the Brownian
+midpoint, the minimum-gap distribution, solver statistics, steps per unit time;
+:mod:`.trust`), with warnings above its thresholds in the notes.
+
+``units.json`` (format ``sdmpi-units`` version 1): the unit of every column of the CSV
+tables (``tables`` -> file -> column -> unit), the time, length and viscosity units,
+what the error columns mean, and the SI value of each reduced unit when the job has a
+``[physical]`` section (else null).
+
 ``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1):
 
 | path | contents |
 |---|---|
-| `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
+| `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML; with ``--medium``, the job with that medium), `medium_applied` (1 when the medium was applied after the fact, :mod:`.medium_view`), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
 | `/table/<column>` | the CSV table, one dataset per column (component as UTF-8 strings) |
 | `/groups/phi`, `/groups/omega` or `/groups/rate` | (G,) the task groups |
-| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between` (:class:`.errors.Ensemble`) |
+| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between`, `dof_within`, `dof_between`, `source` (int8 index into the attr `sources`) (:class:`.errors.Ensemble`) |
 | `/realisations/<field>` | (G, C, Q, R): per-realisation `mean`, `err`, `n` (periods or samples used), `block_size`, `n_blocks` (:class:`.errors.Blocking`) |
 | `/realisations/file_index`, `realisation` | (R,): input file (index into `input_files`) and realisation number in it |
 | `/realisations/task_id`, `committed`, `n_steps` | (G, R): task of each realisation, samples committed and planned |
@@ -35,12 +55,22 @@ import csv
 import datetime
 import json
 import math
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from .reduce import COMPONENTS
+from .errors import SOURCES
+from .trust import TRUST_UNITS
+from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError
+
+#: errors.csv columns after phi and omega (or rate): see the module docstring
+ERROR_COLUMNS = ("component", "quantity", "n_realisations", "err", "err_within",
+                 "err_between", "dof", "dof_within", "dof_between", "source",
+                 "small_ensemble")
 
 UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/t_D",
          "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m", "eta": "eta_m",
@@ -86,6 +116,7 @@ def write_h5(red, path) -> Path:
             "units": json.dumps({c: u for c, u in UNITS.items() if c in red.columns
                                  or c in red.quantities}),
             "notes": json.dumps(list(red.notes)), "sdmpi_version": __version__,
+            "medium_applied": int(red.viewed),
             "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")})
         table = f.create_group("table")
         for c in red.columns:
@@ -100,6 +131,7 @@ def write_h5(red, path) -> Path:
         groups[red.columns[1]] = red.control
         ens = f.create_group("ensemble")
         ens.attrs["axes"] = "group, component, quantity"
+        ens.attrs["sources"] = " ".join(SOURCES)
         for name, value in red.ensemble._asdict().items():
             ens[name] = np.asarray(value)
         per = f.create_group("realisations")
@@ -142,30 +174,168 @@ def format_table(red) -> str:
         rate = ("rate (Pe) in 1/t_D" if red.job.time_unit == "t_D"
                 else "rate 1 = gamma_dot (time unit 1/gamma_dot)")
         units = f"{rate}; eta relative to eta_m; N1, N2, Pi in eta_m gamma_dot"
+    def small(r):
+        return r["component"] != "medium" and 0 < r["n_realisations"] < SMALL_ENSEMBLE
     lines = [[f"{r['phi']:g}", f"{r[red.columns[1]]:.5g}", r["component"],
-              str(r["n_realisations"])] + [pm(r[m], r[e]) for m, e in pairs]
-             for r in red.rows()]
+              str(r["n_realisations"]) + ("*" if small(r) else "")]
+             + [pm(r[m], r[e]) for m, e in pairs] for r in red.rows()]
     widths = [max(len(x) for x in col) for col in zip(head, *lines)]
     text = ["  ".join(x.ljust(w) for x, w in zip(row, widths)).rstrip()
             for row in [head] + lines]
     bars = "one standard error" if red.kind == "oscillatory" else "95% confidence interval"
-    return "\n".join(text + [f"({units}; ± {bars})"])
+    flag = ([f"* fewer than {SMALL_ENSEMBLE} realisations: error bars rest on few runs"]
+            if any(small(r) for r in red.rows()) else [])
+    return "\n".join(text + [f"({units}; ± {bars})"] + flag)
+
+
+def error_rows(red) -> list[dict]:
+    """errors.csv: one row per (group, component, quantity) with :data:`ERROR_COLUMNS`
+    (module docstring)."""
+    e, out = red.ensemble, []
+    control = red.columns[1]
+    for g in range(len(red.phi)):
+        for c, name in enumerate(COMPONENTS):
+            for q, quantity in enumerate(red.quantities):
+                r = int(e.n_realisations[g, c, q])
+                out.append({
+                    "phi": float(red.phi[g]), control: float(red.control[g]),
+                    "component": name, "quantity": quantity, "n_realisations": r,
+                    "err": float(e.err[g, c, q]), "err_within": float(e.err_within[g, c, q]),
+                    "err_between": float(e.err_between[g, c, q]), "dof": int(e.dof[g, c, q]),
+                    "dof_within": int(e.dof_within[g, c, q]),
+                    "dof_between": int(e.dof_between[g, c, q]),
+                    "source": SOURCES[int(e.source[g, c, q])],
+                    "small_ensemble": int(name != "medium" and 0 < r < SMALL_ENSEMBLE)})
+    return out
+
+
+def error_columns(red) -> tuple:
+    """The header of errors.csv."""
+    return ("phi", red.columns[1]) + ERROR_COLUMNS
+
+
+def units_of(red) -> dict:
+    """units.json: the unit of every column of the tables written for ``red`` and the
+    conventions they follow (module docstring)."""
+    rate = "1/t_D" if red.job.time_unit == "t_D" else "gamma_dot (time unit 1/gamma_dot)"
+    base = dict(UNITS, rate=rate, component="label", quantity="label", source="label",
+                n_realisations="count", dof="count", dof_within="count",
+                dof_between="count", small_ensemble="flag (1: fewer than "
+                f"{SMALL_ENSEMBLE} realisations)")
+    stem = "moduli" if red.kind == "oscillatory" else "viscosity"
+
+    def unit(column):
+        for suffix in ("_err", "_ci95"):
+            if column.endswith(suffix) and column[:-len(suffix)] in base:
+                return base[column[:-len(suffix)]]
+        return base[column]
+    quantity_units = {q: base[q] for q in red.quantities}
+    return {
+        "format": "sdmpi-units", "format_version": 1,
+        "time_unit": red.job.time_unit, "length_unit": "a (sphere radius)",
+        "viscosity_unit": "eta_m (medium zero-shear viscosity)",
+        "tables": {f"{stem}.csv": {c: unit(c) for c in red.columns},
+                   "errors.csv": {c: unit(c) for c in error_columns(red)
+                                  if c not in ("err", "err_within", "err_between")},
+                   "trust.csv": {"phi": "1", red.columns[1]: unit(red.columns[1]),
+                                 **{c: u.replace("time unit", red.job.time_unit)
+                                    for c, u in TRUST_UNITS.items()}}},
+        "errors.csv err, err_within, err_between": (
+            "the unit of the row's quantity: " + ", ".join(f"{q} {u}" for q, u in
+                                                           quantity_units.items())),
+        "err": "*_err: one standard error, the larger of the within-realisation blocking "
+               "error and the between-realisation spread (errors.csv: source); *_ci95: "
+               "half-width of the 95% confidence interval (Student t, dof)",
+        "physical_units": (None if red.scales is None else red.scales.as_dict()),
+    }
+
+
+def write_errors_csv(red, path) -> Path:
+    """errors.csv (:func:`error_rows`)."""
+    columns = error_columns(red)
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(columns)
+        for row in error_rows(red):
+            out.writerow([_fmt(row[c]) for c in columns])
+    return Path(path)
+
+
+def write_units(red, path) -> Path:
+    """units.json (:func:`units_of`)."""
+    Path(path).write_text(json.dumps(units_of(red), indent=1, sort_keys=True) + "\n")
+    return Path(path)
+
+
+def check_output_dir(outdir) -> None:
+    """Refuse (ReduceError) an output path that is a file, lies below a file, or lies in
+    a directory this process cannot write."""
+    outdir = Path(outdir)
+    for p in (outdir, *outdir.parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ReduceError(f"-o {outdir}: {p} exists and is not a directory; give "
+                                  f"a directory for the outputs")
+            if not os.access(p, os.W_OK | os.X_OK):
+                raise ReduceError(f"-o {outdir}: cannot write into {p} (permission denied)")
+            return
 
 
 def write_all(red, outdir, *, plots=True, task_id=None):
-    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear) and the
-    figures (:func:`.plots.plot_all`; steady shear: :func:`.plots.plot_running`) into
-    ``outdir`` (created). Returns (paths written, notes)."""
+    """Write ``moduli.csv`` + ``moduli.h5`` (``viscosity.*`` for steady shear),
+    ``errors.csv``, ``trust.csv`` (:mod:`.trust`), ``units.json`` and the figures
+    (``trust.png``, then :func:`.plots.plot_all`; steady shear:
+    :func:`.plots.plot_running_all`) into ``outdir`` (created). Everything is
+    first written into a temporary directory inside ``outdir`` and then renamed into
+    place, so a failure (ReduceError, e.g. a bad ``task_id``, or a full disk) leaves
+    ``outdir`` as it was and removes a directory it created. Returns (paths written,
+    notes); OSError is raised as ReduceError."""
     outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
+    check_output_dir(outdir)
+    created = [p for p in (outdir, *outdir.parents) if not p.exists()]
     stem = "moduli" if red.kind == "oscillatory" else "viscosity"
-    paths = [write_csv(red, outdir / f"{stem}.csv"), write_h5(red, outdir / f"{stem}.h5")]
-    notes = []
-    if plots and red.kind == "oscillatory":
-        from .plots import plot_all
-        figures, notes = plot_all(red, outdir, task_id)
-        paths += figures
-    elif plots:
-        from .plots import plot_running_all
-        paths += plot_running_all(red, outdir)
-    return paths, notes
+    staging = None
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".reduce-", suffix=".tmp", dir=outdir))
+        from .trust import plot_trust, trust_rows, warnings_of, write_trust_csv
+        trust = trust_rows(red)
+        paths = [write_csv(red, staging / f"{stem}.csv"), write_h5(red, staging / f"{stem}.h5"),
+                 write_errors_csv(red, staging / "errors.csv"),
+                 write_trust_csv(red, trust, staging / "trust.csv"),
+                 write_units(red, staging / "units.json")]
+        if plots and any(row["steps"] for row in trust):
+            paths.append(plot_trust(red, trust, staging / "trust.png"))
+        notes = [f"WARNING (trust report): {w}" for w in warnings_of(red, trust)]
+        if plots and red.kind == "oscillatory":
+            from .plots import plot_all
+            figures, more = plot_all(red, staging, task_id)
+            paths, notes = paths + figures, notes + more
+        elif plots:
+            from .plots import plot_running_all
+            paths += plot_running_all(red, staging)
+        final = []
+        for path in paths:
+            os.replace(path, outdir / path.name)
+            final.append(outdir / path.name)
+        return final, notes
+    except OSError as err:
+        _undo(staging, created)
+        raise ReduceError(f"cannot write the outputs into {outdir}: {err}") from None
+    except BaseException:
+        _undo(staging, created)
+        raise
+    finally:
+        if staging is not None and staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _undo(staging, created) -> None:
+    """Remove the staging directory and the directories write_all created."""
+    if staging is not None:
+        shutil.rmtree(staging, ignore_errors=True)
+    for p in created:                      # deepest first
+        try:
+            p.rmdir()
+        except OSError:
+            pass

@@ -7,15 +7,18 @@ Usage::
     for task in enumerate_tasks(job): ...
 
 The schema (sections, keys, defaults, allowed values, units) lives in :mod:`.schema`;
-``schema_text()`` prints it. Units: sphere radius 1, medium zero-shear viscosity 1, time
-in t_D = a^2/D0 (1/gamma_dot for non-Brownian steady shear); ``Job.time_unit`` says which.
+``schema_text()`` (:mod:`.reference`) prints it. Units: sphere radius 1, medium zero-shear
+viscosity 1, time in t_D = a^2/D0 (1/gamma_dot for non-Brownian steady shear);
+``Job.time_unit`` says which.
 This package uses only the standard library, so validating a job is fast.
 """
 
 from .canonical import LAYOUT_KEYS, canonical_text, job_hash, resume_hash, toml_literal
-from .loader import JobError, Problem, load_job, parse_job
+from .loader import load_job, parse_job
+from .problems import JobError, Problem
+from .reference import schema_text
 from .schema import (Brownian, Ensemble, Hydrodynamics, Integration, Job, JobSection,
-                     Medium, Mode, Output, Shear, SizeClass, Solver, System, schema_text)
+                     Medium, Mode, Output, Shear, SizeClass, Solver, System)
 from .tasks import Task, enumerate_tasks
 
 __all__ = [

@@ -1,10 +1,11 @@
 """The job-file schema: one frozen dataclass per TOML section, one field per key.
 
 Each field carries its TOML spelling, kind, allowed values, unit and a one-line doc in
-``dataclasses.field(metadata=...)``; the loader, the canonical writer and
-:func:`schema_text` all read the schema from there, so a key is declared exactly once.
+``dataclasses.field(metadata=...)``; the loader, the canonical writer and the key
+reference (:mod:`.reference`) all read the schema from there, so a key is declared exactly
+once.
 
-Units are the seed's reduced units: sphere radius a = 1 (with size classes: the largest
+Units are the reduced units of Schaink et al. (2000): sphere radius a = 1 (with size classes: the largest
 radius; kT, D0 and t_D are then those of the largest spheres), medium zero-shear viscosity
 eta_m = 1, time in t_D = a^2/D0 with D0 = kT/(6 pi eta_m a). The one exception is
 non-Brownian steady shear, whose time unit is 1/gamma_dot (so ``shear.rate`` is 1 there).
@@ -26,6 +27,17 @@ TWO_PI = 2.0 * math.pi
 #: volume fractions of the initial configurations: below the lattice limit a lattice
 #: start, above it a compressed one (sdmpi.dynamics.initial), up to this
 START_PHI_LIMIT = 0.6
+
+
+def lattice_sites_per_axis(n: int) -> int:
+    """m, the sites per axis of the smallest simple cubic lattice with at least n sites
+    (m^3 >= n > (m - 1)^3): the lattice of the initial configuration."""
+    m = round(n ** (1 / 3))
+    while m ** 3 < n:
+        m += 1
+    while m > 1 and (m - 1) ** 3 >= n:
+        m -= 1
+    return m
 
 
 # --------------------------------------------------------------------------- allowed values
@@ -172,7 +184,7 @@ class SizeClass:
 class System:
     """[system]: the particles. Spheres of radius 1, or of several size classes (radii
     relative to the largest), in a cubic periodic box of side L = (sum_i 4 pi a_i^3 / (3 phi))^(1/3); one task group
-    per volume fraction. Monolayers (geometry = "monolayer", seed 001): N spheres of
+    per volume fraction. Monolayers (geometry = "monolayer", Dratler & Schowalter 1996): N spheres of
     radius 1 with centres in one plane, in a square L x L cell, L = (N pi / phi)^(1/2) with
     phi the areal fraction, replicated in the plane and every layer_spacing x L in z
     (sdmpi.dynamics.monolayer).
@@ -186,16 +198,18 @@ class System:
     n_particles: int = key(27, "int", "number of spheres N per realisation",
                            allowed=Range(1, None))
     phi: tuple[float, ...] = key((0.45,), "floats", "volume fractions (monolayer: areal "
-                                 "fractions N pi a^2 / L^2), one task group each",
-                                 allowed=Range(0.0, 0.64, lo_open=True, hi_open=True))
+                                 "fractions N pi a^2 / L^2), one task group each; the "
+                                 f"initial configurations reach phi < {START_PHI_LIMIT} (bulk) "
+                                 "and pi N / (4 m^2), m = ceil(sqrt N) (monolayer)",
+                                 allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))
     geometry: str = key("bulk", "str", "bulk: spheres in a cubic periodic box; monolayer: "
                         "centres in one plane z = const, in-plane motion, periodic in the "
-                        "plane, non-Brownian steady shear only (seed 001)",
+                        "plane, non-Brownian steady shear only (Dratler & Schowalter 1996)",
                         allowed=Choice(("bulk", "monolayer")), controls="system.geometry")
     box: str | None = key("cubic", "str", "box shape", allowed=Choice(("cubic",)), only_if=BULK)
     layer_spacing: float | None = key(
         2.0, "float", "monolayer: distance Lz between the layer and its periodic images "
-        "in z (3D fluid around a 2D-periodic layer; seed 001 used 100)", unit="L (in-plane side)",
+        "in z (3D fluid around a 2D-periodic layer; Dratler & Schowalter 1996 used 100)", unit="L (in-plane side)",
         allowed=Range(1.0, 1000.0), only_if=MONOLAYER)
     size_classes: tuple[SizeClass, ...] | None = key(
         None, "tables", "discrete size classes [{radius = ..., fraction = ...}, ...]; radii "
@@ -239,11 +253,11 @@ class System:
 
     @property
     def lattice_phi_limit(self) -> float:
-        """The largest phi of the simple-cubic lattice start, whose spacing L/m must exceed
-        the largest diameter 2: (pi/6) sum_i a_i^3 / N (pi/6 = 0.5236 when monodisperse)."""
-        if self.size_classes is None:
-            return math.pi / 6
-        return math.pi / 6 * math.fsum(r ** 3 for r in self.radii) / self.n_particles
+        """The largest phi of the simple-cubic lattice start (m^3 >= N sites, m =
+        :func:`lattice_sites_per_axis`), whose spacing L/m must exceed the largest diameter
+        2: (pi/6) sum_i a_i^3 / m^3 (pi/6 = 0.5236 for N = m^3 equal spheres)."""
+        m = lattice_sites_per_axis(self.n_particles)
+        return math.pi / 6 * (math.fsum(r ** 3 for r in self.radii) / m ** 3)
 
 
 @dataclass(frozen=True)
@@ -258,7 +272,7 @@ class Mode:
 
 @dataclass(frozen=True)
 class Medium:
-    """[medium]: the suspending fluid, Newtonian or multi-mode Maxwell (seed eqs. 2, 26)."""
+    """[medium]: the suspending fluid, Newtonian or multi-mode Maxwell (Schaink et al. 2000, eqs. 2, 26)."""
 
     kind: str = key("newtonian", "str", "suspending medium",
                     allowed=Choice(("newtonian", "maxwell")), controls="medium.kind")
@@ -278,7 +292,7 @@ class Shear:
     protocol: str = key("oscillatory", "str", "shear protocol",
                         allowed=Choice(("oscillatory", "steady", "none")),
                         controls="shear.protocol")
-    gamma0: float | None = key(0.02, "float", "strain amplitude (seed: linear regime)",
+    gamma0: float | None = key(0.02, "float", "strain amplitude (Schaink et al. 2000: linear regime)",
                                allowed=Range(0.0, 1.0, lo_open=True), only_if=OSCILLATORY)
     omega: tuple[float, ...] | None = key(
         (TWO_PI,), "floats", "angular frequencies, one task group each", unit="rad / time unit",
@@ -291,7 +305,7 @@ class Shear:
 
 @dataclass(frozen=True)
 class Brownian:
-    """[brownian]: thermal motion (Brownian forces and the Brownian stress, seed eq. 16)."""
+    """[brownian]: thermal motion (Brownian forces and the Brownian stress, Schaink et al. 2000, eq. 16)."""
 
     enabled: bool = key(True, "bool", "include Brownian motion")
 
@@ -307,7 +321,7 @@ class Integration:
     """
 
     steps_per_period: int | None = key(500, "int", "minimum time steps per period "
-                                       "(seed: at least 500)", allowed=Range(8, None),
+                                       "(Schaink et al. 2000: at least 500)", allowed=Range(8, None),
                                        only_if=OSCILLATORY)
     periods: int | None = key(20, "int", "periods run per task", allowed=Range(1, None),
                               only_if=OSCILLATORY)
@@ -315,7 +329,7 @@ class Integration:
                                       "< periods", allowed=Range(0, None),
                                       only_if=OSCILLATORY)
     dt_max: float | None = key(math.inf, "float", "largest time step; adds steps per period "
-                               "at low frequency (seed: 5e-4)", unit="time unit",
+                               "at low frequency (Schaink et al. 2000: 5e-4)", unit="time unit",
                                allowed=Range(0.0, None, lo_open=True, allow_inf=True),
                                only_if=OSCILLATORY)
     dt: float | None = key(1e-3, "float", "time step", unit="time unit",
@@ -324,7 +338,7 @@ class Integration:
                               only_if=STEADY_OR_NONE)
     overlap_stop: float | None = key(
         0.02, "float", "monolayer: a realisation stops (its later samples are NaN) when two "
-        "spheres overlap by more than this (seed 001: 2% of a radius)", unit="a",
+        "spheres overlap by more than this (Dratler & Schowalter 1996: 2% of a radius)", unit="a",
         allowed=Range(0.0, 1.0, lo_open=True), only_if=MONOLAYER)
     discard_steps: int | None = key(1000, "int", "leading steps left out of averages; "
                                     "< n_steps", allowed=Range(0, None),
@@ -337,8 +351,8 @@ class Interparticle:
 
     none: hard spheres (lubrication, plus the potential-free overlap correction);
     repulsion: F(h) = f0 tau exp(-tau h)/(1 + exp(-tau h)) along the line of centres
-    (seed 001), with h the surface gap; vdw: Hamaker's van der Waals attraction between
-    spheres (seed 003 eqs. 4-5), constant below cap_gap; dlvo: vdw plus the electrostatic
+    (Dratler & Schowalter 1996), with h the surface gap; vdw: Hamaker's van der Waals attraction between
+    spheres (Finke et al. 2020, eqs. 4-5), constant below cap_gap; dlvo: vdw plus the electrostatic
     double-layer repulsion psi^2 R ln(1 + exp(-h/debye_length)) (Derjaguin, constant low
     potential; R = a_i a_j/(a_i + a_j)). vdw and dlvo forces are shifted to vanish at the
     lubrication cut-off. frictional: contact springs k_n, k_t with Coulomb friction mu and
@@ -350,19 +364,19 @@ class Interparticle:
     kind: str = key("none", "str", "interparticle force",
                     allowed=Choice(("none", "repulsion", "vdw", "dlvo", "frictional")),
                     controls="interparticle.kind")
-    f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2); seed 001: "
+    f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2); Dratler & Schowalter 1996: "
                            "F0 = 1/(2 gamma*) in non-Brownian jobs",
                            unit="force unit x a", allowed=Range(0.0, None, lo_open=True),
                            only_if=REPULSION, example=1.0)
     tau: float | None = key(None, "float", "inverse range tau of the repulsion; 1/tau must "
                             "be below the lubrication cut-off / 12", unit="1/a",
                             allowed=Range(0.0, None, lo_open=True), only_if=REPULSION, example=1000.0)
-    hamaker: float | None = key(None, "float", "Hamaker constant A (seed 003 eq. 4; "
+    hamaker: float | None = key(None, "float", "Hamaker constant A (Finke et al. 2020, eq. 4; "
                                 "e.g. A/kT = 1.8 for 7.5e-21 J at 300 K)", unit="energy unit",
                                 allowed=Range(0.0, None, lo_open=True), only_if=VDW_OR_DLVO,
                                 example=1.0)
     cap_gap: float | None = key(None, "float", "gap below which the van der Waals force is "
-                                "held constant (seed 003: 0.4 nm); F(cut-off) <= 1e-3 F(cap) "
+                                "held constant (Finke et al. 2020: 0.4 nm); F(cut-off) <= 1e-3 F(cap) "
                                 "is required", unit="a",
                                 allowed=Range(0.0, 1.0, lo_open=True), only_if=VDW_OR_DLVO,
                                 example=0.01)
@@ -406,7 +420,7 @@ class Ensemble:
     """[ensemble]: independent realisations and how many MPI ranks share one task."""
 
     realisations: int = key(7, "int", "independent realisations per (phi, omega) "
-                            "(seed: at least 7)", allowed=Range(1, None))
+                            "(Schaink et al. 2000: at least 7)", allowed=Range(1, None))
     ranks_per_task: int = key(1, "int", "MPI ranks per task (> 1 needs a petsc backend)",
                               allowed=Range(1, None))
 
@@ -486,10 +500,10 @@ class Physical:
     omega: tuple[float, ...] | None = key(None, "floats", "angular frequencies; set shear.omega",
                                           unit="rad/s", allowed=Range(0.0, None, lo_open=True),
                                           optional=True)
-    hamaker: float | None = key(None, "float", "Hamaker constant (seed 003: 7.5e-21); sets "
+    hamaker: float | None = key(None, "float", "Hamaker constant (Finke et al. 2020: 7.5e-21); sets "
                                 "interparticle.hamaker", unit="J",
                                 allowed=Range(0.0, None, lo_open=True), optional=True)
-    cap_gap: float | None = key(None, "float", "van der Waals cap gap (seed 003: 0.4); sets "
+    cap_gap: float | None = key(None, "float", "van der Waals cap gap (Finke et al. 2020: 0.4); sets "
                                 "interparticle.cap_gap", unit="nm",
                                 allowed=Range(0.0, None, lo_open=True), optional=True)
     debye_length: float | None = key(None, "float", "Debye length; sets "
@@ -501,7 +515,7 @@ class Physical:
         allowed=Range(None, None), optional=True)
     particle_permittivity: float | None = key(
         None, "float", "static dielectric constant e1 of the particles: with the next four "
-        "keys and temperature, the Hamaker constant of seed 003 eq. 6 (Israelachvili eq. "
+        "keys and temperature, the Hamaker constant of Finke et al. 2020, eq. 6 (Israelachvili eq. "
         "13.16) sets interparticle.hamaker", allowed=Range(1.0, None), optional=True)
     medium_permittivity: float | None = key(None, "float", "static dielectric constant e3 of "
                                             "the medium (eq. 6; double layer)",
@@ -575,33 +589,3 @@ class Job:
 
 SECTIONS: tuple[tuple[str, type], ...] = tuple(
     (f.name, f.default_factory) for f in dataclasses.fields(Job))
-
-
-def schema_text() -> str:
-    """A plain-text table of every key: default, allowed values, unit and meaning."""
-    from .canonical import toml_literal
-
-    lines = []
-    for section, cls in SECTIONS:
-        lines.append(" ".join(cls.__doc__.split("\n\n")[0].split()))
-        for f in dataclasses.fields(cls):
-            lines.extend(_key_line(f, toml_literal, "  "))
-            if f.metadata["table"] is not None:
-                for g in dataclasses.fields(f.metadata["table"]):
-                    lines.extend(_key_line(g, toml_literal, "    ", f"{toml_name(f)}[]."))
-        lines.append("")
-    return "\n".join(lines)
-
-
-def _key_line(f, literal, indent, prefix=""):
-    m = f.metadata
-    name = prefix + toml_name(f)
-    default = literal(m["default"])
-    if m["default"] is None:
-        default = "absent" if m["optional"] else "required"
-    allowed = m["allowed"].describe(name) if m["allowed"] else m["kind"]
-    extra = f"; unit {m['unit']}" if m["unit"] else ""
-    if m["only_if"]:
-        s, k, vals = m["only_if"]
-        extra += f"; only when {s}.{k} is " + " or ".join(f'"{v}"' for v in vals)
-    return [f"{indent}{name} = {default}   ({allowed}{extra})", f"{indent}    {m['doc']}"]

@@ -5,7 +5,7 @@ Denn, J. Rheol. 58, 1693 (2014), on top of SD's lubrication (minimum-gap rule).
 Pair i, j with radii a_i, a_j, n the unit vector from i to j, h = |x_j - x_i| - a_i - a_j
 the surface gap (in a; negative = overlap = contact). Forces on j (those on i are opposite):
 
-* repulsion (:class:`CriticalLoadRepulsion`, electrostatic-like, the "critical load"):
+* repulsion (:class:`~sdmpi.dynamics.forces.CriticalLoadRepulsion`, electrostatic-like, the "critical load"):
   F_R = F_R0 exp(-h/lambda) n for h > 0 and F_R0 n for h <= 0, with U = F_R0 lambda
   exp(-h/lambda) (h > 0; continued linearly below) so that F_R = -dU/dh. It acts on every
   lubrication pair (applied by `forces.pair_forces`), so lambda must decay to 1e-12 of
@@ -57,7 +57,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .forces import FORCE_UNIT
+from .forces import FORCE_UNIT, CriticalLoadRepulsion  # noqa: F401 (the repulsion of this model)
 
 #: the normal relative mobility of touching unit spheres at minimum gap h_min is about
 #: SQUEEZE x h_min (job units; leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units)
@@ -70,28 +70,6 @@ def sliding_mobility(min_gap):
     ln(1/min_gap)), a fit to `solve_mobility` (0.568, 0.726, 1.002 at 1e-4, 1e-3, 1e-2;
     within 1% for 1e-4..3e-2, 3% at 0.1)."""
     return 1.0 / (0.245 + 0.165 * math.log(1.0 / min_gap))
-
-
-@dataclass(frozen=True)
-class CriticalLoadRepulsion:
-    """F(h) = F0 exp(-h/length) for h > 0, F0 for h <= 0 (Mari et al. 2014); F = -dU/dh
-    with U = F0 length exp(-h/length), continued linearly for h < 0. Radii unused."""
-
-    f0: float
-    length: float
-
-    def magnitude(self, gap, a_i=1.0, a_j=1.0):
-        return self.f0 * np.exp(-np.maximum(gap, 0.0) / self.length)
-
-    def potential(self, gap, a_i=1.0, a_j=1.0):
-        gap = np.asarray(gap, float)
-        return self.f0 * (self.length * np.exp(-np.maximum(gap, 0.0) / self.length)
-                          - np.minimum(gap, 0.0))
-
-    @property
-    def reach(self):
-        """Gap beyond which F < 1e-12 F0."""
-        return 12 * math.log(10) * self.length
 
 
 @dataclass(frozen=True)

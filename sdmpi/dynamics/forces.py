@@ -40,6 +40,9 @@ Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
   it is the seed-001 repulsion with F0 = psi^2/2, tau = 1/lambda_D; far away it is the
   linear superposition form 4 pi eps eps0 psi0^2 R e^(-kappa h) (low potential). Valid for
   kappa a >> 1, h << a, |e psi0/kT| <~ 2.
+* :class:`CriticalLoadRepulsion` (Mari, Seto, Morris & Denn, J. Rheol. 58 (2014)): the
+  repulsion of the frictional-contact model (sdmpi.dynamics.contacts), F0 exp(-h/lambda)
+  for h > 0 and F0 at contact.
 * :class:`Combined`: a sum of laws (DLVO = van der Waals + double layer).
 
 Shifted-force truncation (van der Waals, double layer): with h_c = cut-off x (a_i+a_j)/2,
@@ -80,6 +83,28 @@ class Repulsion:
     def reach(self):
         """Gap beyond which F < 1e-12 F0 tau."""
         return 12 * math.log(10) / self.tau
+
+
+@dataclass(frozen=True)
+class CriticalLoadRepulsion:
+    """F(h) = F0 exp(-h/length) for h > 0, F0 for h <= 0 (Mari et al. 2014); F = -dU/dh
+    with U = F0 length exp(-h/length), continued linearly for h < 0. Radii unused."""
+
+    f0: float
+    length: float
+
+    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+        return self.f0 * np.exp(-np.maximum(gap, 0.0) / self.length)
+
+    def potential(self, gap, a_i=1.0, a_j=1.0):
+        gap = np.asarray(gap, float)
+        return self.f0 * (self.length * np.exp(-np.maximum(gap, 0.0) / self.length)
+                          - np.minimum(gap, 0.0))
+
+    @property
+    def reach(self):
+        """Gap beyond which F < 1e-12 F0."""
+        return 12 * math.log(10) * self.length
 
 
 class _Truncated:
@@ -185,7 +210,6 @@ def force_law(job):
     if inter.kind == "repulsion":
         return Repulsion(FORCE_UNIT * inter.f0, inter.tau)
     if inter.kind == "frictional":  # the repulsion; the contact springs: contacts.contact_model
-        from .contacts import CriticalLoadRepulsion  # contacts imports this module
         return CriticalLoadRepulsion(FORCE_UNIT * inter.f_r0, inter.repulsion_length)
     vdw = VanDerWaals(FORCE_UNIT * inter.hamaker, inter.cap_gap, cutoff)
     if inter.kind == "vdw":

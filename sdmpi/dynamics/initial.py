@@ -1,20 +1,21 @@
 """Initial configurations: equilibrium hard-sphere fluids in a cubic periodic box, and
 hard-disk monolayers (`hard_disk_monolayer`).
 
-Spheres of equal or unequal radii a_i start on a simple cubic lattice spaced for the
-largest diameter (dense enough up to phi = (pi/6) sum_i a_i^3 / (N a_max^3), pi/6 = 0.524
-for equal spheres; unequal spheres are placed on randomly permuted sites) and are
-randomised by hard-sphere Metropolis Monte Carlo (trial displacements uniform in a cube,
-rejected on overlap, |x_i - x_j| < a_i + a_j; Metropolis et al. 1953), which samples the equilibrium hard-sphere
-distribution for the given volume fraction; the overlap checks use a cell list, O(N) per
-sweep (N = 1000: 0.14 s instead of 5 s for the O(N^2) version, same positions). Denser random packings (up to phi ~ 0.62) come
-from `compress`: alternating MC sweeps with affine box shrinks limited by the closest
-pair, a slow Lubachevsky-Stillinger-like compression (Lubachevsky & Stillinger 1990).
-`hard_sphere_fluid` uses it for volume fractions the lattice cannot hold (dense
-polydisperse suspensions, monodisperse phi >= pi/6): lattice + MC at LATTICE_FILL of the
-lattice limit, compression to phi, then MC at phi (phi < ``START_PHI_LIMIT``).
-Equal radii take exactly the arithmetic (and random stream) of the monodisperse code
-before size classes existed, so old seeds give the same positions bit for bit.
+Any number N of spheres of equal or unequal radii a_i start on N of the m^3 >= N sites
+of a simple cubic lattice spaced for the largest diameter (dense enough up to phi =
+(pi/6) sum_i a_i^3 / (m^3 a_max^3), pi/6 = 0.524 for N = m^3 equal spheres; unequal
+spheres, or N < m^3, take randomly drawn sites) and are randomised by hard-sphere
+Metropolis Monte Carlo (trial displacements uniform in a cube, rejected on overlap,
+|x_i - x_j| < a_i + a_j; Metropolis et al. 1953), which samples the equilibrium
+hard-sphere distribution for the given volume fraction; the overlap checks use a cell
+list, O(N) per sweep, and give the same moves as checking every pair. Denser random
+packings (up to phi ~ 0.62) come from `compress`: alternating MC sweeps with affine box
+shrinks limited by the closest pair, a slow Lubachevsky-Stillinger-like compression
+(Lubachevsky & Stillinger 1990). `hard_sphere_fluid` uses it for volume fractions the
+lattice cannot hold: lattice + MC at LATTICE_FILL of the lattice limit, compression to
+phi, then MC at phi (phi < ``START_PHI_LIMIT``). Equal radii given as an array take
+exactly the arithmetic and random stream of a common radius, so a job's positions depend
+only on its seed, N and phi.
 """
 
 import math
@@ -22,11 +23,17 @@ import math
 import numba
 import numpy as np
 
-from ..config.schema import START_PHI_LIMIT
+from ..config.schema import START_PHI_LIMIT, lattice_sites_per_axis
 from ..hydro.geometry import Lattice, find_pairs
 
 #: dense starts: the lattice is filled to this share of its limit before compressing
 LATTICE_FILL = 0.9
+#: dense starts: compressions tried (each with new random draws) before giving up
+COMPRESS_ATTEMPTS = 5
+
+
+class Jammed(RuntimeError):
+    """A compression (:func:`compress`) that stopped below its target volume fraction."""
 
 
 def cubic_box(n_particles, phi, radius=1.0):
@@ -188,35 +195,46 @@ def hard_sphere_fluid(n_particles, phi, rng, sweeps=200, radius=1.0, strain=0.0,
     images at the given strain: positions (N, 3) (not wrapped) and L.
 
     Spheres have the common ``radius``, or the per-particle ``radii`` (N,) when given
-    (then L comes from their total volume, :func:`box_side`). n_particles must be a
-    perfect cube (lattice start: layers L/m > 2 a_max apart in y, so no overlap at any
-    strain), which holds phi < (pi/6) sum_i a_i^3 / (N a_max^3) (pi/6 for equal spheres). Unequal
-    spheres take the lattice sites in an order drawn from ``rng`` (equal ones in raster
-    order, drawing nothing). The MC step is tuned to ~40% acceptance. At or above the
+    (then L comes from their total volume, :func:`box_side`). The start is a simple cubic
+    lattice of m^3 >= N sites, m = ceil(N^(1/3)) (layers L/m > 2 a_max apart in y, so no
+    overlap at any strain), which holds phi < (pi/6) sum_i a_i^3 / (m^3 a_max^3) (pi/6 for
+    N = m^3 equal spheres). When N < m^3, or the spheres are unequal, they take N of the
+    sites in an order drawn from ``rng`` (rng.permutation(m^3)[:N]); N = m^3 equal spheres
+    fill the lattice in raster order, drawing nothing. The MC step is tuned to ~40% acceptance. At or above the
     lattice limit (phi < START_PHI_LIMIT) the lattice is filled to LATTICE_FILL x the
     limit, equilibrated, compressed (:func:`compress`) and equilibrated again at phi by
-    ``sweeps`` more sweeps; RuntimeError if the compression jams."""
-    m = round(n_particles ** (1 / 3))
-    if m ** 3 != n_particles:
-        raise ValueError(f"n_particles must be a perfect cube for a lattice start, got {n_particles}")
+    ``sweeps`` more sweeps; :class:`Jammed` if the compression jams COMPRESS_ATTEMPTS times."""
+    m = lattice_sites_per_axis(n_particles)
     radii = _radii(n_particles, radius, radii)
     a_max = float(radii.max())
-    limit = math.pi / 6 * float(np.mean((radii / a_max) ** 3))
+    limit = math.pi / 6 * float(np.mean((radii / a_max) ** 3)) * (n_particles / m ** 3)
     if not 0 < phi < START_PHI_LIMIT:
         raise ValueError(f"phi must be in (0, {START_PHI_LIMIT}) (a lattice start below the "
-                         f"lattice limit pi/6 <(a/a_max)^3> = {limit:.4f} for a spacing of the "
-                         f"largest diameter, a compressed one above it), got {phi}")
+                         f"lattice limit (pi/6) sum_i (a_i/a_max)^3 / m^3 = {limit:.4f} for a "
+                         f"spacing of the largest diameter, a compressed one above it), got {phi}")
     start = phi if phi < limit else LATTICE_FILL * limit
     side = box_side(radii, start)
     grid = (np.arange(m) + 0.5) * side / m
     pos = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
-    if np.any(radii != radii[0]):
-        pos = pos[rng.permutation(n_particles)]
+    if n_particles < m ** 3 or np.any(radii != radii[0]):
+        pos = pos[rng.permutation(m ** 3)[:n_particles]]
     _equilibrate(pos, side, radii, 0.5 * (side / m - 2 * a_max) + 0.01, sweeps, rng, strain)
     if start < phi:
-        pos, side = compress(pos, side, phi, rng, radius=radius, strain=strain, radii=radii)
+        pos, side = _compress_retrying(pos, side, phi, rng, strain, radii)
         _equilibrate(pos, side, radii, 0.05 * a_max, sweeps, rng, strain)
     return pos, side
+
+
+def _compress_retrying(pos, side, phi, rng, strain, radii):
+    """:func:`compress` from the same lattice start with the next random draws, up to
+    COMPRESS_ATTEMPTS times: small periodic boxes (N of order 10) can jam below phi."""
+    for _ in range(COMPRESS_ATTEMPTS):
+        try:
+            return compress(pos, side, phi, rng, strain=strain, radii=radii)
+        except Jammed as err:
+            jam = err
+    raise Jammed(f"{jam}, {COMPRESS_ATTEMPTS} times from a lattice of N = {len(pos)} spheres; "
+                 "small boxes jam: use more particles or a smaller phi")
 
 
 def _equilibrate(pos, side, radii, step, sweeps, rng, strain, dims=3):
@@ -318,7 +336,7 @@ def compress(pos, side, phi_target, rng, sweeps_per_shrink=5, radius=1.0, max_sh
              radii=None):
     """Compress a hard-sphere configuration (N, 3) in a cube of the given side (Lees-Edwards
     strain fixed) to volume fraction phi_target; spheres of the common ``radius`` or of the
-    per-particle ``radii``. Returns (positions, side). Raises RuntimeError if it jams."""
+    per-particle ``radii``. Returns (positions, side). Raises :class:`Jammed` if it jams."""
     pos = pos.copy()
     n = len(pos)
     radii = _radii(n, radius, radii)
@@ -334,4 +352,4 @@ def compress(pos, side, phi_target, rng, sweeps_per_shrink=5, radius=1.0, max_sh
         rate = _mc_sweeps(pos, side, radii, step, sweeps_per_shrink, int(rng.integers(2 ** 31)), strain)
         step = min(max(step * (0.5 + rate / 0.4 * 0.5), 1e-4), 0.5)
     volume = 4.0 / 3.0 * math.pi * float(np.sum(radii ** 3))
-    raise RuntimeError(f"compression to phi = {phi_target} jammed at phi = {volume / side ** 3:.3f}")
+    raise Jammed(f"compression to phi = {phi_target} jammed at phi = {volume / side ** 3:.3f}")

@@ -162,10 +162,14 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
         job = load_job(job_path, overrides)
     except JobError as err:
         raise BadInput(str(err)) from None
-    if not h5py.get_config().mpi:
-        raise BadInput("sdmpi run needs h5py built with MPI (Debian: python3-h5py-mpi); "
-                       "set H5PY_ALWAYS_USE_MPI=1 before h5py is imported (the sdmpi "
-                       "command does)")
+    if size > 1 and not store.parallel_hdf5():
+        raise BadInput(f"sdmpi run on {size} ranks needs h5py built with MPI (parallel "
+                       f"HDF5), and this h5py {h5py.version.version} is serial "
+                       "(h5py.get_config().mpi is False); one rank runs without it. "
+                       "Install a parallel h5py against the MPI that mpirun belongs to "
+                       "(Debian: python3-h5py-mpi; conda-forge: h5py=*=mpi_openmpi* or "
+                       "mpi_mpich*; pip: HDF5_MPI=ON CC=mpicc pip install --no-binary=h5py "
+                       "h5py against a parallel HDF5); see docs/hpc.md")
     rpt = job.ensemble.ranks_per_task
     if size % rpt:
         raise BadInput(f"ensemble.ranks_per_task = {rpt} does not divide the {size} MPI "

@@ -2,7 +2,7 @@
 
 Three ways in:
 
-* :func:`create` (collective, ``mpio``): the whole layout, every dataset preallocated
+* :func:`create` (collective, ``mpio``; see :func:`parallel_hdf5`): the whole layout, every dataset preallocated
   (contiguous, allocated at creation), before any rank steps;
 * :class:`RunFile` (collective open, ``mpio``): while stepping, each task's owner writes
   raw data only (:meth:`RunFile.commit`), never metadata, so a process killed at any
@@ -104,12 +104,29 @@ def _nan_if_none(x):
 # --------------------------------------------------------------------------- create
 
 
+def parallel_hdf5() -> bool:
+    """Whether this h5py is built with MPI (parallel HDF5, the ``mpio`` driver)."""
+    return bool(h5py.get_config().mpi)
+
+
+def _open_collective(path, mode: str, comm, **kwargs) -> h5py.File:
+    """``h5py.File`` opened collectively over ``comm`` through MPI-IO; on one rank
+    without parallel HDF5, opened directly (the same file: the layout does not depend
+    on the driver)."""
+    if parallel_hdf5():
+        return h5py.File(path, mode, driver="mpio", comm=comm, **kwargs)
+    if comm.Get_size() == 1:
+        return h5py.File(path, mode, **kwargs)
+    raise StoreError(f"{comm.Get_size()} ranks share the run file, which needs h5py built "
+                     "with MPI (parallel HDF5)")
+
+
 def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versions: str,
            created: str) -> None:
     """Create the complete run file at ``path`` (collective over ``comm``; every rank
     passes the same arguments). ``versions`` is a JSON text, ``created`` UTC ISO 8601."""
     tasks = enumerate_tasks(job)
-    with h5py.File(path, "w", driver="mpio", comm=comm, libver="earliest") as f:
+    with _open_collective(path, "w", comm, libver="earliest") as f:
         f.attrs.update({
             "format": FORMAT, "format_version": FORMAT_VERSION, "job_text": job_text,
             "job_hash": job_hash(job), "resume_hash": resume_hash(job),
@@ -190,7 +207,7 @@ class RunFile:
     """
 
     def __init__(self, path, comm):
-        self.file = h5py.File(path, "r+", driver="mpio", comm=comm)
+        self.file = _open_collective(path, "r+", comm)
         self._fd = os.open(path, os.O_RDONLY)  # for fsync, independent of MPI-IO
         self._progress = self.file["progress"]
         self._checksums = {}  # task id -> (sample checksum table, block) being extended

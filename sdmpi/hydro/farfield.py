@@ -38,6 +38,7 @@ from scipy.special import gamma as gamma_function
 
 from .basis import BASIS
 from .geometry import Lattice, find_pairs
+from .workspace import work_array
 
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
 #: default relative accuracy of the Ewald sums (every entry point)
@@ -188,14 +189,14 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
     r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
     v = work[3:23].reshape((4, 5))
     _radial_values(table, bounds, xi, r, work[23:23 + _NPOW], v)
-    _block_from_radial(rvec, r, v, ai, aj, basis, work, out)
+    _block_from_radial(rvec, r, v, ai, aj, basis, work[0:3], work[51:66].reshape((5, 3)), work[66:71], out)
 
 
 @numba.njit(cache=True)
-def _block_from_radial(rvec, r, v, ai, aj, basis, work, out):
+def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
-    (work: (80,) scratch, entries 3..50 untouched)."""
-    e = work[0:3]
+    (e (3,), be (5, 3), q (5,): scratch, passed in so that a loop over images makes no
+    array views per image)."""
     for c in range(3):
         e[c] = rvec[c] / r
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
@@ -236,8 +237,6 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, work, out):
         out[3 + m, 3 + m] += 0.25 * (b2 - v[2, 0])
 
     # B^n . e and e . B^n . e
-    be = work[51:66].reshape((5, 3))
-    q = work[66:71]
     be[:, :] = 0.0
     q[:] = 0.0
     for n in range(5):
@@ -312,7 +311,7 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
     triangle, and for a self-image (i == j) adds the -n image. Consecutive images of the
     same pair (find_pairs lists them together) are summed before being added to mob."""
     bounds = _power_bounds(table)
-    work = np.empty(80)
+    pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
     v = np.empty((4, 5))
     block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
@@ -322,8 +321,8 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         for c in range(3):
             rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
         r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
-        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, work[23:23 + _NPOW], v)
-        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, work, block)
+        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
+        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, block)
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
         for a in range(NDOF):
@@ -437,9 +436,12 @@ def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entr
                         mob[rj + a, ri + b] += v_ba[p, e]
 
 
-def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
-    """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N)."""
-    n, nk = len(pos), len(kvec)
+def _wave_terms(radii, kvec, xi, volume):
+    """What the reciprocal sum needs besides the positions: the cosine and sine tensors
+    of every wave vector (scaled by 2/V, with the radius factors folded in when all radii
+    are equal), |k|^2 (nk, 1), the Faxen coefficients of their rows and columns, and
+    whether the radii are equal."""
+    nk = len(kvec)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
     _wave_tensors(kvec, xi, BASIS, _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
     tcos *= 2.0 / volume
@@ -452,20 +454,27 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob):
         a2 = radii[0] ** 2
         tcos *= (1 - c_row["cos"] * a2 * ksq) * (1 - c_col["cos"] * a2 * ksq)
         tsin *= (1 - c_row["sin"] * a2 * ksq) * (1 - c_col["sin"] * a2 * ksq)
-    tensors = {"cos": tcos, "sin": tsin}
+    return {"cos": tcos, "sin": tsin}, ksq, c_row, c_col, equal
+
+
+def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
+    """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N);
+    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand."""
+    n, nk = len(pos), len(kvec)
+    tensors, ksq, c_row, c_col, equal = _wave_terms(radii, kvec, xi, volume) if terms is None else terms
     phase = pos @ kvec.T
     phase_re, phase_im = np.cos(phase), np.sin(phase)
     pi, pj = np.triu_indices(n)
     for start in range(0, len(pi), _PAIR_CHUNK):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
-        cos_k, sin_k = np.empty((len(ci), nk)), np.empty((len(ci), nk))
+        cos_k, sin_k = work_array("cos_k", (len(ci), nk)), work_array("sin_k", (len(ci), nk))
         _pair_phases(phase_re, phase_im, ci, cj, cos_k, sin_k)
         vals = []  # (entry values at (a, b), at (b, a)) of the cosine and sine parts
         for part, trig, sign in (("cos", cos_k, 1.0), ("sin", sin_k, -1.0)):
             t = tensors[part]
-            g0 = trig @ t
+            g0 = np.matmul(trig, t, out=work_array(part, (len(ci), t.shape[1])))
             if equal:
-                vals += [g0, sign * g0]
+                vals += [g0, g0 if sign > 0 else np.negative(g0, out=work_array("-sin", g0.shape))]
                 continue
             # f_a(a_i) f_b(a_j) = 1 - (c_a a_i^2 + c_b a_j^2) k^2 + c_a c_b a_i^2 a_j^2 k^4
             g1, g2 = trig @ (ksq * t), trig @ (ksq * ksq * t)
@@ -548,7 +557,8 @@ class FarFieldPlan:
     """What the far-field sums need besides the positions, fixed for a configuration and
     its small displacements (random finite differences must not see pairs cross the
     cut-off): Ewald parameters (None: unbounded), real-space pair images (i, j, shift),
-    wave vectors, radial coefficient table, the self blocks per radius and the volume."""
+    wave vectors, radial coefficient table, the self blocks per radius and the volume;
+    the wave vectors' tensors are kept once computed (a step's midpoint reuses them)."""
 
     params: EwaldParameters | None
     images: tuple
@@ -557,6 +567,7 @@ class FarFieldPlan:
     grid: "RadialGrid"
     self_blocks: dict
     volume: float
+    wave_terms: tuple | None = None  # (radii, their `_wave_terms`), built on first use
 
 
 @functools.lru_cache(maxsize=16)
@@ -629,7 +640,9 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD
     grid = plan.grid
     _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob)
     if plan.params is not None:
-        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob)
+        if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
+            plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, xi_used, plan.volume))
+        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1])
     for i, a in enumerate(radii):
         mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob

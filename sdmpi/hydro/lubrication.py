@@ -51,6 +51,7 @@ from .basis import BASIS
 from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
 from .geometry import find_pairs
 from .two_sphere import _basis5, _fill_pair_work, pair_resistance
+from .workspace import work_array
 
 #: default lubrication cut-off: gap in units of the pair's mean radius
 DEFAULT_CUTOFF = 2.0
@@ -238,7 +239,8 @@ _CHUNK = 2048
 def pair_blocks(radii, pairs):
     """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
     columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
-    exact ones (module docstring); together all pairs once."""
+    exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
+    `workspace.work_array`, valid until the next chunk is asked for."""
     if len(pairs.i) == 0:
         return
     radii = np.asarray(radii, dtype=float)
@@ -261,7 +263,7 @@ def pair_blocks(radii, pairs):
     sel = np.flatnonzero(fast)
     for c in range(0, len(sel), _CHUNK):
         part = sel[c:c + _CHUNK]
-        res = np.empty((len(part), 2 * NDOF, 2 * NDOF))
+        res = work_array("pair_blocks", (len(part), 2 * NDOF, 2 * NDOF))
         _tabulated_kernel(dx[part], a1[part], a2[part], tab[part], *tables, res)
         yield pi[part], pj[part], res
     if not fast.all():

@@ -44,14 +44,33 @@ class GrandResistance:
         return self.matrix.shape[0] // NDOF
 
     def blocks(self):
-        """(R_FU, R_FE, R_SU, R_SE): the 6N rigid-body and 5N strain partitions (views of
-        one reordered copy; R_SU = R_FE^T)."""
+        """(R_FU, R_FE, R_SU, R_SE): the 6N rigid-body and 5N strain partitions, dofs
+        ordered particle by particle within each (fresh C-contiguous copies; R_SU is the
+        view R_FE^T, R is symmetric)."""
         n = self.n_particles
-        idx = np.arange(NDOF * n).reshape(n, NDOF)
-        order = np.concatenate([idx[:, :6].ravel(), idx[:, 6:].ravel()])
-        m = self.matrix[np.ix_(order, order)]
-        r = 6 * n
-        return m[:r, :r], m[:r, r:], m[r:, :r], m[r:, r:]
+        r_fu, r_fe, r_se = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
+        _partition(self.matrix, r_fu, r_fe, r_se)
+        return r_fu, r_fe, r_fe.T, r_se
+
+
+@numba.njit(cache=True)
+def _partition(matrix, r_fu, r_fe, r_se):
+    """Copies the rigid-body (6 per particle) and strain (5 per particle) rows and
+    columns of an (11N, 11N) matrix into its FU, FE and SE partitions."""
+    n = r_fu.shape[0] // 6
+    for i in range(n):
+        for a in range(NDOF):
+            row = matrix[NDOF * i + a]
+            for j in range(n):
+                for b in range(NDOF):
+                    v = row[NDOF * j + b]
+                    if a < 6:
+                        if b < 6:
+                            r_fu[6 * i + a, 6 * j + b] = v
+                        else:
+                            r_fe[6 * i + a, 5 * j + b - 6] = v
+                    elif b >= 6:
+                        r_se[5 * i + a - 6, 5 * j + b - 6] = v
 
 
 def spd_inverse(matrix):

@@ -23,7 +23,7 @@ backend but a rule (`resolve_backend`): dense below AUTO_KRYLOV_MIN_N particles
 """
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import lapack
 
 from .krylov import DEFAULT_TOL
 from .resistance import grand_resistance, split_resistance
@@ -35,22 +35,28 @@ AUTO_KRYLOV_MIN_N = 300
 
 
 class DenseSolver:
-    """Cholesky factorisation of R_FU (LAPACK via scipy)."""
+    """Cholesky factorisation of R_FU (LAPACK potrf/potrs via scipy, in place: R_FU comes
+    as a fresh copy from `GrandResistance.blocks` and is finite by construction)."""
 
     name = "dense"
 
     def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
-        self.r_fu, self.r_fe, self.r_su, self.r_se = resistance.blocks()
+        r_fu, self.r_fe, self.r_su, self.r_se = resistance.blocks()
         self.n = resistance.n_particles
-        try:
-            self._chol = cho_factor(self.r_fu, lower=True)
-        except np.linalg.LinAlgError as exc:
-            raise np.linalg.LinAlgError("R_FU is not positive definite") from exc
+        # r_fu.T is the same symmetric matrix in Fortran order: its upper factor U
+        # (R_FU = U^T U) overwrites it, and U.T is the lower factor C in C order
+        upper, info = lapack.dpotrf(r_fu.T, lower=False, clean=True, overwrite_a=True)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"R_FU is not positive definite (potrf info {info})")
+        self._upper = upper
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
         rhs = forces.ravel() + self.r_fe @ einf.ravel()
-        return cho_solve(self._chol, rhs).reshape(self.n, 6)
+        sol, info = lapack.dpotrs(self._upper, rhs, lower=False)
+        if info != 0:
+            raise ValueError(f"potrs: illegal argument {-info}")
+        return sol.reshape(self.n, 6)
 
     def stresslets(self, velocities, einf):
         """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
@@ -58,8 +64,7 @@ class DenseSolver:
 
     def brownian_forces(self, noise):
         """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
-        chol = np.tril(self._chol[0])
-        return (chol @ noise.ravel()).reshape(self.n, 6)
+        return (self._upper.T @ noise.ravel()).reshape(self.n, 6)
 
 
 def _petsc_dense(resistance, comm=None):

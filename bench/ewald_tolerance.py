@@ -1,0 +1,135 @@
+"""How loose an Ewald tolerance a Brownian run at N = 27, phi = 0.45 can take.
+
+On a fixed set of equilibrium hard-sphere configurations (Monte Carlo,
+`sdmpi.dynamics.initial.hard_sphere_fluid`, one seed each) this compares, between the
+reference ewald_tolerance (1e-6) and looser ones, the operators a Brownian step uses:
+
+- R_FU^-1 (6N x 6N), the mobility that turns forces into velocities;
+- the Brownian drift kT div R_FU^-1 (6N) and the Brownian stresslets
+  -kT div(R_SU R_FU^-1) (5N), by centred finite differences over the 3N translations
+  with the configuration's pair sets frozen (as the midpoint scheme sees them);
+- eta_H = n <S_xy>/gamma_dot, the hydrodynamic part of the high-frequency viscosity.
+
+Per configuration the error of a vector or matrix X is ||X_tol - X_ref|| / ||X_ref||
+(Frobenius/Euclidean), of eta_H |eta_tol - eta_ref| / eta_ref; the systematic part of a
+vector's error is its component along the reference, (X_tol - X_ref).X_ref / |X_ref|^2,
+averaged over the configurations (a bias that averaging over an ensemble does not remove).
+Also the time of one `grand_resistance` at each tolerance, in units of a 297 x 297 LAPACK
+Cholesky timed in the same process. Writes JSON (default bench/ewald_tolerance.json).
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/ewald_tolerance.py
+"""
+
+import argparse
+import json
+import platform
+import time
+
+import numpy as np
+from scipy.linalg import lapack
+
+from sdmpi.dynamics.initial import hard_sphere_fluid
+from sdmpi.hydro.bulk import hydrodynamic_viscosity
+from sdmpi.hydro.resistance import grand_resistance
+
+KT = 1.0  # the errors are relative: any kT
+
+
+def operators(pos, box, tol, h):
+    """R_FU^-1, kT div R_FU^-1, -kT div(R_SU R_FU^-1) and eta_H at one tolerance."""
+    n = len(pos)
+    radii = np.ones(n)
+    base = grand_resistance(pos, radii, box, 0.0, ewald_tol=tol)
+    mobility = np.linalg.inv(base.blocks()[0])
+    div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
+    for p in range(n):
+        for c in range(3):
+            mats = []
+            for sign in (1, -1):
+                moved = base.positions.copy()
+                moved[p, c] += sign * h
+                r_fu, _, r_su, _ = grand_resistance(moved, radii, box, 0.0, ewald_tol=tol,
+                                                    plan=base.plan).blocks()
+                m = np.linalg.inv(r_fu)
+                mats.append((m[:, 6 * p + c], r_su @ m[:, 6 * p + c]))
+            div_m += (mats[0][0] - mats[1][0]) / (2 * h)
+            div_a += (mats[0][1] - mats[1][1]) / (2 * h)
+    eta = hydrodynamic_viscosity(base.positions, box, ewald_tol=tol)
+    return {"mobility": mobility, "drift": KT * div_m, "stresslets": -KT * div_a,
+            "bulk_stresslet": -KT * div_a.reshape(n, 5).sum(axis=0), "eta_H": np.array([eta])}
+
+
+def cholesky_units(pos, box, tols, repeat=15):
+    """ms of one grand_resistance per tolerance and of a 297 x 297 Cholesky, interleaved."""
+    a = np.random.default_rng(0).standard_normal((297, 297))
+    spd = a @ a.T + 297 * np.eye(297)
+    runs = {"cholesky": lambda: lapack.dpotrf(spd)}
+    runs.update({f"{t:g}": (lambda t=t: grand_resistance(pos, np.ones(len(pos)), box, 0.0, ewald_tol=t))
+                 for t in tols})
+    times = {k: [] for k in runs}
+    for f in runs.values():
+        f()
+    for _ in range(repeat):
+        for k, f in runs.items():
+            t0 = time.perf_counter()
+            f()
+            times[k].append(time.perf_counter() - t0)
+    ms = {k: 1e3 * float(np.median(v)) for k, v in times.items()}
+    return {"ms": ms, "cholesky_equivalents": {k: v / ms["cholesky"] for k, v in ms.items()}}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--configs", type=int, default=20)
+    ap.add_argument("--n", type=int, default=27)
+    ap.add_argument("--phi", type=float, default=0.45)
+    ap.add_argument("--reference", type=float, default=1e-6)
+    ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-5, 1e-4])
+    ap.add_argument("--h", type=float, default=1e-5, help="finite-difference step [a]")
+    ap.add_argument("--out", default="bench/ewald_tolerance.json")
+    args = ap.parse_args()
+    errors = {f"{t:g}": {} for t in args.tolerances}
+    configs = []
+    for seed in range(args.configs):
+        pos, side = hard_sphere_fluid(args.n, args.phi, np.random.default_rng(seed))
+        box = np.full(3, side)
+        configs.append((pos, box))
+        ref = operators(pos, box, args.reference, args.h)
+        for t in args.tolerances:
+            got = operators(pos, box, t, args.h)
+            for key, r in ref.items():
+                d = got[key] - r
+                e = errors[f"{t:g}"].setdefault(key, {"relative": [], "systematic": []})
+                e["relative"].append(float(np.linalg.norm(d) / np.linalg.norm(r)))
+                e["systematic"].append(float(np.vdot(d, r) / np.vdot(r, r)))
+        print(f"config {seed}: eta_H = {ref['eta_H'][0]:.4f}, "
+              + ", ".join(f"{t:g}: drift {errors[f'{t:g}']['drift']['relative'][-1]:.1e}"
+                          for t in args.tolerances), flush=True)
+    summary = {}
+    for t, per in errors.items():
+        summary[t] = {key: {"mean_relative": float(np.mean(e["relative"])),
+                            "max_relative": float(np.max(e["relative"])),
+                            "mean_systematic": float(np.mean(e["systematic"])),
+                            "below_0.2_percent": bool(max(np.mean(e["relative"]),
+                                                          abs(np.mean(e["systematic"]))) < 2e-3)}
+                      for key, e in per.items()}
+    result = {"command": "python bench/ewald_tolerance.py " + " ".join(
+                  f"--{k.replace('_', '-')} {v if not isinstance(v, list) else ' '.join(map(str, v))}"
+                  for k, v in vars(args).items() if k != "out"),
+              "n": args.n, "phi": args.phi, "configs": args.configs, "reference": args.reference,
+              "summary": summary, "per_config": errors,
+              "cost": cholesky_units(*configs[0], [args.reference, *args.tolerances]),
+              "machine": platform.processor() or platform.machine(), "python": platform.python_version()}
+    with open(args.out, "w") as fh:
+        json.dump(result, fh, indent=1)
+    for t, per in summary.items():
+        print(f"tolerance {t} against {args.reference:g}:")
+        for key, s in per.items():
+            print(f"  {key:15s} mean {s['mean_relative']:.2e}  max {s['max_relative']:.2e}  "
+                  f"systematic {s['mean_systematic']:+.2e}  {'ok' if s['below_0.2_percent'] else 'TOO LARGE'}")
+    print("grand_resistance cost [Cholesky-297 equivalents]:",
+          {k: round(v, 2) for k, v in result["cost"]["cholesky_equivalents"].items()})
+
+
+if __name__ == "__main__":
+    main()

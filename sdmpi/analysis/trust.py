@@ -1,0 +1,163 @@
+"""How far to trust the dynamics of a reduced run: the trust report (trust.csv, trust.png).
+
+Per (phi, omega or rate) group, over every committed sample of every realisation (the
+start-up included: it is the same dynamics), from the per-step sample fields of the run
+file (docs/store.md):
+
+* ``steps_per_time``: time steps per unit of the job's time unit (t_D for Brownian jobs),
+  1/dt;
+* ``overlaps_per_time``, ``overlaps_per_step``: overlapping pairs found and separated at
+  the start of a step (``n_overlaps``), summed over steps, per unit time and per step;
+  ``midpoint_*`` the same for the Brownian midpoint (``n_overlaps_midpoint``);
+* ``min_gap_min``, ``min_gap_p01``, ``min_gap_p10``, ``min_gap_median``: the distribution
+  of the per-step smallest surface gap (``min_gap``, in radii; negative: an overlap);
+* ``solver_iterations_per_step``, ``solver_residual_max``, ``lanczos_iterations_per_step``:
+  iterative-solver statistics (0 for the direct backends).
+
+Fields that a file does not hold are NaN. Warnings are raised when the overlap
+corrections per step exceed :data:`OVERLAPS_PER_STEP_WARN` at the start or at the
+midpoint (the time step is too large for the closest pairs), or when the smallest gap is
+deeper than :data:`DEEP_OVERLAP` radii.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+#: warn when more overlapping pairs than this are corrected per step (on average)
+OVERLAPS_PER_STEP_WARN = 0.02
+#: warn when a step starts with an overlap deeper than this (surface gap, radii)
+DEEP_OVERLAP = -0.05
+
+TRUST_COLUMNS = ("n_tasks", "steps", "time", "steps_per_time", "overlaps_per_time",
+                 "overlaps_per_step", "midpoint_overlaps_per_time",
+                 "midpoint_overlaps_per_step", "min_gap_min", "min_gap_p01", "min_gap_p10",
+                 "min_gap_median", "solver_iterations_per_step", "solver_residual_max",
+                 "lanczos_iterations_per_step")
+#: the unit of each column (time: the job's time unit)
+TRUST_UNITS = {"n_tasks": "count", "steps": "count", "time": "time unit",
+               "steps_per_time": "1/time unit", "overlaps_per_time": "1/time unit",
+               "overlaps_per_step": "1", "midpoint_overlaps_per_time": "1/time unit",
+               "midpoint_overlaps_per_step": "1", "min_gap_min": "a", "min_gap_p01": "a",
+               "min_gap_p10": "a", "min_gap_median": "a", "solver_iterations_per_step": "1",
+               "solver_residual_max": "1", "lanczos_iterations_per_step": "1"}
+
+FIELDS = ("n_overlaps", "n_overlaps_midpoint", "min_gap", "solver_iterations",
+          "solver_residual", "lanczos_iterations")
+
+
+def group_samples(red, g):
+    """{field: concatenated committed samples of every task of group g}, and the steps
+    and total time they span (sum of committed x dt); missing fields are absent."""
+    from ..ensemble.store import task_key
+    from .reduce import _open_h5, open_run
+    out, steps, time = {f: [] for f in FIELDS}, 0, 0.0
+    for i, path in enumerate(red.files):
+        tasks = {t.task_id: t for t in open_run(path).tasks}
+        cols = np.flatnonzero(red.file_index == i)
+        with _open_h5(path) as f:
+            for col in cols:
+                task = tasks[int(red.task_id[g, col])]
+                done = int(red.committed[g, col])
+                samples = f[f"tasks/{task_key(task.task_id)}/samples"]
+                for name in FIELDS:
+                    if name in samples:
+                        out[name].append(samples[name][:done])
+                steps += done
+                time += done * task.dt
+    return {k: np.concatenate(v) for k, v in out.items() if v}, steps, time
+
+
+def trust_rows(red) -> list[dict]:
+    """One dict per group: phi, omega or rate, then :data:`TRUST_COLUMNS`."""
+    rows = []
+    for g in range(len(red.phi)):
+        data, steps, time = group_samples(red, g)
+
+        def total(name):
+            return float(np.sum(data[name], dtype=np.int64)) if name in data else np.nan
+
+        def per_step(name, reduce=np.mean):
+            return float(reduce(data[name])) if name in data and steps else np.nan
+        gaps = data.get("min_gap", np.zeros(0))
+        gaps = gaps[np.isfinite(gaps)]
+        q = np.quantile(gaps, [0.0, 0.01, 0.1, 0.5]) if gaps.size else [np.nan] * 4
+        per_time = (lambda x: x / time) if time > 0 else (lambda x: np.nan)
+        per = (lambda x: x / steps) if steps else (lambda x: np.nan)
+        rows.append({
+            "phi": float(red.phi[g]), red.columns[1]: float(red.control[g]),
+            "n_tasks": int(np.sum(red.committed[g] > 0)), "steps": steps, "time": time,
+            "steps_per_time": steps / time if time > 0 else np.nan,
+            "overlaps_per_time": per_time(total("n_overlaps")),
+            "overlaps_per_step": per(total("n_overlaps")),
+            "midpoint_overlaps_per_time": per_time(total("n_overlaps_midpoint")),
+            "midpoint_overlaps_per_step": per(total("n_overlaps_midpoint")),
+            "min_gap_min": float(q[0]), "min_gap_p01": float(q[1]),
+            "min_gap_p10": float(q[2]), "min_gap_median": float(q[3]),
+            "solver_iterations_per_step": per_step("solver_iterations"),
+            "solver_residual_max": per_step("solver_residual", np.max),
+            "lanczos_iterations_per_step": per_step("lanczos_iterations"),
+            "_gaps": gaps})
+    return rows
+
+
+def warnings_of(red, rows) -> list[str]:
+    """The threshold warnings of the trust report (module docstring)."""
+    out = []
+    for row in rows:
+        where = f"phi = {row['phi']:g}, {red.columns[1]} = {row[red.columns[1]]:.6g}"
+        for key, name in (("overlaps_per_step", "start"),
+                          ("midpoint_overlaps_per_step", "Brownian midpoint")):
+            if row[key] > OVERLAPS_PER_STEP_WARN:
+                out.append(f"{where}: {row[key]:.3g} overlapping pairs corrected per step at "
+                           f"the {name} (above {OVERLAPS_PER_STEP_WARN:g}): the time step is "
+                           f"large for the closest pairs; consider a smaller dt")
+        if row["min_gap_min"] < DEEP_OVERLAP:
+            out.append(f"{where}: a step started with an overlap of {-row['min_gap_min']:.3g} "
+                       f"radii (deeper than {-DEEP_OVERLAP:g})")
+    return out
+
+
+def write_trust_csv(red, rows, path) -> Path:
+    """trust.csv: phi, omega (or rate), then :data:`TRUST_COLUMNS`."""
+    from .report import _fmt
+    columns = ("phi", red.columns[1]) + TRUST_COLUMNS
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(columns)
+        for row in rows:
+            out.writerow([_fmt(row[c]) for c in columns])
+    return Path(path)
+
+
+def plot_trust(red, rows, path) -> Path:
+    """trust.png: the distribution of the per-step smallest gap per group (left) and the
+    overlap corrections per unit time at the start and the midpoint (right)."""
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(11.0, 4.8), layout="constrained")
+    a1, a2 = fig.subplots(1, 2)
+    labels = [f"φ = {r['phi']:g}, {red.columns[1][0]} = {r[red.columns[1]]:.4g}" for r in rows]
+    for row, label in zip(rows, labels):
+        gaps = row["_gaps"]
+        if gaps.size:
+            a1.hist(gaps, bins=40, histtype="step", label=label)
+    a1.axvline(0.0, color="0.5", lw=0.8)
+    a1.set_xlabel("smallest surface gap per step  [a]")
+    a1.set_ylabel("steps")
+    a1.set_title("distribution of the minimum gap")
+    x = np.arange(len(rows))
+    a2.bar(x - 0.2, [r["overlaps_per_time"] for r in rows], 0.4, label="start of step")
+    a2.bar(x + 0.2, [r["midpoint_overlaps_per_time"] for r in rows], 0.4,
+           label="Brownian midpoint")
+    a2.set_xticks(x, labels, rotation=30, ha="right", fontsize=7)
+    a2.set_ylabel(f"overlap corrections per {red.job.time_unit}")
+    a2.set_title("overlap corrections")
+    for ax in (a1, a2):
+        ax.grid(True, alpha=0.25)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{red.job.job.name}: trust report (all committed steps)", fontsize=10)
+    fig.savefig(path, dpi=120)
+    return Path(path)

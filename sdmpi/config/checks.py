@@ -1,0 +1,334 @@
+"""Checks that involve several keys of a job, run after every key passed its own checks.
+
+Each check takes the provisional :class:`~sdmpi.config.schema.Job` and returns a list of
+:class:`~sdmpi.config.problems.Problem`; :data:`CROSS_CHECKS` names the keys each one
+reads, so that the loader skips a check when one of those keys already failed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from .problems import Problem
+from .schema import START_PHI_LIMIT, Job
+
+
+def _discard_periods(job):
+    i = job.integration
+    if job.shear.protocol == "oscillatory" and i.discard_periods >= i.periods:
+        return [Problem("integration.discard_periods",
+                        f"must be smaller than integration.periods (= {i.periods})",
+                        i.discard_periods, allowed=f"0 <= discard_periods < {i.periods}")]
+    return []
+
+
+def _discard_steps(job):
+    i = job.integration
+    if job.shear.protocol != "oscillatory" and i.discard_steps >= i.n_steps:
+        return [Problem("integration.discard_steps",
+                        f"must be smaller than integration.n_steps (= {i.n_steps})",
+                        i.discard_steps, allowed=f"0 <= discard_steps < {i.n_steps}")]
+    return []
+
+
+def _maxwell_sum(job):
+    if job.medium.kind != "maxwell":
+        return []
+    total = math.fsum(m.eta for m in job.medium.modes)
+    if abs(total - 1.0) > 1e-9:
+        return [Problem("medium.modes", f"the mode viscosities eta sum to {total:g}, but "
+                        "their sum is the medium's zero-shear viscosity eta_m, the unit of "
+                        "viscosity", job.medium.modes, allowed="modes whose eta sum to 1")]
+    return []
+
+
+def _gaps(job):
+    h = job.hydrodynamics
+    if h.min_gap >= h.lubrication_cutoff:
+        return [Problem("hydrodynamics.min_gap", "must be smaller than "
+                        f"hydrodynamics.lubrication_cutoff (= {h.lubrication_cutoff:g})",
+                        h.min_gap, allowed=f"0 < min_gap < {h.lubrication_cutoff:g}")]
+    return []
+
+
+def _ranks(job):
+    if job.ensemble.ranks_per_task > 1 and job.solver.backend == "dense":
+        return [Problem("ensemble.ranks_per_task", 'the "dense" backend runs a task on '
+                        "one rank", job.ensemble.ranks_per_task,
+                        allowed='1, or solver.backend = "petsc-dense", "petsc-krylov" or "auto"')]
+    return []
+
+
+def _protocol_units(job):
+    shear, brownian = job.shear, job.brownian.enabled
+    if shear.protocol == "steady" and not brownian and shear.rate != 1.0:
+        return [Problem("shear.rate", "non-Brownian steady shear measures time in "
+                        "1/gamma_dot, so the rate is 1 by definition", shear.rate,
+                        allowed="1.0, or brownian.enabled = true (rate = Peclet number)")]
+    if shear.protocol == "none" and not brownian:
+        return [Problem("shear.protocol", "without shear and without Brownian motion "
+                        "nothing moves", "none",
+                        allowed='"oscillatory" or "steady", or brownian.enabled = true')]
+    return []
+
+
+def _time_step(job):
+    """Seed eq. 14a (dt < t_D = 1, Brownian jobs) and dt < lambda (Maxwell media)."""
+    limits = []
+    if job.brownian.enabled:
+        smallest = min(job.system.class_radii)
+        if smallest == 1.0:
+            limits.append((1.0, "the diffusion time t_D = 1 (seed eq. 14a)"))
+        else:  # size classes: t_D is the largest spheres' diffusion time
+            limits.append((smallest ** 3, "the diffusion time a^2/D0(a) = a^3 t_D = "
+                           f"{smallest ** 3:.4g} of the smallest spheres (radius {smallest:g})"))
+    if job.medium.kind == "maxwell":
+        lam = min(m.lam for m in job.medium.modes)
+        limits.append((lam, f"the shortest Maxwell relaxation time ({lam:g})"))
+    problems = []
+    for limit, what in limits:
+        omega = max(job.frequencies, key=lambda w: job.time_step(w), default=None)
+        dt = job.time_step(omega)
+        if dt < limit:
+            continue
+        if omega is None:
+            problems.append(Problem("integration.dt", f"must be smaller than {what}", dt,
+                                    allowed=f"0 < dt < {limit:g}"))
+        else:
+            problems.append(Problem(
+                "integration.steps_per_period", f"gives dt = {dt:.3g} at omega = {omega:g}, "
+                f"not smaller than {what}", job.integration.steps_per_period,
+                allowed=f"more steps per period, or integration.dt_max < {limit:g}"))
+    return problems
+
+
+def _bulk_start(job):
+    """The hard-sphere generator (sdmpi.dynamics.initial) starts from a simple cubic
+    lattice spaced for the largest diameter, compressed when phi is above the lattice's
+    limit: phi < START_PHI_LIMIT for any N and size classes."""
+    if job.system.geometry != "bulk":
+        return []
+    return [Problem(f"system.phi[{k}]", "the initial configuration is a compressed hard-sphere "
+                    f"fluid, made up to phi = {START_PHI_LIMIT} (denser ones jam)", phi,
+                    allowed=f"0 < phi < {START_PHI_LIMIT}")
+            for k, phi in enumerate(job.system.phi) if phi >= START_PHI_LIMIT]
+
+
+def _monolayer_start(job):
+    """Monolayers: the start (sdmpi.dynamics.initial.hard_disk_monolayer): m x m square
+    lattice sites, m = ceil(sqrt N), spaced L/m > 2, so phi < pi N / (4 m^2)."""
+    system = job.system
+    if system.geometry != "monolayer":
+        return []
+    m = math.isqrt(system.n_particles - 1) + 1
+    limit = math.pi * system.n_particles / (4 * m * m)
+    return [Problem(f"system.phi[{k}]", f"the monolayer start fills {m} x {m} square-lattice "
+                    f"sites spaced for the diameter, which holds N = {system.n_particles} disks "
+                    f"up to the areal fraction pi N / (4 m^2) = {limit:.4f}", phi,
+                    allowed=f"0 < phi < {math.floor(limit * 1e4) / 1e4:.4f}, or N = {m * m}")
+            for k, phi in enumerate(system.phi) if phi >= limit]
+
+
+def _monolayer(job):
+    """Monolayers are seed 001's case: non-Brownian steady shear of equal spheres in a
+    Newtonian medium, hard (with the minimum-gap rule) or with the short-range repulsion;
+    the layer's z-images stay outside the lubrication cut-off."""
+    system = job.system
+    if system.geometry != "monolayer":
+        return []
+    why = "monolayers are non-Brownian steady shear of equal spheres (seed 001)"
+    problems = []
+    for path, value, ok, allowed in (
+            ("shear.protocol", job.shear.protocol, job.shear.protocol == "steady", '"steady"'),
+            ("brownian.enabled", job.brownian.enabled, not job.brownian.enabled, "false"),
+            ("medium.kind", job.medium.kind, job.medium.kind == "newtonian", '"newtonian"'),
+            ("system.size_classes", system.size_classes, system.size_classes is None,
+             "absent (equal spheres)"),
+            ("interparticle.kind", job.interparticle.kind,
+             job.interparticle.kind in ("none", "repulsion"), '"none" or "repulsion"')):
+        if not ok:
+            problems.append(Problem(path, why, value, allowed=f'{allowed}, or system.geometry = "bulk"'))
+    cutoff = job.hydrodynamics.lubrication_cutoff
+    side = math.sqrt(system.n_particles * math.pi / max(system.phi))
+    need = (2.0 + cutoff) / side
+    if system.layer_spacing * side < 2.0 + cutoff:
+        problems.append(Problem("system.layer_spacing", f"the layer's z-images ({system.layer_spacing:g} "
+                                f"x L = {system.layer_spacing * side:.3g} a away at phi = "
+                                f"{max(system.phi):g}) must lie beyond the lubrication cut-off "
+                                f"(centre distance 2 + {cutoff:g})", system.layer_spacing,
+                                allowed=f"layer_spacing >= {need:.4g}"))
+    return problems
+
+
+def _size_classes(job):
+    """Volume shares summing to 1, the largest radius 1 (the length unit), distinct radii,
+    and at least one sphere per class after rounding the counts."""
+    system = job.system
+    classes = system.size_classes
+    if classes is None:
+        return []
+    problems = []
+    total = math.fsum(c.fraction for c in classes)
+    if abs(total - 1.0) > 1e-9:
+        problems.append(Problem("system.size_classes", f"the volume shares (fraction) sum to "
+                                f"{total:g}; they divide the particle volume, so they sum to 1",
+                                classes, allowed="fractions > 0 whose sum is 1"))
+    largest = max(c.radius for c in classes)
+    if largest != 1.0:
+        problems.append(Problem("system.size_classes", f"the largest radius is {largest:g}, "
+                                "but the largest radius is the length unit a, so it is 1",
+                                classes, allowed="radii divided by the largest, e.g. "
+                                "[{radius = 1.0, ...}, {radius = 0.5, ...}]"))
+    for k, c in enumerate(classes):
+        if any(c.radius == d.radius for d in classes[:k]):
+            problems.append(Problem(f"system.size_classes[{k}].radius", "appears twice; "
+                                    "merge the two classes", c.radius,
+                                    allowed="distinct radii"))
+    if problems:
+        return problems
+    for k, (c, m) in enumerate(zip(classes, system.class_counts)):
+        if m == 0:
+            problems.append(Problem(f"system.size_classes[{k}]", f"gets no sphere among N = "
+                                    f"{system.n_particles} (volume share {c.fraction:g} of "
+                                    f"radius {c.radius:g} spheres)", c,
+                                    allowed="a larger system.n_particles, or a larger fraction"))
+    return problems
+
+
+def _repulsion_range(job):
+    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
+    if inter.kind == "repulsion" and 12 * math.log(10) / inter.tau > cutoff:
+        need = 12 * math.log(10) / cutoff
+        return [Problem("interparticle.tau", "the repulsion must decay (to 1e-12) within the "
+                        f"lubrication cut-off (= {cutoff:g}), whose pairs it acts on", inter.tau,
+                        allowed=f"tau >= {need:.4g}, or a larger hydrodynamics.lubrication_cutoff")]
+    return []
+
+
+def _force_range(job):
+    """vdw / dlvo: the cap inside the cut-off, and the shift that truncates the force at
+    the lubrication cut-off negligible (sdmpi.dynamics.forces.TAIL of the contact force)."""
+    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
+    if inter.kind not in ("vdw", "dlvo"):
+        return []
+    smallest = min(job.system.class_radii)  # the cut-off gap is cut-off x mean radius
+    if inter.cap_gap >= cutoff * smallest:
+        of = "" if smallest == 1.0 else f" x the smallest radius {smallest:g}"
+        return [Problem("interparticle.cap_gap", "must be smaller than the cut-off gap "
+                        f"hydrodynamics.lubrication_cutoff (= {cutoff:g}){of}", inter.cap_gap,
+                        allowed=f"0 < cap_gap < {cutoff * smallest:g}")]
+    # the formulas live with the force laws: a layering exception (config -> dynamics),
+    # imported here only for these kinds, rather than a second copy of the force laws
+    from ..dynamics.forces import TAIL, tail_ratios
+    problems = []
+    for path, (ratio, (a_i, a_j)) in tail_ratios(job).items():
+        if ratio > TAIL:
+            what = ("the van der Waals force at the cut-off" if path.endswith("cap_gap")
+                    else "the double-layer force at the cut-off")
+            if job.system.size_classes is not None:
+                what += f" (worst pair: radii {a_i:g} and {a_j:g})"
+            fix = ("a smaller cap_gap" if path.endswith("cap_gap") else "a shorter debye_length")
+            problems.append(Problem(path, f"{what} is {ratio:.2g} of its contact value; "
+                                    f"the force is shifted to vanish at the lubrication cut-off "
+                                    f"(= {cutoff:g}), which needs <= {TAIL:g}",
+                                    getattr(inter, path.split(".")[1]),
+                                    allowed=f"{fix}, or a larger hydrodynamics.lubrication_cutoff"))
+    return problems
+
+
+def _frictional(job):
+    """Frictional contacts (sdmpi.dynamics.contacts): non-Brownian, the repulsion decayed
+    within the lubrication cut-off, and a time step the explicit contact springs allow."""
+    inter, hyd = job.interparticle, job.hydrodynamics
+    if inter.kind != "frictional":
+        return []
+    from ..dynamics.contacts import SQUEEZE, sliding_mobility
+    problems = []
+    if job.brownian.enabled:
+        problems.append(Problem("brownian.enabled", "frictional contacts are a non-Brownian "
+                                "model (the Brownian midpoint would cross the contact springs)",
+                                True, allowed='false with interparticle.kind = "frictional"'))
+    reach = 12 * math.log(10) * inter.repulsion_length
+    if reach > hyd.lubrication_cutoff:
+        problems.append(Problem("interparticle.repulsion_length", "the repulsion must decay "
+                                "(to 1e-12) within the lubrication cut-off (= "
+                                f"{hyd.lubrication_cutoff:g}), whose pairs it acts on",
+                                inter.repulsion_length, allowed="repulsion_length <= "
+                                f"{hyd.lubrication_cutoff / (12 * math.log(10)):.4g}, or a "
+                                "larger hydrodynamics.lubrication_cutoff"))
+    dt = max(job.time_step(w) for w in job.frequencies)
+    for path, limit, why in (
+            ("interparticle.k_t", 1 / (sliding_mobility(hyd.min_gap) * dt),
+             f"sliding mobility {sliding_mobility(hyd.min_gap):.3g} at hydrodynamics.min_gap"),
+            ("interparticle.k_n", 1 / (SQUEEZE * hyd.min_gap * dt),
+             f"normal mobility {SQUEEZE:g} x hydrodynamics.min_gap at contact")):
+        value = getattr(inter, path.split(".")[1])
+        if value > limit:
+            problems.append(Problem(path, f"is too stiff for the time step dt = {dt:.3g}: the "
+                                    f"explicit step needs dt x stiffness x mobility <= 1 ({why})",
+                                    value, allowed=f"{path.split('.')[1]} <= {limit:.4g}, or a "
+                                    "smaller integration.dt"))
+    return problems
+
+
+def _forces_need_pairs(job):
+    if job.interparticle.kind != "none" and not job.hydrodynamics.lubrication:
+        return [Problem("hydrodynamics.lubrication", "interparticle forces act on the "
+                        "lubrication pair list; without lubrication only overlapping pairs "
+                        "would feel them", False,
+                        allowed='true, or interparticle.kind = "none"')]
+    return []
+
+
+#: backends implemented in this version (the others are named by the job schema)
+IMPLEMENTED_BACKENDS = ("dense", "petsc-dense", "petsc-krylov", "auto")
+
+
+def _maxwell_forces(job):
+    """Seed 000 covers hard spheres in a Maxwell medium: the viscoelastic response of the
+    force-induced stresslets is not modelled, so the combination is refused."""
+    if job.medium.kind == "maxwell" and job.interparticle.kind != "none":
+        return [Problem("interparticle.kind", "interparticle forces in a Maxwell medium are not "
+                        "modelled (their stresslets would need the medium's memory too)",
+                        job.interparticle.kind, allowed='"none" with medium.kind = "maxwell"')]
+    return []
+
+
+def _backend(job):
+    if job.solver.backend not in IMPLEMENTED_BACKENDS:
+        return [Problem("solver.backend", "is not implemented yet in this version",
+                        job.solver.backend, allowed=", ".join(f'"{b}"' for b in IMPLEMENTED_BACKENDS))]
+    return []
+
+
+_INTEGRATION = tuple(f"integration.{f.name}" for f in dataclasses.fields(Job().integration))
+
+# (keys a check reads, check): skipped when one of those keys failed its own checks.
+CROSS_CHECKS = (
+    (("shear.protocol", "integration.periods", "integration.discard_periods"),
+     _discard_periods),
+    (("shear.protocol", "integration.n_steps", "integration.discard_steps"), _discard_steps),
+    (("medium.kind", "medium.modes"), _maxwell_sum),
+    (("hydrodynamics.min_gap", "hydrodynamics.lubrication_cutoff"), _gaps),
+    (("ensemble.ranks_per_task", "solver.backend"), _ranks),
+    (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),
+    (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes",
+      "system.size_classes") + _INTEGRATION, _time_step),
+    (("system.n_particles", "system.size_classes"), _size_classes),
+    (("system.phi", "system.geometry"), _bulk_start),
+    (("system.n_particles", "system.phi", "system.geometry"), _monolayer_start),
+    (("system.geometry", "system.n_particles", "system.phi", "system.layer_spacing",
+      "system.size_classes", "shear.protocol", "brownian.enabled", "medium.kind",
+      "interparticle.kind", "hydrodynamics.lubrication_cutoff"), _monolayer),
+    (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
+    (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
+      "hydrodynamics.lubrication_cutoff", "system.size_classes"), _force_range),
+    (("interparticle.kind", "hydrodynamics.lubrication"), _forces_need_pairs),
+    (("interparticle.kind", "interparticle.mu", "interparticle.k_n", "interparticle.k_t",
+      "interparticle.f_r0", "interparticle.repulsion_length", "brownian.enabled",
+      "hydrodynamics.lubrication_cutoff", "hydrodynamics.min_gap", "shear.protocol",
+      "shear.omega") + _INTEGRATION, _frictional),
+    (("solver.backend",), _backend),
+    (("medium.kind", "interparticle.kind"), _maxwell_forces),
+)

@@ -1,0 +1,26 @@
+"""Reusable work arrays for the large temporaries of the hydrodynamic sums.
+
+A fresh array of a few hundred kB is mapped by the allocator on every call and each of
+its pages faults on first touch; at N = 27 that costs as much as the arithmetic that
+fills it. `work_array` hands out views of one growing buffer per name and thread: the
+caller must be done with a view before asking for the same name again.
+"""
+
+import threading
+
+import numpy as np
+
+_LOCAL = threading.local()
+
+
+def work_array(name, shape):
+    """An uninitialised float64 C-contiguous array of `shape`, a view of this thread's
+    buffer `name` (valid until the next call with that name)."""
+    size = 1
+    for s in shape:
+        size *= s
+    buffers = _LOCAL.__dict__
+    buf = buffers.get(name)
+    if buf is None or buf.size < size:
+        buf = buffers[name] = np.empty(size)
+    return buf[:size].reshape(shape)

@@ -1,0 +1,93 @@
+"""The trust report of `sdmpi reduce` (sdmpi.analysis.trust): its numbers equal a direct
+count over the run file's samples; warnings above the thresholds; committed samples only."""
+
+import csv
+import math
+
+import h5py
+import numpy as np
+import pytest
+
+from sdmpi.analysis.reduce import reduce_runs
+from sdmpi.analysis.trust import OVERLAPS_PER_STEP_WARN, trust_rows, warnings_of
+from sdmpi.cli import main
+from sdmpi.config import enumerate_tasks, parse_job
+from synthetic_run import write_run
+from test_reduce import MODULI, job_text
+from tiny_runs import sdmpi_run
+
+
+def read_csv(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_trust_report_equals_a_direct_count_on_a_small_run(tmp_path, capsys):
+    run = sdmpi_run(tmp_path / "run.h5")
+    out = tmp_path / "out"
+    assert main(["reduce", str(run), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    rows = read_csv(out / "trust.csv")
+    assert (out / "trust.png").read_bytes()[:4] == b"\x89PNG"
+    with h5py.File(run) as f:
+        job = parse_job(f.attrs["job_text"])
+        by_omega = {}
+        for task in enumerate_tasks(job):
+            by_omega.setdefault(task.omega, []).append(task)
+        assert len(rows) == len(by_omega) == 2
+        for row, (omega, tasks) in zip(rows, sorted(by_omega.items())):
+            assert float(row["omega"]) == omega
+            s = [f[f"tasks/{t.task_id:06d}/samples"] for t in tasks]
+            steps = sum(t.n_steps for t in tasks)
+            time = sum(t.n_steps * t.dt for t in tasks)
+            starts = sum(int(x["n_overlaps"][:].sum()) for x in s)
+            mids = sum(int(x["n_overlaps_midpoint"][:].sum()) for x in s)
+            gaps = np.concatenate([x["min_gap"][:] for x in s])
+            assert int(row["steps"]) == steps and int(row["n_tasks"]) == len(tasks)
+            assert math.isclose(float(row["time"]), time, rel_tol=1e-12)
+            assert math.isclose(float(row["steps_per_time"]), 1 / tasks[0].dt, rel_tol=1e-9)
+            assert math.isclose(float(row["overlaps_per_time"]), starts / time, rel_tol=1e-12)
+            assert math.isclose(float(row["overlaps_per_step"]), starts / steps, rel_tol=1e-12)
+            assert math.isclose(float(row["midpoint_overlaps_per_time"]), mids / time,
+                                rel_tol=1e-12)
+            assert float(row["min_gap_min"]) == gaps.min()
+            assert float(row["min_gap_median"]) == pytest.approx(np.median(gaps), rel=1e-12)
+            # about a tenth of the steps below the 10% quantile
+            assert abs(np.mean(gaps < float(row["min_gap_p10"])) - 0.1) <= 1 / len(gaps) + 0.01
+            assert float(row["solver_iterations_per_step"]) == 0.0     # dense backend
+            if mids / steps > OVERLAPS_PER_STEP_WARN:
+                assert f"omega = {omega:.6g}: {mids / steps:.3g} overlapping pairs corrected " \
+                    "per step at the Brownian midpoint" in err
+
+
+def test_committed_samples_only_missing_fields_nan_and_warnings(tmp_path):
+    run = tmp_path / "run.h5"
+    text = job_text(realisations=2, phi="[0.3]")
+    job = parse_job(text)
+    done = job.discard_steps(6.283185307179586) + 3 * job.steps_per_period(6.283185307179586)
+    write_run(run, text, MODULI, noise=0.002, seed=3, progress={0: done})
+    with h5py.File(run, "a") as f:
+        n = f["tasks/000000/samples/n_overlaps"]
+        values = np.zeros(n.shape, dtype=np.int32)
+        values[:done] = 1                   # one correction every step
+        values[done:] = 1000                # never committed: must not count
+        n[...] = values
+        g = f["tasks/000000/samples/min_gap"]
+        gaps = g[()]
+        gaps[5] = -0.2
+        gaps[done + 1] = -5.0               # not committed
+        g[...] = gaps
+    with pytest.warns(UserWarning):
+        red = reduce_runs([run])
+    rows = trust_rows(red)
+    first = rows[0]
+    tasks = [t for t in enumerate_tasks(job) if t.omega == rows[0]["omega"]]
+    steps = done + tasks[1].n_steps
+    assert first["steps"] == steps
+    assert first["overlaps_per_step"] == pytest.approx(done / steps, rel=1e-12)
+    assert first["min_gap_min"] == -0.2
+    assert math.isnan(first["midpoint_overlaps_per_step"])   # not in this file
+    text = "\n".join(warnings_of(red, rows))
+    assert "overlapping pairs corrected per step at the start" in text
+    assert "overlap of 0.2 radii" in text
+    assert "phi = 0.3, omega = 25.1327" not in text     # the other group is clean
