@@ -23,7 +23,7 @@ import math
 import os
 import shutil
 
-from .loader import Problem
+from .problems import Problem
 
 DENSE_MATRICES = 3          # 11N x 11N matrices alive at once (peak of a dense solve)
 BASE_BYTES = 300 * 2 ** 20  # interpreter, libraries, compiled kernels
