@@ -191,13 +191,12 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
             raise BadInput(_different_job(out, summary.job, job))
         progress = tuple(step for step, _ in summary.resume)
         slots = tuple(slot for _, slot in summary.resume)
-        notes = tuple(f"damaged: {d}" for d in summary.damage) + tuple(
-            f"task {t.task_id}: recomputing from step {step} (committed up to {done}), "
-            f"bit for bit as before the damage"
-            for t, step, done in zip(tasks, progress, summary.progress) if step < done)
         mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
         rewind = tuple((t.task_id, step) for t, step, done in
                        zip(tasks, progress, summary.progress) if step < done)
+        notes = tuple(f"damaged: {d}" for d in summary.damage) + tuple(
+            f"task {tid}: recomputing from step {step} (committed up to "
+            f"{summary.progress[tid]}), bit for bit as before the damage" for tid, step in rewind)
         damaged = tuple((d.task_id, d.slot) for d in summary.damage if d.what == "state")
         return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
@@ -223,15 +222,13 @@ def _check_resources(job, job_path, out: Path, new: bool, size: int) -> None:
     run file still to be created) the room for it in the output's file system."""
     from ..hydro.solvers import backend_for
 
-    rpt = job.ensemble.ranks_per_task
-    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
-    busy = min(resources.ranks_on_this_node(size), len(enumerate_tasks(job)) * rpt)
-    problems = resources.start_problems(job) or resources.memory_problems(
-        job, backend, busy, resources.available_memory())
-    if new or not out.exists():
-        replaced = out.stat().st_size if out.exists() else 0
-        problems += resources.disk_problems(job, store.run_file_bytes(job) - replaced,
-                                            out.parent)
+    backend = backend_for(job.solver.backend, job.system.n_particles,
+                          job.ensemble.ranks_per_task)
+    creating = new or not out.exists()
+    replaced = out.stat().st_size if out.exists() and creating else 0
+    problems = resources.problems(job, backend, resources.ranks_on_this_node(size),
+                                  out.parent if creating else None,
+                                  store.run_file_bytes(job) - replaced)
     if problems:
         raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
 
