@@ -95,8 +95,11 @@ def test_random_bit_flips_are_all_detected(reference, tmp_path):
     assert (injected, detected) == (TRIALS, TRIALS)
 
 
-@pytest.mark.parametrize("kind", ["samples", "state"])
-def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, kind):
+@pytest.mark.parametrize("kind, ranks", [("samples", None),
+                                         pytest.param("state", 2, marks=pytest.mark.mpi)])
+def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, kind, ranks):
+    if ranks and ens.MPIRUN is None:
+        pytest.skip("mpirun not found")
     regions = [r for r in committed_regions(reference) if r[0] == 5 and r[1] == kind
                and r[2] in ("stress_brownian", "positions")]
     _, _, name, offset, size, _ = regions[0]
@@ -111,7 +114,7 @@ def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, 
         assert "task 5: samples/stress_brownian of steps 20..29 fail" in reduced.stderr
     else:  # the checksums of the last interval were in the damaged checkpoint
         assert "task 5: samples of steps 40..47 cannot be verified" in reduced.stderr
-    res = ens.sdmpi("run", job_file, "-o", out)
+    res = ens.sdmpi("run", job_file, "-o", out, ranks=ranks)
     assert res.returncode == 0, res.stderr
     assert "WARNING: damaged: task 5" in res.stdout
     restart = 0 if kind == "samples" else 40  # samples: before the damage; state: older slot
