@@ -34,6 +34,9 @@ $(VENV)/.installed: pyproject.toml
 	$(VPY) -m pip install -q --no-deps -e .
 	$(VPY) -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['optional-dependencies']['test']))" \
 	  | xargs -d '\n' $(VPY) -m pip install -q
+	# pyh5md (the H5MD reference reader, tests/test_trajectory.py) without its h5py
+	# dependency, which would shadow Debian's parallel h5py in the virtualenv
+	$(VPY) -m pip install -q --no-deps pyh5md
 	touch $@
 
 run: setup
@@ -48,6 +51,7 @@ test: setup
 bench: setup
 	$(VPY) bench/bench_hydro.py --out bench/results.json
 	$(VPY) bench/bench_ensemble.py
+	$(VPY) bench/bench_step.py --out bench/step.json
 
 clean:
 	rm -rf $(VENV) .numba_cache build *.egg-info

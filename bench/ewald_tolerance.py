@@ -14,8 +14,8 @@ Per configuration the error of a vector or matrix X is ||X_tol - X_ref|| / ||X_r
 (Frobenius/Euclidean), of eta_H |eta_tol - eta_ref| / eta_ref; the systematic part of a
 vector's error is its component along the reference, (X_tol - X_ref).X_ref / |X_ref|^2,
 averaged over the configurations (a bias that averaging over an ensemble does not remove).
-Also the time of one `grand_resistance` at each tolerance, in units of a 297 x 297 LAPACK
-Cholesky timed in the same process. Writes JSON (default bench/ewald_tolerance.json).
+Also the CPU time of one `grand_resistance` at each tolerance, in units of a 297 x 297
+LAPACK Cholesky timed in the same process. Writes JSON (default bench/ewald_tolerance.json).
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/ewald_tolerance.py
 """
@@ -30,7 +30,7 @@ from scipy.linalg import lapack
 
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
-from sdmpi.hydro.resistance import grand_resistance
+from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
 
 KT = 1.0  # the errors are relative: any kT
 
@@ -41,26 +41,16 @@ def operators(pos, box, tol, h):
     radii = np.ones(n)
     base = grand_resistance(pos, radii, box, 0.0, ewald_tol=tol)
     mobility = np.linalg.inv(base.blocks()[0])
-    div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
-    for p in range(n):
-        for c in range(3):
-            mats = []
-            for sign in (1, -1):
-                moved = base.positions.copy()
-                moved[p, c] += sign * h
-                r_fu, _, r_su, _ = grand_resistance(moved, radii, box, 0.0, ewald_tol=tol,
-                                                    plan=base.plan).blocks()
-                m = np.linalg.inv(r_fu)
-                mats.append((m[:, 6 * p + c], r_su @ m[:, 6 * p + c]))
-            div_m += (mats[0][0] - mats[1][0]) / (2 * h)
-            div_a += (mats[0][1] - mats[1][1]) / (2 * h)
+    div_m, div_a = mobility_divergence(
+        lambda moved, plan: grand_resistance(moved, radii, box, 0.0, ewald_tol=tol, plan=plan), base, h)
     eta = hydrodynamic_viscosity(base.positions, box, ewald_tol=tol)
     return {"mobility": mobility, "drift": KT * div_m, "stresslets": -KT * div_a,
             "bulk_stresslet": -KT * div_a.reshape(n, 5).sum(axis=0), "eta_H": np.array([eta])}
 
 
-def cholesky_units(pos, box, tols, repeat=15):
-    """ms of one grand_resistance per tolerance and of a 297 x 297 Cholesky, interleaved."""
+def cholesky_units(pos, box, tols, repeat=40):
+    """CPU ms of one grand_resistance per tolerance and of a 297 x 297 Cholesky,
+    interleaved (medians)."""
     a = np.random.default_rng(0).standard_normal((297, 297))
     spd = a @ a.T + 297 * np.eye(297)
     runs = {"cholesky": lambda: lapack.dpotrf(spd)}
@@ -71,9 +61,10 @@ def cholesky_units(pos, box, tols, repeat=15):
         f()
     for _ in range(repeat):
         for k, f in runs.items():
-            t0 = time.perf_counter()
-            f()
-            times[k].append(time.perf_counter() - t0)
+            t0 = time.process_time()
+            for _ in range(5):
+                f()
+            times[k].append((time.process_time() - t0) / 5)
     ms = {k: 1e3 * float(np.median(v)) for k, v in times.items()}
     return {"ms": ms, "cholesky_equivalents": {k: v / ms["cholesky"] for k, v in ms.items()}}
 

@@ -27,6 +27,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import sys  # noqa: E402
 
 from . import __version__
@@ -101,6 +102,14 @@ def _validate(args) -> int:
     if bad:
         print("sdmpi validate: " + "\n".join(bad), file=sys.stderr)
         return EXIT_BAD_INPUT
+    if job.system.start == "file":
+        from .ensemble.start_file import StartError, load
+
+        try:
+            load(job)
+        except StartError as err:
+            print(f"{args.job}: 1 problem\n  - {err}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     print(summary(job))
     print(resource_text(job, args.ranks, args.output))
     if args.time_steps:
@@ -199,8 +208,10 @@ def summary(job) -> str:
             for r, m, f in zip(sysm.class_radii, sysm.class_counts, sysm.realised_fractions)))
     for omega in job.frequencies:
         head = "  every task      " if omega is None else f"  omega = {omega:<9.5g}"
+        periods = "" if omega is None else \
+            f" = {job.periods(omega)} periods ({job.discarded_periods(omega)} discarded)"
         lines.append(f"{head}  dt = {job.time_step(omega):<9.3g} "
-                     f"{job.n_steps(omega)} steps ({job.discard_steps(omega)} discarded)")
+                     f"{job.n_steps(omega)} steps ({job.discard_steps(omega)} discarded){periods}")
     omegas = f"{len(s.omega)} omega x " if s.omega else ""
     lines.append(f"  tasks: {len(tasks)} = {len(job.system.phi)} phi x {omegas}"
                  f"{job.ensemble.realisations} realisations; "
@@ -253,8 +264,14 @@ def _add_run(subparsers) -> None:
     add_job_arguments(parser)
     parser.add_argument("-o", "--output", required=True, metavar="RUN.h5",
                         help="the run file (HDF5): created, or resumed if it exists")
-    parser.add_argument("--new", action="store_true",
-                        help="start afresh, replacing RUN.h5 if it exists (its data are lost)")
+    again = parser.add_mutually_exclusive_group()
+    again.add_argument("--new", action="store_true",
+                       help="start afresh, replacing RUN.h5 if it exists (its data are lost)")
+    again.add_argument("--extend", action="store_true",
+                       help="lengthen the existing RUN.h5 to this job, which may differ from "
+                            "the stored one only in the length keys (integration.periods, "
+                            "duration, n_steps and their discard keys) and not be shorter "
+                            "for any task: what is committed is kept, the run resumes")
     parser.set_defaults(handler=_run, realisation_factory=None)
 
 
@@ -264,7 +281,7 @@ def _run(args) -> int:
 
     try:
         complete = run(args.job, args.overrides, args.output, new=args.new,
-                       realisation_factory=args.realisation_factory)
+                       extend=args.extend, realisation_factory=args.realisation_factory)
     except BadInput as err:
         if err.args and err.args[0]:
             print(err, file=sys.stderr)
@@ -338,6 +355,15 @@ def info_text(run, running=None) -> str:
                                                  else f"{100.0 * p / task.n_steps:.0f}%")
         lines.append(f"  {task.task_id:>6}  {task.phi:>6.4g}  {omega:>10}  "
                      f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
+    every = run.job.output.trajectory_every
+    if every:
+        from .ensemble.trajectory import frames_done
+
+        frames = sum(frames_done(p, every) for p in done)
+        lines.append(f"trajectory: H5MD, a frame every {every} steps, {frames} frames "
+                     f"committed (particles/task_NNNNNN; docs/trajectories.md)")
+    if "extended" in a:
+        lines.append(f"extended {len(json.loads(a['extended']))} time(s) (sdmpi run --extend)")
     if not run.checksummed:
         lines.append("checksums: none (written by an sdmpi without them); data not verified")
     elif run.damage:

@@ -71,6 +71,7 @@ class DoubleRealisation:
             out["stress_hydrodynamic"][i] = six
             out["stress_brownian"][i] = kick[:2].ravel()
             out["stress_interparticle"][i] = -six
+            out["stress_collision"][i] = 0.25 * six
             out["n_overlaps"][i] = int(np.sum(np.abs(kick) > 2.5))
             out["n_overlaps_midpoint"][i] = int(np.sum(np.abs(kick) > 3.0))
             out["min_gap"][i] = float(np.min(np.abs(kick)))

@@ -11,6 +11,7 @@ from scipy.integrate import solve_ivp
 
 from sdmpi.config import JobError, enumerate_tasks, parse_job
 from sdmpi.dynamics import Realisation
+from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.forces import (FORCE_UNIT, Combined, DoubleLayer, Repulsion, VanDerWaals,
                                    force_law, pair_forces)
 from sdmpi.hydro.lubrication import close_pairs
@@ -192,6 +193,7 @@ def sd_gaps(inter, h0, dt, t_end):
     real = Realisation(job, enumerate_tasks(job)[0])
     real.n_particles, real.radii = 2, np.ones(2)
     real.box, real.volume = np.full(3, BOX), BOX ** 3
+    real.model = hydrodynamic_model(job, real.radii, real.box)
     c = BOX / 2
     real.positions = np.array([[c, c, c - 1 - h0 / 2], [c, c, c + 1 + h0 / 2]])
     gaps = [h0]

@@ -190,6 +190,18 @@ def test_schema_text_documents_every_key():
     ('[medium]\nkind = "maxwell"\nmodes = [{eta = 1.0, lambda = 0.001}]\n',
      ["integration.steps_per_period", "Maxwell relaxation time"]),
     ('[shear]\nprotocol = "steady"\n[integration]\ndt = 2.0\n', ["integration.dt", "dt < 1"]),
+    # hydrodynamic models with options they do not support
+    ('[hydrodynamics]\nmodel = "magic"\n', ["hydrodynamics.model", '"free-draining"']),
+    ('[hydrodynamics]\nmodel = "far-field"\nlubrication = false\n',
+     ["hydrodynamics.lubrication", "stokesian model only"]),
+    ('[hydrodynamics]\nmodel = "free-draining"\n[interparticle]\nkind = "frictional"\n'
+     'mu = 0.1\nk_n = 1e4\nk_t = 1e4\nf_r0 = 1.0\nrepulsion_length = 0.02\n[brownian]\nenabled = false\n'
+     '[shear]\nprotocol = "steady"\nrate = 1.0\n[integration]\ndt = 1e-4\nn_steps = 10\ndiscard_steps = 0\n',
+     ["hydrodynamics.model", "frictional contacts"]),
+    ('[brownian]\nscheme = "rfd"\n[solver]\nbackend = "petsc-krylov"\n',
+     ["brownian.scheme", "iterative solver", '"midpoint"']),
+    ('[hydrodynamics]\nmodel = "free-draining"\n[ensemble]\nranks_per_task = 2\n[solver]\n'
+     'backend = "petsc-dense"\n', ["ensemble.ranks_per_task", "free-draining"]),
     # not TOML at all
     ("[system]\nphi = [0.3\nn_particles = 8\n", ["invalid TOML", "line 3"]),
     ("[shear]\ngamma0 = \n", ["invalid TOML", "line 2", "gamma0 ="]),

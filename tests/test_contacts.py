@@ -16,6 +16,7 @@ from scipy.integrate import solve_ivp
 
 from sdmpi.config import JobError, enumerate_tasks, load_job, parse_job
 from sdmpi.dynamics import Realisation
+from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.contacts import (ContactLaw, CriticalLoadRepulsion, FrictionalContacts,
                                      contact_model, sliding_mobility, sliding_velocity, tangent)
 from sdmpi.dynamics.forces import FORCE_UNIT, force_law
@@ -243,6 +244,7 @@ def sd_contact(dt, t_end):
     real = Realisation(job, enumerate_tasks(job)[0])
     real.n_particles, real.radii = 2, np.ones(2)
     real.box, real.volume = np.full(3, BOX), BOX ** 3
+    real.model = hydrodynamic_model(job, real.radii, real.box)
     real.contacts = FrictionalContacts(real.contacts.law, 2, 4)
     real.contacts.partners[0, 0] = 1
     real.contacts.stretch[0, 0] = [XI0, 0.0, 0.0]

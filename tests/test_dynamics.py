@@ -11,9 +11,9 @@ from sdmpi.analysis.projection import project_periods
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.media import MaxwellFilter
-from sdmpi.dynamics.realisation import midpoint_brownian
+from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
-from sdmpi.hydro.resistance import grand_resistance
+from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
 from sdmpi.hydro.solvers import make_solver
 
 BOX = np.array([7.0, 7.0, 7.0])
@@ -54,21 +54,13 @@ def _divergences(h=1e-5):
     """Centred finite differences over the 3N translations (pair sets frozen) of
     M = R_FU^-1 (6N x 6N) and A = R_SU R_FU^-1 (5N x 6N): sum_j dM_ij/dx_j, sum_j dA_ij/dx_j."""
     base = _resistance(CONFIG)
-    n = len(CONFIG)
-    div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
-    for p in range(n):
-        for c in range(3):
-            mats = []
-            for sign in (1, -1):
-                pos = base.positions.copy()
-                pos[p, c] += sign * h
-                r_fu, _, r_su, _ = _resistance(pos, base.plan).blocks()
-                m = np.linalg.inv(r_fu)
-                mats.append((m, r_su @ m))
-            col = 6 * p + c
-            div_m += (mats[0][0][:, col] - mats[1][0][:, col]) / (2 * h)
-            div_a += (mats[0][1][:, col] - mats[1][1][:, col]) / (2 * h)
-    return base, div_m.reshape(n, 6), div_a.reshape(n, 5)
+    div_m, div_a = mobility_divergence(_resistance, base, h)
+    return base, div_m.reshape(-1, 6), div_a.reshape(-1, 5)
+
+
+def _model(scheme):
+    return ResistanceModel(np.ones(len(CONFIG)), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0,
+                           min_gap=1e-4, scheme=scheme)
 
 
 def test_midpoint_drift_and_brownian_stress_match_finite_difference_divergence():
@@ -77,18 +69,39 @@ def test_midpoint_drift_and_brownian_stress_match_finite_difference_divergence()
     it must equal kT div R_FU^-1 and -kT div(R_SU R_FU^-1) from finite differences."""
     kt, dt = 1.0, 1e-7
     base, div_m, div_a = _divergences()
-    solver = make_solver("dense", base)
+    at = _model("midpoint").at(CONFIG, STRAIN)
     n = len(CONFIG)
     drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
     for k in range(6 * n):
         for sign in (1.0, -1.0):
             z = np.zeros(6 * n)
             z[k] = sign
-            u, s = midpoint_brownian(base, solver, z.reshape(n, 6), kt, dt, _resistance)
-            drift += 0.5 * u
-            stress += 0.5 * s
+            terms = at.brownian_terms(z.reshape(n, 6), kt, dt)
+            drift += 0.5 * terms.velocities
+            stress += 0.5 * terms.stresslets
     assert np.abs(drift[:, :3] - kt * div_m[:, :3]).max() < 1e-3 * np.abs(div_m[:, :3]).max()
     assert np.abs(stress + kt * div_a).max() < 1e-3 * np.abs(div_a).max()
+
+
+def test_rfd_drift_and_brownian_stress_match_finite_difference_divergence():
+    """The rfd estimates are a linear (mean 0) plus a quadratic form in z up to O(epsilon^2)
+    terms, so the quadrature z = +-e_k (weights 1/2) gives their mean exactly: equal to
+    kT div R_FU^-1 and -kT div(R_SU R_FU^-1) from finite differences of step 1e-5 to their
+    truncation and the rounding of a difference over epsilon (1e-5 relative)."""
+    kt, dt = 1.0, 1e-3
+    base, div_m, div_a = _divergences()
+    at = _model("rfd").at(CONFIG, STRAIN)
+    n = len(CONFIG)
+    drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
+    for k in range(6 * n):
+        for sign in (1.0, -1.0):
+            z = np.zeros(6 * n)
+            z[k] = sign
+            terms = at.brownian_terms(z.reshape(n, 6), kt, dt)
+            drift += 0.5 * terms.velocities
+            stress += 0.5 * terms.stresslets
+    assert np.abs(drift - kt * div_m).max() < 1e-5 * np.abs(div_m[:, :3]).max()
+    assert np.abs(stress + kt * div_a).max() < 1e-5 * np.abs(div_a).max()
 
 
 def test_single_sphere_self_diffusion_in_periodic_box():

@@ -1,5 +1,5 @@
 """Interparticle forces: the seed-001 repulsion (force = -dU/dh, limits, Newton's third
-law, virial) and the potential-free overlap correction."""
+law, virial)."""
 
 import math
 
@@ -8,7 +8,7 @@ import pytest
 
 from sdmpi.config import JobError, enumerate_tasks, load_job
 from sdmpi.dynamics import Realisation
-from sdmpi.dynamics.forces import Repulsion, pair_forces, remove_overlaps
+from sdmpi.dynamics.forces import Repulsion, pair_forces
 from sdmpi.hydro.lubrication import close_pairs
 
 
@@ -32,16 +32,6 @@ def test_pair_forces_obey_newtons_third_law_and_virial():
     assert np.allclose(virial, np.einsum("ni,nj->ij", pos, forces), atol=1e-12)
     # repulsion: particle 1 is pushed away from 0 along +x mostly
     assert forces[1, 0] > 0 and forces[0, 0] < 0
-
-
-def test_overlap_correction_separates_pairs():
-    pos = np.array([[0.0, 0, 0], [1.9, 0, 0], [3.85, 0, 0]])
-    radii = np.ones(3)
-    pairs = close_pairs(pos, radii)
-    fixed = remove_overlaps(pos, radii, pairs, min_gap=1e-4)
-    after = close_pairs(fixed, radii)
-    assert after.gap.min() >= -1e-12
-    assert np.allclose(fixed.mean(axis=0), pos.mean(axis=0))  # symmetric pushes
 
 
 def test_repulsion_keys_validated_and_used():

@@ -22,7 +22,7 @@ from test_ensemble import _env  # noqa: E402
 from test_petsc_dense import (MPIRUN, ROOT, SHORT, _run, assert_isolated_sphere, assert_same_stream,  # noqa: E402
                               mobility_problem, needs_mpi, rows_on_two_ranks)
 
-from sdmpi.dynamics.realisation import midpoint_brownian  # noqa: E402
+from sdmpi.dynamics.models import ResistanceModel  # noqa: E402
 from sdmpi.hydro.krylov import lanczos_inverse_sqrt  # noqa: E402
 from sdmpi.hydro.lubrication import close_pairs, lubrication_matrix, lubrication_sparse  # noqa: E402
 from sdmpi.hydro.resistance import grand_resistance, split_resistance  # noqa: E402
@@ -253,26 +253,20 @@ def test_midpoint_drift_and_brownian_stress_agree_with_dense():
     1e-4 relative (dt = 1e-7: O(dt) terms ~1e-6; solver errors ~1e-7)."""
     kt, dt, n = 1.0, 1e-7, len(CONFIG)
     means = {}
-    for name, assemble in (("dense", grand_resistance), ("petsc-krylov", split_resistance)):
-        def at(pos, plan=None):
-            return assemble(pos, np.ones(n), BOX, 0.1, plan=plan)
-
-        base = at(CONFIG)
-        solver = make_solver(name, base, tolerance=1e-10)
-
-        def solver_at(res):
-            return make_solver(name, res, tolerance=1e-10)
-
-        m = int(np.prod(getattr(solver, "noise_shape", (n, 6))))
+    for name in ("dense", "petsc-krylov"):
+        model = ResistanceModel(np.ones(n), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=1e-4,
+                                backend=name, tolerance=1e-10, scheme="midpoint")
+        at = model.at(CONFIG, 0.1)
+        shape = getattr(at.solver, "noise_shape", (n, 6))
+        m = int(np.prod(shape))
         drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
         for k in range(m):
             for sign in (1.0, -1.0):
                 z = np.zeros(m)
                 z[k] = sign
-                u, s = midpoint_brownian(base, solver, z.reshape(getattr(solver, "noise_shape", (n, 6))),
-                                         kt, dt, at, solver_at)
-                drift += 0.5 * u
-                stress += 0.5 * s
+                terms = at.brownian_terms(z.reshape(shape), kt, dt)
+                drift += 0.5 * terms.velocities
+                stress += 0.5 * terms.stresslets
         means[name] = drift, stress
     for a, b in zip(means["dense"], means["petsc-krylov"]):
         assert np.abs(a - b).max() < 1e-4 * np.abs(a).max()
@@ -375,7 +369,7 @@ def test_far_field_key_picks_the_operator_and_both_agree():
             "solver.tolerance=1e-10", "hydrodynamics.ewald_tolerance=1e-8",
             "integration.steps_per_period=2000", *([f'solver.far_field="{far}"'] if far else [])])
         real = Realisation(job, enumerate_tasks(job)[0])
-        kind = type(real._resistance(real.positions, 0.0).far)
+        kind = type(real.model.at(real.positions, 0.0).resistance.far)
         runs[far] = kind, real.advance(3), real.positions
     (dense_kind, dense, x_dense), (spectral_kind, spectral, x_spectral) = runs.values()
     assert dense_kind is DenseFarField and spectral_kind is SpectralFarField

@@ -131,16 +131,20 @@ def _run(out, *extra, ranks=None):
 
 @needs_mpi
 @pytest.mark.mpi
-def test_two_ranks_per_task_same_stream(tmp_path):
+@pytest.mark.parametrize("scheme,rtol", [("midpoint", 1e-9), ("rfd", 1e-6)])
+def test_two_ranks_per_task_same_stream(tmp_path, scheme, rtol):
     """A Brownian realisation (N = 27, phi = 0.45, 100 steps) on a 2-rank sub-communicator
     against dense on one rank: the deterministic columns are equal, the stresses agree
     to rounding (the Brownian force uses the same, unique Cholesky factor), so their
-    statistics agree too."""
-    one = _run(tmp_path / "one.h5")
-    two = _run(tmp_path / "two.h5", *PETSC, "--set", "ensemble.ranks_per_task=2", ranks=2)
-    assert_same_stream(one, two, rtol=1e-9, mean_tol=1e-6)
+    statistics agree too. The rfd drift is a difference of two solves over a step
+    delta = 1e-6 a: it carries the solvers' rounding (eps cond(R_FU) ~ 1e-12 at the
+    1e-4 floor) amplified by 1/delta, ~1e-6 relative, hence its tolerance."""
+    scheme_key = ["--set", f'brownian.scheme="{scheme}"']
+    one = _run(tmp_path / "one.h5", *scheme_key)
+    two = _run(tmp_path / "two.h5", *PETSC, *scheme_key, "--set", "ensemble.ranks_per_task=2", ranks=2)
+    assert_same_stream(one, two, rtol=rtol, mean_tol=1e-6 if scheme == "midpoint" else 1e-3)
     b1, b2 = one["stress_brownian"], two["stress_brownian"]
-    assert np.allclose(b1.std(axis=0), b2.std(axis=0), rtol=1e-8)
+    assert np.allclose(b1.std(axis=0), b2.std(axis=0), rtol=10 * rtol)
 
 
 def assert_same_stream(one, two, rtol, mean_tol):

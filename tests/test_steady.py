@@ -121,11 +121,11 @@ def test_viscosity_csv_split_normal_stresses_pressure_and_ci(tmp_path):
             assert abs(m - w) < bound * err, (comp, q, m, w, err)
     # the total is the sum of the parts, value by value
     for q in STEADY_QUANTITIES:
-        parts = sum(float(by[c][q]) for c in ("medium", "hydrodynamic", "brownian", "interparticle"))
+        parts = sum(float(by[c][q]) for c in COMPONENTS[:-1])
         assert float(by["total"][q]) == pytest.approx(parts, abs=1e-12)
     # running averages end at the mean over all samples (start-up included)
     run_vals = red.running["values"]
-    assert run_vals.shape[:4] == (1, 5, 4, 5)
+    assert run_vals.shape[:4] == (1, len(COMPONENTS), 4, 5)
     assert np.all(np.isfinite(run_vals))
     assert "95% confidence interval" in format_table(red)
     png = tmp_path / "out" / "running_phi0.3.png"

@@ -37,10 +37,12 @@ STYLE = {  # component -> (colour, marker)
     "hydrodynamic": ("tab:blue", "o"),
     "brownian": ("tab:orange", "s"),
     "interparticle": ("tab:green", "^"),
+    "collision": ("tab:red", "v"),
     "total": ("black", "D"),
 }
 LABEL = {"medium": "medium (exact, seed eq. 36)", "hydrodynamic": "hydrodynamic",
-         "brownian": "Brownian", "interparticle": "interparticle", "total": "total"}
+         "brownian": "Brownian", "interparticle": "interparticle", "collision": "collision",
+         "total": "total"}
 
 
 def _figure(ncols, width=11.0, height=5.6):

@@ -23,7 +23,7 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
 
    in eta_m/t_D; partial periods are never used. The medium's own stress is analytic
    and added here (:func:`medium_moduli`, eq. 36; exact, error 0). The total is formed
-   per period as medium + hydrodynamic + Brownian + interparticle and reduced like
+   per period as medium + hydrodynamic + Brownian + interparticle + collision and reduced like
    the parts, so its mean is the sum of the parts' means (to round-off) and its error
    includes the correlations between the parts.
 4. Per realisation: mean and blocking error of the per-period values; over the
@@ -55,9 +55,9 @@ all made dimensionless with eta_m gamma_dot (multiply by the rate for eta_m/t_D 
 Brownian job). Components: ``medium`` (eta = its zero-shear viscosity, the sum of the
 Maxwell modes' eta_k or 1; N1 = N2 = Pi = 0: the medium's linear stress, seed 000 eq. 2,
 has no normal stresses; exact, errors 0), ``hydrodynamic``, ``brownian``,
-``interparticle`` and ``total`` (medium + the parts, sample by sample). NB: SD's FTS
-stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
-construction: Pi here is the interparticle (virial) pressure only; the stresslet trace
+``interparticle``, ``collision`` and ``total`` (medium + the parts, sample by sample). NB:
+SD's FTS stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
+construction: Pi here is the interparticle and collision (virial) pressure only; the stresslet trace
 (Jeffrey, Morris & Brady 1993) and the kinetic n kT are not computed. Errors: the same
 blocking within a realisation and spread between realisations (:mod:`.errors`, the
 larger of the two) give one standard error ``*_err`` with ``dof`` degrees of freedom
@@ -92,12 +92,13 @@ import numpy as np
 
 from ..config import Job, units
 from ..config.schema import toml_name
+from ..config.stresses import CONTRIBUTIONS
 from .errors import SOURCES, Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
 from .projection import project_periods, viscosities
 
 #: rows of moduli.csv per (phi, omega), in this order
-COMPONENTS = ("medium", "hydrodynamic", "brownian", "interparticle", "total")
+COMPONENTS = ("medium", *(c.component for c in CONTRIBUTIONS), "total")
 #: moduli.csv columns (DESIGN.md contract 4)
 MODULI_COLUMNS = ("phi", "omega", "component", "n_realisations", "G_prime", "G_prime_err",
                   "G_dprime", "G_dprime_err", "eta_prime", "eta_prime_err", "eta_dprime",
@@ -305,11 +306,13 @@ def medium_viscosity(job: Job) -> float:
 
 
 #: the sample datasets of the viscous-medium stress contributions
-VISCOUS_DATASETS = ("stress_hydrodynamic", "stress_brownian", "stress_interparticle")
+VISCOUS_DATASETS = tuple(c.dataset for c in CONTRIBUTIONS)
+#: datasets that run files written before their contribution existed lack (read as zero)
+ABSENT_IS_ZERO = frozenset(c.dataset for c in CONTRIBUTIONS if c.absent_is_zero)
 
 
 def stress_datasets(job: Job) -> tuple:
-    """Sample datasets of the hydrodynamic, Brownian and interparticle xy stress (the
+    """Sample datasets of the stress contributions (`config.stresses.CONTRIBUTIONS`; the
     Maxwell-filtered hydrodynamic stress for Maxwell media; see the module docstring)."""
     if job.medium.kind == "maxwell":
         return ("stress_hydrodynamic_maxwell",) + VISCOUS_DATASETS[1:]
@@ -317,8 +320,8 @@ def stress_datasets(job: Job) -> tuple:
 
 
 def read_stress(f, job: Job, task, committed, viewed=False, columns=XY):
-    """(3, committed) hydrodynamic, Brownian and interparticle xy stress of one task
-    (``columns = slice(None)``: (3, committed, 6)): as stored for the run's own medium,
+    """(C, committed) xy stress of one task per contribution (``columns = slice(None)``:
+    (C, committed, 6)), C = len(CONTRIBUTIONS): as stored for the run's own medium,
     or (``viewed``) the viscous stress with the hydrodynamic part filtered by
     ``job.medium`` (:func:`.medium_view.filtered_stress`)."""
     if not viewed:
@@ -402,7 +405,7 @@ def _read_xy(f, task, committed, names, columns=XY):
     that the samples are taken at t_k = k dt (the projection assumes t0 = 0)."""
     from ..ensemble.store import task_key
     group = f[f"tasks/{task_key(task.task_id)}/samples"]
-    missing = [n for n in names if n not in group]
+    missing = [n for n in names if n not in group and n not in ABSENT_IS_ZERO]
     if missing:
         raise ReduceError(f"{f.filename}: task {task.task_id} has no sample dataset(s) "
                           f"{', '.join(missing)}; this job's reduction needs them")
@@ -412,24 +415,25 @@ def _read_xy(f, task, committed, names, columns=XY):
         if not np.allclose(t, k * task.dt, rtol=1e-9, atol=1e-12 * task.dt):
             raise ReduceError(f"{f.filename}: task {task.task_id}: samples are not at "
                               f"t_k = k dt (time[{k.tolist()}] = {t.tolist()})")
-    return np.stack([group[n][:committed, columns] for n in names])
+    shape = group["stress_hydrodynamic"][:0, columns].shape[1:]
+    return np.stack([group[n][:committed, columns] if n in group else np.zeros((committed, *shape))
+                     for n in names])
 
 
 def task_series(job: Job, task, stress):
     """Per-value series of one task, (C, Q, n): per whole period (G', G'') after the
     start-up for oscillatory jobs, per sample (eta, N1, N2, Pi) after discard_steps for
-    steady ones (module docstring). ``stress``: hydrodynamic, Brownian, interparticle
-    stress of the committed samples, (3, committed) xy for oscillatory jobs and
-    (3, committed, 6) 6-vectors for steady ones. Rows follow COMPONENTS; the medium row
-    is its exact value repeated and the total row is medium + the three parts, value by
-    value."""
+    steady ones (module docstring). ``stress``: the contributions' stress of the committed
+    samples (`read_stress`), (C, committed) xy for oscillatory jobs and (C, committed, 6)
+    6-vectors for steady ones. Rows follow COMPONENTS; the medium row is its exact value
+    repeated and the total row is medium + the contributions, value by value."""
     if job.shear.protocol == "oscillatory":
         n = job.steps_per_period(task.omega)
         g1, g2 = project_periods(stress, job.shear.gamma0, task.omega, n, task.discard_steps // n)
-        parts = np.stack([g1, g2], axis=1)                         # (3, 2, P)
+        parts = np.stack([g1, g2], axis=1)                         # (C, 2, P)
         medium = np.array(medium_moduli(job, task.omega))
     else:
-        parts = steady_quantities(stress[:, task.discard_steps:], job.shear.rate)  # (3, 4, M)
+        parts = steady_quantities(stress[:, task.discard_steps:], job.shear.rate)  # (C, 4, M)
         medium = np.array([medium_viscosity(job), 0.0, 0.0, 0.0])
     med = np.broadcast_to(medium[:, None], parts.shape[1:])
     return np.concatenate([med[None], parts, (med + parts.sum(axis=0))[None]])
@@ -598,7 +602,7 @@ def _until_stop(stress, path, task):
 def _running_into(out, job: Job, stress, keep):
     """Running averages of one steady task from t = 0 into out (C, Q, T) at the sample
     indices ``keep`` that it has committed (the rest stays NaN)."""
-    parts = steady_quantities(stress, job.shear.rate)                # (3, Q, done)
+    parts = steady_quantities(stress, job.shear.rate)                # (C, Q, done)
     medium = np.array([medium_viscosity(job), 0.0, 0.0, 0.0])[:, None]
     full = np.concatenate([np.broadcast_to(medium, parts.shape[1:])[None], parts,
                            (medium + parts.sum(axis=0))[None]])
@@ -678,7 +682,7 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     n_periods = max(done // n - first, 0)
     if n_periods == 0:
         raise ReduceError(f"task {task_id} has no whole period after the start-up yet")
-    cycles = xy[:, first * n:(first + n_periods) * n].reshape(3, n_periods, n)
+    cycles = xy[:, first * n:(first + n_periods) * n].reshape(len(xy), n_periods, n)
     phase = 2.0 * np.pi * np.arange(n) / n
     gamma0 = job.shear.gamma0
     g1, g2 = medium_moduli(job, task.omega)

@@ -13,7 +13,8 @@ viscosity 1, time in t_D = a^2/D0 (1/gamma_dot for non-Brownian steady shear);
 This package uses only the standard library, so validating a job is fast.
 """
 
-from .canonical import LAYOUT_KEYS, canonical_text, job_hash, resume_hash, toml_literal
+from .canonical import (LAYOUT_KEYS, LENGTH_KEYS, canonical_text, extension_hash, job_hash,
+                        resume_hash, toml_literal)
 from .loader import load_job, parse_job
 from .problems import JobError, Problem
 from .reference import schema_text
@@ -23,7 +24,7 @@ from .tasks import Task, enumerate_tasks
 
 __all__ = [
     "Brownian", "Ensemble", "Hydrodynamics", "Integration", "Job", "JobError", "JobSection",
-    "LAYOUT_KEYS", "Medium", "Mode", "Output", "Problem", "Shear", "SizeClass", "Solver", "System", "Task",
-    "canonical_text", "enumerate_tasks", "job_hash", "load_job", "parse_job", "resume_hash",
+    "LAYOUT_KEYS", "LENGTH_KEYS", "Medium", "Mode", "Output", "Problem", "Shear", "SizeClass", "Solver", "System", "Task",
+    "canonical_text", "enumerate_tasks", "extension_hash", "job_hash", "load_job", "parse_job", "resume_hash",
     "schema_text", "toml_literal",
 ]

@@ -20,6 +20,11 @@ FORMAT = "sdmpi job, canonical form 1"
 # Keys that change how a job is run but never its results (principle: results do not
 # depend on rank count, assignment, stops or resumes); a run may resume with them changed.
 LAYOUT_KEYS = frozenset({"ensemble.ranks_per_task", "output.checkpoint_every"})
+# Keys that set how long tasks run (and how much of the start the averages leave out): a
+# finished run may be extended (``sdmpi run --extend``) by a job differing only in these.
+LENGTH_KEYS = frozenset({"integration.periods", "integration.discard_periods",
+                         "integration.duration", "integration.discard_duration",
+                         "integration.n_steps", "integration.discard_steps"})
 
 
 def toml_literal(value) -> str:
@@ -90,3 +95,10 @@ def resume_hash(job: Job) -> str:
     """SHA-256 (hex) of the canonical text without :data:`LAYOUT_KEYS`: a run may be
     resumed by any job with the same resume hash."""
     return hashlib.sha256(canonical_text(job, exclude=LAYOUT_KEYS).encode()).hexdigest()
+
+
+def extension_hash(job: Job) -> str:
+    """SHA-256 (hex) of the canonical text without :data:`LAYOUT_KEYS` and
+    :data:`LENGTH_KEYS`: a run may be extended by any longer job with the same hash."""
+    return hashlib.sha256(canonical_text(job, exclude=LAYOUT_KEYS | LENGTH_KEYS)
+                          .encode()).hexdigest()

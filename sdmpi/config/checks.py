@@ -11,15 +11,31 @@ import dataclasses
 import math
 
 from .problems import Problem
-from .schema import START_PHI_LIMIT, Job
+from .schema import START_PHI_LIMIT, TWO_PI, Job
 
 
 def _discard_periods(job):
     i = job.integration
-    if job.shear.protocol == "oscillatory" and i.discard_periods >= i.periods:
-        return [Problem("integration.discard_periods",
-                        f"must be smaller than integration.periods (= {i.periods})",
-                        i.discard_periods, allowed=f"0 <= discard_periods < {i.periods}")]
+    if job.shear.protocol != "oscillatory":
+        return []
+    if i.duration is None:
+        if i.discard_periods >= i.periods:
+            return [Problem("integration.discard_periods",
+                            f"must be smaller than integration.periods (= {i.periods})",
+                            i.discard_periods, allowed=f"0 <= discard_periods < {i.periods}")]
+        return []
+    if i.discard_duration >= i.duration:
+        return [Problem("integration.discard_duration", f"must be smaller than "
+                        f"integration.duration (= {i.duration:g})", i.discard_duration,
+                        allowed=f"0 <= discard_duration < {i.duration:g}")]
+    for omega in job.frequencies:  # both are rounded up to whole periods
+        kept, dropped = job.periods(omega), job.discarded_periods(omega)
+        if dropped >= kept:
+            return [Problem("integration.discard_duration", f"leaves no whole period at "
+                            f"omega = {omega:g}: both it and integration.duration round up "
+                            f"to {kept} period(s) of {TWO_PI / omega:.4g}", i.discard_duration,
+                            allowed=f"discard_duration <= {(kept - 1) * TWO_PI / omega:.4g}, "
+                            "or a longer duration")]
     return []
 
 
@@ -30,6 +46,19 @@ def _discard_steps(job):
                         f"must be smaller than integration.n_steps (= {i.n_steps})",
                         i.discard_steps, allowed=f"0 <= discard_steps < {i.n_steps}")]
     return []
+
+
+def _trajectory(job):
+    """Trajectory extras need frames, and stresslets come from the per-particle samples."""
+    out, problems = job.output, []
+    for name in ("trajectory_velocities", "trajectory_stresslets"):
+        if getattr(out, name) and out.trajectory_every == 0:
+            problems.append(Problem(f"output.{name}", "needs a trajectory", True,
+                                    allowed="output.trajectory_every >= 1, or false"))
+    if out.trajectory_stresslets and not out.per_particle:
+        problems.append(Problem("output.trajectory_stresslets", "needs the per-particle "
+                                "stresslets", True, allowed="output.per_particle = true, or false"))
+    return problems
 
 
 def _maxwell_sum(job):
@@ -272,13 +301,33 @@ def _frictional(job):
     return problems
 
 
-def _forces_need_pairs(job):
-    if job.interparticle.kind != "none" and not job.hydrodynamics.lubrication:
-        return [Problem("hydrodynamics.lubrication", "interparticle forces act on the "
-                        "lubrication pair list; without lubrication only overlapping pairs "
-                        "would feel them", False,
-                        allowed='true, or interparticle.kind = "none"')]
-    return []
+def _model(job):
+    """What the hydrodynamic models support (sdmpi.dynamics.models): lubrication is the
+    Stokesian model's; monolayers and frictional contacts are built on lubrication; the
+    rfd drift needs a direct solver (a difference over a length ~1e-6 a would be swamped
+    by an iterative solver's tolerance)."""
+    hyd, problems = job.hydrodynamics, []
+    if hyd.model != "stokesian" and not hyd.lubrication:
+        problems.append(Problem("hydrodynamics.lubrication", "applies to the stokesian model "
+                                "only (lubrication = false there is the far-field model)", False,
+                                allowed=f'true (the default) with hydrodynamics.model = "{hyd.model}"'))
+    if hyd.model != "stokesian" and job.system.geometry == "monolayer":
+        problems.append(Problem("hydrodynamics.model", "monolayers are simulated with full "
+                                "Stokesian dynamics only", hyd.model, allowed='"stokesian"'))
+    if hyd.model != "stokesian" and job.interparticle.kind == "frictional":
+        problems.append(Problem("hydrodynamics.model", "frictional contacts need the "
+                                "lubrication of the stokesian model", hyd.model, allowed='"stokesian"'))
+    if hyd.model == "free-draining" and job.ensemble.ranks_per_task > 1:
+        problems.append(Problem("ensemble.ranks_per_task", "a free-draining realisation has "
+                                "nothing to solve on several ranks", job.ensemble.ranks_per_task,
+                                allowed='1 with hydrodynamics.model = "free-draining"'))
+    if job.brownian.scheme == "rfd" and hyd.model != "free-draining" and \
+            job.solver.backend == "petsc-krylov":
+        problems.append(Problem("brownian.scheme", "the random finite difference takes a "
+                                "difference over ~1e-6 a, which an iterative solver's tolerance "
+                                "would swamp", "rfd",
+                                allowed='"midpoint" (or absent) with solver.backend = "petsc-krylov"'))
+    return problems
 
 
 #: backends implemented in this version (the others are named by the job schema)
@@ -306,10 +355,11 @@ _INTEGRATION = tuple(f"integration.{f.name}" for f in dataclasses.fields(Job().i
 
 # (keys a check reads, check): skipped when one of those keys failed its own checks.
 CROSS_CHECKS = (
-    (("shear.protocol", "integration.periods", "integration.discard_periods"),
-     _discard_periods),
+    (("shear.protocol", "shear.omega") + _INTEGRATION, _discard_periods),
     (("shear.protocol", "integration.n_steps", "integration.discard_steps"), _discard_steps),
     (("medium.kind", "medium.modes"), _maxwell_sum),
+    (("output.trajectory_every", "output.trajectory_velocities", "output.trajectory_stresslets",
+      "output.per_particle"), _trajectory),
     (("hydrodynamics.min_gap", "hydrodynamics.lubrication_cutoff"), _gaps),
     (("ensemble.ranks_per_task", "solver.backend"), _ranks),
     (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),
@@ -324,7 +374,8 @@ CROSS_CHECKS = (
     (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
     (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
       "hydrodynamics.lubrication_cutoff", "system.size_classes"), _force_range),
-    (("interparticle.kind", "hydrodynamics.lubrication"), _forces_need_pairs),
+    (("hydrodynamics.model", "hydrodynamics.lubrication", "system.geometry", "interparticle.kind",
+      "ensemble.ranks_per_task", "brownian.scheme", "solver.backend"), _model),
     (("interparticle.kind", "interparticle.mu", "interparticle.k_n", "interparticle.k_t",
       "interparticle.f_r0", "interparticle.repulsion_length", "brownian.enabled",
       "hydrodynamics.lubrication_cutoff", "hydrodynamics.min_gap", "shear.protocol",

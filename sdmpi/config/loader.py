@@ -156,16 +156,19 @@ def _resolve_table(table, cls, prefix, st: _Pass, out: dict) -> dict:
         if name not in names:
             st.problems.append(_unknown(f"{prefix}.{name}", value, names, prefix))
             misspelt.update(_close(name, names))
+    table = _alternatives(table, fields, prefix, st)
     for f in fields:
         name, meta = toml_name(f), f.metadata
         path = f"{prefix}.{name}"
         applies, controller, condition, fix = _applies(meta["only_if"], st)
+        if applies and (rule := _given(f, fields, table, prefix)):
+            applies, controller, condition, fix = rule
         if applies is False:
             switched = controller in st.set_paths and path not in st.set_paths
             if name in table and not switched:
                 st.problems.append(Problem(path, f"does not apply: used only when "
                                            f"{condition}", table[name],
-                                           allowed=f"remove it, or set {fix}"))
+                                           allowed=f"remove it, or {fix}"))
             out[f.name] = None
         elif name not in table:
             if meta["default"] is None and applies and not meta["optional"] \
@@ -186,6 +189,39 @@ def _resolve_table(table, cls, prefix, st: _Pass, out: dict) -> dict:
     return out
 
 
+def _alternatives(table: dict, fields, prefix, st: _Pass) -> dict:
+    """``table`` without the keys an override switched away from: a key given by --set
+    wins over its alternative given in the file (``instead_of`` in the schema), and a key
+    given only with a dropped one (``given_with``) goes with it."""
+    dropped = set()
+    for f in fields:
+        name, others = toml_name(f), f.metadata["instead_of"]
+        given = [o for o in others if o in table]
+        if name not in table or not given:
+            continue
+        if f"{prefix}.{name}" in st.set_paths:
+            dropped.update(o for o in given if f"{prefix}.{o}" not in st.set_paths)
+        elif any(f"{prefix}.{o}" in st.set_paths for o in given):
+            dropped.add(name)
+    dropped.update(toml_name(f) for f in fields if f.metadata["given_with"] in dropped)
+    return {k: v for k, v in table.items() if k not in dropped}
+
+
+def _given(f, fields, table: dict, prefix: str):
+    """Like :func:`_applies` for the schema's ``instead_of`` / ``given_with``: a key does
+    not apply when an alternative to it is given, or when the key it goes with is not
+    (None: neither rule concerns the key)."""
+    for other in fields:
+        if toml_name(f) in other.metadata["instead_of"] and toml_name(other) in table:
+            path = f"{prefix}.{toml_name(other)}"
+            return False, path, f"{path} is not given", f"remove {path}"
+    partner = f.metadata["given_with"]
+    if partner is None:
+        return None
+    path = f"{prefix}.{partner}"
+    return partner in table, path, f"{path} is given", f"give {path}"
+
+
 def _applies(only_if, st: _Pass):
     """Whether a key applies (None when its controlling key is itself invalid), the
     controlling key, the condition in words, and the setting that makes the key apply."""
@@ -194,7 +230,7 @@ def _applies(only_if, st: _Pass):
     section, name, values = only_if
     controller = f"{section}.{name}"
     condition = f"{controller} is " + " or ".join(f'"{v}"' for v in values)
-    fix = f'{controller} = "{values[0]}"'
+    fix = f'set {controller} = "{values[0]}"'
     if controller in st.invalid or section in st.invalid:
         return None, controller, condition, fix
     return st.context[section][name] in values, controller, condition, fix

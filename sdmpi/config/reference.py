@@ -34,4 +34,8 @@ def _key_line(f, indent, prefix=""):
     if m["only_if"]:
         s, k, vals = m["only_if"]
         extra += f"; only when {s}.{k} is " + " or ".join(f'"{v}"' for v in vals)
+    if m["instead_of"]:
+        extra += "; given instead of " + " and ".join(m["instead_of"])
+    if m["given_with"]:
+        extra += f"; only with {m['given_with']}"
     return [f"{indent}{name} = {default}   ({allowed}{extra})", f"{indent}    {m['doc']}"]

@@ -112,7 +112,7 @@ _CONTROLLER_DEFAULTS: dict[str, str] = {}  # "section.key" -> default of keys na
 
 
 def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, table=None,
-        example=None, controls=None, optional=False):
+        example=None, controls=None, optional=False, instead_of=(), given_with=None):
     """Declare one job-file key.
 
     default  the value when the key is absent (None together with ``only_if`` means the key
@@ -125,7 +125,11 @@ def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, t
     example  a value shown in messages about a required key;
     controls "section.key" of this key when other keys' only_if refer to it;
     optional a key whose default None means "absent" rather than "required" (it is then
-             left out of the canonical text).
+             left out of the canonical text);
+    instead_of  names of keys of the same table that do not apply when this key is given
+             (alternatives: giving both is an error; an override of either wins);
+    given_with  name of a key of the same table: this key applies only when that one is
+             given (it is then required unless ``optional``).
 
     The dataclass default is None for a key that does not apply under the defaults of
     its controlling key, so that ``Job()`` equals the job of an empty file.
@@ -135,7 +139,9 @@ def key(default, kind, doc, *, unit="", allowed=None, only_if=None, toml=None, t
         _CONTROLLER_DEFAULTS[controls] = default
     applies = only_if is None or _CONTROLLER_DEFAULTS[f"{only_if[0]}.{only_if[1]}"] in only_if[2]
     meta = dict(kind=kind, doc=doc, unit=unit, allowed=allowed, only_if=only_if,
-                toml=toml, table=table, default=default, example=example, optional=optional)
+                toml=toml, table=table, default=default, example=example, optional=optional,
+                instead_of=tuple(instead_of), given_with=given_with)
+    applies = applies and given_with is None
     return field(default=default if applies else None, metadata=meta)
 
 
@@ -155,6 +161,7 @@ DLVO = ("interparticle", "kind", ("dlvo",))
 FRICTIONAL = ("interparticle", "kind", ("frictional",))
 BULK = ("system", "geometry", ("bulk",))
 MONOLAYER = ("system", "geometry", ("monolayer",))
+START_FILE = ("system", "start", ("file",))
 
 
 @dataclass(frozen=True)
@@ -207,6 +214,22 @@ class System:
                         "plane, non-Brownian steady shear only (Dratler & Schowalter 1996)",
                         allowed=Choice(("bulk", "monolayer")), controls="system.geometry")
     box: str | None = key("cubic", "str", "box shape", allowed=Choice(("cubic",)), only_if=BULK)
+    start: str | None = key("generated", "str", "starting configuration: generated (an "
+                            "equilibrated hard-sphere fluid drawn from the task's stream) or "
+                            "file (positions read from start_file; docs/trajectories.md)",
+                            allowed=Choice(("generated", "file")), only_if=BULK,
+                            controls="system.start")
+    start_file: str | None = key(
+        None, "str", "HDF5 file (datasets positions (N, 3) or (M, N, 3), box (3,), optional "
+        "radii (N,)), extended XYZ file (Lattice in the comment line, optional 5th column "
+        "radius; M frames), or an sdmpi run file (the last committed positions of its tasks "
+        "at each phi); realisation r starts from configuration r mod M; a relative path is "
+        "taken from the directory sdmpi runs in", allowed=Text(1000), only_if=START_FILE,
+        example="start.h5")
+    start_tolerance: float | None = key(
+        1e-4, "float", "deepest overlap a start file may hold (surface gap >= -tolerance); "
+        "smaller overlaps are removed by the overlap correction of the first step",
+        unit="a", allowed=Range(0.0, 0.1), only_if=START_FILE)
     layer_spacing: float | None = key(
         2.0, "float", "monolayer: distance Lz between the layer and its periodic images "
         "in z (3D fluid around a 2D-periodic layer; Dratler & Schowalter 1996 used 100)", unit="L (in-plane side)",
@@ -308,6 +331,12 @@ class Brownian:
     """[brownian]: thermal motion (Brownian forces and the Brownian stress, Schaink et al. 2000, eq. 16)."""
 
     enabled: bool = key(True, "bool", "include Brownian motion")
+    scheme: str | None = key(None, "str", "how the Brownian drift kT div R_FU^-1 and the Brownian "
+                             "stresslets are estimated: rfd = random finite difference at every "
+                             "step (exact in the mean at every gap), midpoint = Fixman's midpoint "
+                             "(too small a drift at gaps below ~4 dt); absent: rfd on the direct "
+                             "backends, midpoint on petsc-krylov (see docs/physics.md)",
+                             allowed=Choice(("rfd", "midpoint")), optional=True)
 
 
 @dataclass(frozen=True)
@@ -315,19 +344,35 @@ class Integration:
     """[integration]: time stepping.
 
     oscillatory: dt = (2 pi / omega) / n with n = max(steps_per_period,
-    ceil(2 pi / (omega dt_max))) steps per period; ``periods`` periods are run and the
-    first ``discard_periods`` are not used for the moduli.
+    ceil(2 pi / (omega dt_max))) steps per period. The length of every task is given either
+    in periods (``periods``, the first ``discard_periods`` left out of the moduli) or in
+    time (``duration``, the first ``discard_duration`` left out); a duration is rounded up
+    to whole periods at each frequency, P(omega) = ceil(duration omega / 2 pi), and so is the
+    discarded start-up, because the moduli are projections over whole periods (seed eq.
+    18). A duration gives every frequency the same time in t_D, so that slow structural
+    relaxation (diffusion times) is sampled alike at high and low frequency.
     steady / none: ``n_steps`` steps of ``dt``, the first ``discard_steps`` not averaged.
     """
 
     steps_per_period: int | None = key(500, "int", "minimum time steps per period "
                                        "(Schaink et al. 2000: at least 500)", allowed=Range(8, None),
                                        only_if=OSCILLATORY)
-    periods: int | None = key(20, "int", "periods run per task", allowed=Range(1, None),
-                              only_if=OSCILLATORY)
+    periods: int | None = key(20, "int", "periods run per task (or give duration instead)",
+                              allowed=Range(1, None), only_if=OSCILLATORY)
     discard_periods: int | None = key(5, "int", "leading periods left out of the moduli; "
                                       "< periods", allowed=Range(0, None),
                                       only_if=OSCILLATORY)
+    duration: float | None = key(
+        None, "float", "length of every task in time, instead of periods (and "
+        "discard_periods): rounded up to whole periods at each frequency, ceil(duration "
+        "omega / 2 pi) periods, so that the moduli are still projections over whole periods",
+        unit="time unit", allowed=Range(0.0, None, lo_open=True), only_if=OSCILLATORY,
+        optional=True, instead_of=("periods", "discard_periods"))
+    discard_duration: float | None = key(
+        None, "float", "with duration: leading time left out of the moduli, rounded up to "
+        "whole periods like duration; at every frequency fewer periods than duration gives",
+        unit="time unit", allowed=Range(0.0, None), only_if=OSCILLATORY,
+        given_with="duration", example=5.0)
     dt_max: float | None = key(math.inf, "float", "largest time step; adds steps per period "
                                "at low frequency (Schaink et al. 2000: 5e-4)", unit="time unit",
                                allowed=Range(0.0, None, lo_open=True, allow_inf=True),
@@ -457,6 +502,10 @@ class Hydrodynamics:
     """[hydrodynamics]: accuracy knobs of the hydrodynamic interactions. Gaps are
     surface-to-surface distances in units of the pair's mean radius."""
 
+    model: str = key("stokesian", "str", "hydrodynamic interactions: stokesian = far field + "
+                     "lubrication (Stokesian dynamics), far-field = the periodic far-field "
+                     "(Rotne-Prager-level FTS) mobility alone, free-draining = none (Stokes drag "
+                     "of isolated spheres)", allowed=Choice(("stokesian", "far-field", "free-draining")))
     ewald_tolerance: float = key(1e-6, "float", "relative accuracy of the Ewald sums",
                                  allowed=Range(0.0, 1e-2, lo_open=True))
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
@@ -474,6 +523,13 @@ class Output:
     per_particle: bool = key(False, "bool", "also store per-particle stresslets")
     checkpoint_every: int = key(1000, "int", "time steps between checkpoints",
                                 allowed=Range(1, None))
+    trajectory_every: int = key(0, "int", "write the positions every K time steps into the "
+                                "run file as an H5MD trajectory (docs/trajectories.md); 0: "
+                                "no trajectory", allowed=Range(0, None))
+    trajectory_velocities: bool = key(False, "bool", "trajectory frames also hold each "
+                                      "particle's mean velocity over the frame's time step")
+    trajectory_stresslets: bool = key(False, "bool", "trajectory frames also hold the "
+                                      "hydrodynamic stresslets (needs per_particle = true)")
 
 
 @dataclass(frozen=True)
@@ -574,17 +630,39 @@ class Job:
             return self.integration.dt
         return TWO_PI / omega / self.steps_per_period(omega)
 
+    def periods(self, omega: float) -> int:
+        """Whole periods run per task at this omega (oscillatory jobs)."""
+        integ = self.integration
+        if integ.duration is None:
+            return integ.periods
+        return max(_whole_periods(integ.duration, omega), 1)
+
+    def discarded_periods(self, omega: float) -> int:
+        """Leading whole periods left out of the moduli at this omega (oscillatory jobs)."""
+        integ = self.integration
+        if integ.duration is None:
+            return integ.discard_periods
+        return _whole_periods(integ.discard_duration, omega)
+
     def n_steps(self, omega: float | None) -> int:
         """Total time steps of one task at this omega (None: steady / none)."""
         if omega is None:
             return self.integration.n_steps
-        return self.integration.periods * self.steps_per_period(omega)
+        return self.periods(omega) * self.steps_per_period(omega)
 
     def discard_steps(self, omega: float | None) -> int:
         """Leading time steps left out of averages at this omega."""
         if omega is None:
             return self.integration.discard_steps
-        return self.integration.discard_periods * self.steps_per_period(omega)
+        return self.discarded_periods(omega) * self.steps_per_period(omega)
+
+
+def _whole_periods(duration: float, omega: float) -> int:
+    """ceil(duration omega / 2 pi): the whole periods covering ``duration``; a product
+    within 1e-9 (relative) of an integer counts as that integer, so that a duration given
+    as an exact multiple of the period is not rounded up by round-off."""
+    n = duration * omega / TWO_PI
+    return max(math.ceil(n - 1e-9 * max(n, 1.0)), 0)
 
 
 SECTIONS: tuple[tuple[str, type], ...] = tuple(

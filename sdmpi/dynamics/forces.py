@@ -1,4 +1,4 @@
-"""Interparticle forces between sphere pairs, and the potential-free overlap correction.
+"""Interparticle forces between sphere pairs.
 
 Pair forces act along the line of centres; a force law gives the magnitude F(h) at
 surface gap h of a pair of radii a_i, a_j, positive when it pushes the spheres apart
@@ -261,23 +261,3 @@ def pair_forces(force_law, pairs, n, radii=None):
     # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j (true separations)
     virial = (pairs.distance[:, None] * unit).T @ f_on_j
     return forces, virial
-
-
-def remove_overlaps(positions, radii, pairs, min_gap, sweeps=100):
-    """Potential-free overlap correction (Bossis & Brady 1984; Heyes & Melrose 1993):
-    each overlapping pair of the list is moved apart symmetrically along its line of
-    centres to a gap of min_gap mean radii. Repeated (up to `sweeps` times) while a
-    correction creates new overlaps within the list. Returns corrected positions."""
-    pos = positions.copy()
-    for _ in range(sweeps):
-        dx = pos[pairs.j] + pairs.shift - pos[pairs.i]
-        dist = np.linalg.norm(dx, axis=1)
-        asum = radii[pairs.i] + radii[pairs.j]
-        target = asum * (1 + 0.5 * min_gap)
-        bad = dist < asum
-        if not bad.any():
-            break
-        push = 0.5 * ((target - dist) / dist)[bad, None] * dx[bad]
-        np.add.at(pos, pairs.j[bad], push)
-        np.add.at(pos, pairs.i[bad], -push)
-    return pos

@@ -42,15 +42,15 @@ import math
 
 import numpy as np
 
+from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
-from ..hydro.lubrication import close_pairs
-from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, noise_shape, resolve_backend, solver_stats,
-                             take_preconditioner)
+from .collisions import Collisions, separate
 from .contacts import contact_model
-from .forces import force_law, pair_forces, remove_overlaps
+from .forces import force_law, pair_forces
 from .initial import hard_sphere_fluid
 from .media import MaxwellFilter
+from .models import hydrodynamic_model
 from .monolayer import Monolayer
 from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
 
@@ -89,9 +89,7 @@ def sample_fields(job):
         "time": ((), "f8", job.time_unit, "t_k = k dt"),
         "strain": ((), "f8", "1", "gamma(t_k)"),
         "rate": ((), "f8", "1/" + job.time_unit, "gamma_dot(t_k)"),
-        "stress_hydrodynamic": ((6,), "f8", su, "(1/V) sum S_H, viscous medium"),
-        "stress_brownian": ((6,), "f8", su, "-(kT/V) sum div(R_SU R_FU^-1)"),
-        "stress_interparticle": ((6,), "f8", su, "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
+        **{c.dataset: ((6,), "f8", su, c.description) for c in CONTRIBUTIONS},
         "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
         "n_overlaps_midpoint": ((), "i4", "1", "overlapping pairs corrected at the Brownian midpoint"),
         "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
@@ -137,19 +135,14 @@ class Realisation:
         else:
             pos, self.box = self.monolayer.start(self.rng), self.monolayer.box
         self.n_particles = n
-        self.backend = resolve_backend(job.solver.backend, n, comm)  # "auto" resolved by N
-        self._solvers = []  # the solvers of the current step (their statistics)
         self.volume = float(np.prod(self.box)) if self.monolayer is None else self.monolayer.volume
         self.positions = Lattice(self.box, self.protocol.strain(0.0)).wrap(pos)
         self.kT = KT_REDUCED if job.brownian.enabled else 0.0
         self.dt = task.dt
         self.n_steps = task.n_steps
         self.step = 0
-        hyd = job.hydrodynamics
-        self._hydro = dict(lubrication=hyd.lubrication, ewald_tol=hyd.ewald_tolerance,
-                           cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)
-        if self.backend in MATRIX_FREE:
-            self._hydro["far_field"] = job.solver.far_field
+        self.model = hydrodynamic_model(job, self.radii, self.box, comm, separate=self._separate_midpoint,
+                                        on_error=self._lost_definiteness)
         self.maxwell = None
         if job.medium.kind == "maxwell":
             modes = job.medium.modes
@@ -217,78 +210,79 @@ class Realisation:
 
     # ------------------------------------------------------------------ physics
 
-    def _resistance(self, positions, strain, plan=None):
-        try:
-            return assemble(self.backend, positions, self.radii, self.box, strain, plan=plan,
-                            comm=self.comm, **self._hydro)
-        except np.linalg.LinAlgError as err:
-            raise RuntimeError(
-                f"task {self.task.task_id}, step {self.step}: the hydrodynamic matrices lost "
-                f"positive definiteness ({err}); a time step of {self.dt:.3g} moves spheres by "
-                f"~{math.sqrt(2 * self.dt):.2g} radii per step (Brownian) - use a smaller "
-                "time step (the seed used 5e-5 <= dt <= 5e-4 t_D)") from err
+    def _lost_definiteness(self, err):
+        return RuntimeError(
+            f"task {self.task.task_id}, step {self.step}: the hydrodynamic matrices lost "
+            f"positive definiteness ({err}); a time step of {self.dt:.3g} moves spheres by "
+            f"~{math.sqrt(2 * self.dt):.2g} radii per step (Brownian) - use a smaller "
+            "time step (Schaink et al. 2000 used 5e-5 <= dt <= 5e-4 t_D)")
 
-    def _separate(self, positions, lattice, rounds=10):
-        """Overlapping pairs are counted (with the deepest gap) and separated by the
-        potential-free correction, repeated while a correction creates new overlaps."""
-        found, deepest = 0, np.inf
-        for _ in range(rounds):
-            pairs = close_pairs(positions, self.radii, lattice, cutoff=0.0)
-            if len(pairs.i) == 0:
-                break
-            if found == 0:
-                found, deepest = len(pairs.i), pairs.min_gap
-            positions = remove_overlaps(positions, self.radii, pairs, self._hydro["min_gap"])
-        return positions, found, deepest
+    def _separate(self, positions, strain):
+        """Overlapping pairs separated (`collisions.separate`): (positions, Collisions)."""
+        return separate(positions, self.radii, Lattice(self.box, strain), self.job.hydrodynamics.min_gap)
+
+    def _separate_midpoint(self, positions, strain):
+        positions, collisions = self._separate(positions, strain)
+        return positions, collisions.n_overlaps
+
+    def _start(self, k, strain, lattice):
+        """The step's start configuration: (positions, Collisions, or a stopped sample)."""
+        pos = lattice.wrap(self.positions)
+        if self.monolayer is not None:  # seed 001: overlaps counted and kept; a deep one stops the run
+            n_overlaps, overlap_gap = self.monolayer.overlaps(pos, self.radii, lattice)
+            return pos, Collisions.none(n_overlaps, overlap_gap)
+        if self.contacts is not None:  # frictional contacts: overlaps are the springs' compression
+            return pos, Collisions.none(0, np.inf)
+        return self._separate(pos, strain)
 
     def _one_step(self):
         k = self.step
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
-        lattice = Lattice(self.box, strain)
-        if self.monolayer is not None:  # seed 001: overlaps counted and kept; a deep one stops the run
-            pos = lattice.wrap(self.positions)
-            n_overlaps, overlap_gap = self.monolayer.overlaps(pos, self.radii, lattice)
-            if self.monolayer.stops(k, overlap_gap, self.task.task_id):
-                self.step += 1
-                return self.monolayer.stopped_sample(self.sample_fields(), t0, strain, rate)
-        elif self.contacts is None:
-            pos, n_overlaps, overlap_gap = self._separate(lattice.wrap(self.positions), lattice)
-        else:  # frictional contacts: overlaps are the springs' compression, not corrected
-            pos, n_overlaps, overlap_gap = lattice.wrap(self.positions), 0, np.inf
-        self._midpoint_overlaps = 0
-        res = self._resistance(pos, strain)
-        min_gap = min(overlap_gap, res.pairs.min_gap)
+        pos, collisions = self._start(k, strain, Lattice(self.box, strain))
+        if self.monolayer is not None and self.monolayer.stops(k, collisions.deepest, self.task.task_id):
+            self.step += 1
+            return self.monolayer.stopped_sample(self.sample_fields(), t0, strain, rate)
+        at = self.model.at(pos, strain)
         n = self.n_particles
-        solver = self._solver(res)
+        zero = np.zeros((n, 5))
         e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
 
-        u_flow = solver.velocities(np.zeros((n, 6)), e5)
-        s_h = solver.stresslets(u_flow, e5)
+        u_flow = at.velocities(np.zeros((n, 6)), e5)
+        s_h = at.stresslets(u_flow, e5)
         velocity = u_flow
-        forces, virial = pair_forces(self.force_law, res.pairs, n, self.radii)
-        torques, contact_sample = np.zeros((n, 3)), {}
+        forces, virial = pair_forces(self.force_law, at.pairs, n, self.radii)
+        forces = np.hstack([forces, np.zeros((n, 3))])
+        contact_sample = {}
         if self.contacts is not None:
-            contact, contact_sample = self._contact_forces(res, solver)
-            forces, torques, virial = forces + contact.forces, contact.torques, virial + contact.virial
+            contact = self.contacts.forces(at.pairs, self.radii)
+            f6 = np.hstack([contact.forces, contact.torques])
+            u_c = at.velocities(f6, zero)
+            contact_sample = {"stress_contact": self._force_stress(at, u_c, contact.virial),
+                              "n_contacts": contact.n_contacts, "n_sliding": contact.n_sliding}
+            forces, virial = forces + f6, virial + contact.virial
         stress_p = np.zeros(6)
-        if self.force_law is not None:
-            f6 = np.hstack([forces, torques])
-            u_force = solver.velocities(f6, np.zeros((n, 5)))
+        if self.force_law is not None or self.contacts is not None:
+            u_force = at.velocities(forces, zero)
             velocity = velocity + u_force
-            stress_p = bulk_stress(solver.stresslets(u_force, np.zeros((n, 5))), self.volume) \
-                - symmetric_six(virial) / self.volume
-        stress_b = np.zeros(6)
+            stress_p = self._force_stress(at, u_force, virial)
+        stress_c = np.zeros(6)
+        if len(collisions.i):
+            f_c, virial_c = collisions.forces(at.relative_mobility, self.dt, n)
+            stress_c = self._force_stress(at, at.velocities(f_c, zero), virial_c)
+        stress_b, midpoint_overlaps = np.zeros(6), 0
         if self.kT > 0:
-            u_b, s_b = self._brownian(res, solver, strain)
-            velocity = velocity + u_b
-            stress_b = bulk_stress(s_b, self.volume)
+            brownian = at.brownian(self.rng, self.kT, self.dt)
+            velocity = velocity + brownian.velocities
+            stress_b = bulk_stress(brownian.stresslets, self.volume)
+            midpoint_overlaps = brownian.midpoint_overlaps
 
         sample = {"time": t0, "strain": strain, "rate": rate,
                   "stress_hydrodynamic": bulk_stress(s_h, self.volume),
                   "stress_brownian": stress_b, "stress_interparticle": stress_p,
-                  "n_overlaps": n_overlaps, "n_overlaps_midpoint": self._midpoint_overlaps,
-                  "min_gap": min_gap, **contact_sample, **self._solver_sample()}
+                  "stress_collision": stress_c,
+                  "n_overlaps": collisions.n_overlaps, "n_overlaps_midpoint": midpoint_overlaps,
+                  "min_gap": min(collisions.deepest, at.pairs.min_gap), **contact_sample, **at.stats()}
         if self.maxwell is not None:
             if k > 0:
                 self.maxwell.update(self.modes, self.source_prev, s_h)
@@ -307,61 +301,12 @@ class Realisation:
         self.step += 1
         return sample
 
-    def _contact_forces(self, res, solver):
-        """The contact springs' forces (`contacts.ContactForces`) and their sample fields:
-        their stress -(1/V) sum (x F_C + R_SU R_FU^-1 (F_C, T_C)) and the contact counts."""
+    def _force_stress(self, at, velocities, virial):
+        """Stress of forces that drive these velocities with this virial sum x F:
+        -(1/V) (sum R_SU R_FU^-1 F + sum x F)."""
         n = self.n_particles
-        contact = self.contacts.forces(res.pairs, self.radii)
-        u_c = solver.velocities(np.hstack([contact.forces, contact.torques]), np.zeros((n, 5)))
-        stress = bulk_stress(solver.stresslets(u_c, np.zeros((n, 5))), self.volume) \
-            - symmetric_six(contact.virial) / self.volume
-        return contact, {"stress_contact": stress, "n_contacts": contact.n_contacts,
-                         "n_sliding": contact.n_sliding}
-
-    def _solver(self, res):
-        """The step's backend for a resistance (kept for its statistics)."""
-        solver = make_solver(self.backend, res, self.comm, self.job.solver.tolerance,
-                             self.job.solver.lanczos_tolerance)
-        self._solvers.append(solver)
-        return solver
-
-    def _solver_sample(self):
-        """Iterations and largest residual of this step's solvers (sample fields); the
-        solvers are released."""
-        stats = [solver_stats(s) for s in self._solvers]
-        self._solvers = []
-        return {"solver_iterations": sum(s["iterations"] for s in stats),
-                "solver_residual": max(s["residual"] for s in stats),
-                "lanczos_iterations": sum(s["lanczos"] for s in stats)}
-
-    def _brownian(self, res, solver, strain):
-        """Brownian velocities and stresslets of this step (see `midpoint_brownian`)."""
-        z = self.rng.standard_normal(noise_shape(solver))
-
-        def at_midpoint(pos, plan):
-            # a half step may overlap spheres: separate them as at step starts (counted)
-            pos, found, _ = self._separate(pos, Lattice(self.box, strain))
-            self._midpoint_overlaps = found
-            return self._resistance(pos, strain, plan=plan)
-
-        return midpoint_brownian(res, solver, z, self.kT, self.dt, at_midpoint, self._solver)
-
-
-def midpoint_brownian(res, solver, z, kT, dt, resistance_at, solver_at=None):
-    """Fixman midpoint step (module docstring) for the noise z (`solvers.noise_shape`;
-    (N, 6) for the direct backends): returns the Brownian velocities R_FU^-1(x*) F_B (N, 6),
-    whose mean is kT div R_FU^-1, and the Brownian stresslets (N, 5), whose mean is
-    -kT div(R_SU R_FU^-1); F_B = sqrt(2 kT/dt) C z (C C^T = R_FU, or any F_B of that
-    covariance). resistance_at(positions, plan) assembles R at the mid configuration,
-    solver_at(resistance) builds its solver (default: dense)."""
-    zero = np.zeros((res.n_particles, 5))
-    force = math.sqrt(2 * kT / dt) * solver.brownian_forces(z)
-    u_start = solver.velocities(force, zero)
-    mid = resistance_at(res.positions + 0.5 * dt * u_start[:, :3], res.plan)
-    solver_mid = make_solver("dense", mid) if solver_at is None else solver_at(mid)
-    take_preconditioner(solver_mid, solver)  # petsc-krylov: refactorise the start's factor
-    u_mid = solver_mid.velocities(force, zero)
-    return u_mid, solver_mid.stresslets(u_mid, zero) - solver.stresslets(u_start, zero)
+        return bulk_stress(at.stresslets(velocities, np.zeros((n, 5))), self.volume) \
+            - symmetric_six(virial) / self.volume
 
 
 def _encode_rng(rng):

@@ -7,7 +7,9 @@
 ``samples``  after the first sample dataset of a checkpoint is written (mid-write);
 ``state``    after the checkpoint slot's state is written, before the slot is marked
              valid (mid-checkpoint);
-``commit``   after the slot is marked valid and synced, before ``/progress`` moves.
+``commit``   after the slot is marked valid and synced, before ``/progress`` moves;
+``extend``   (``sdmpi run --extend``) after the longer file is complete, before it
+             replaces the run file.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import os
 import signal
 
-POINTS = ("step", "samples", "state", "commit")
+POINTS = ("step", "samples", "state", "commit", "extend")
 
 _spec = os.environ.get("SDMPI_TEST_KILL", "")
 _point, _, _n = _spec.partition(":")

@@ -23,6 +23,7 @@ valid, and running the same command resumes.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import errno
 import json
@@ -42,9 +43,9 @@ from mpi4py import MPI
 
 from .. import __version__
 from .._kernel_cache import kernels_cached
-from ..config import (LAYOUT_KEYS, JobError, canonical_text, enumerate_tasks, load_job,
-                      parse_job, resources, resume_hash)
-from . import store
+from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
+                      extension_hash, load_job, parse_job, resources, resume_hash)
+from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
 from .progress import PipeSafe, Progress, RunLocked, logs_dir, rank_logger, take_lock
@@ -70,12 +71,14 @@ class Plan:
     notes: tuple = ()  # damage found by the checksums, and where tasks resume instead
     rewind: tuple = ()    # (task id, step): /progress to move back before running
     damaged: tuple = ()   # (task id, slot): checkpoint slots that fail their checksums
+    extension: str = ""  # what --extend did (said before the run starts)
 
 
-def run(job_path, overrides, output, *, new=False, realisation_factory=None,
+def run(job_path, overrides, output, *, new=False, extend=False, realisation_factory=None,
         comm=None, stream=None) -> bool:
     """Run or resume the job in ``job_path`` (with ``--set`` ``overrides``) into the run
-    file ``output``; ``new`` replaces an existing file. Collective over ``comm``
+    file ``output``; ``new`` replaces an existing file; ``extend`` lengthens the existing
+    run to the job's longer tasks first (:mod:`.extension`). Collective over ``comm``
     (default MPI_COMM_WORLD). Returns True when every task is complete, False when
     stopped by a signal (resumable). Raises :class:`BadInput` (nothing written).
 
@@ -86,7 +89,7 @@ def run(job_path, overrides, output, *, new=False, realisation_factory=None,
     comm = comm or MPI.COMM_WORLD
     lock = None
     try:
-        plan, lock = _agree(comm, job_path, overrides, Path(output), new)
+        plan, lock = _agree(comm, job_path, overrides, Path(output), new, extend)
         return _execute(comm, plan, Path(output), realisation_factory,
                         PipeSafe(stream or sys.stdout))
     except BadInput:
@@ -115,17 +118,20 @@ def _file_system_full(err: BaseException) -> bool:
         or "quota exceeded" in text.lower())
 
 
-def _agree(comm, job_path, overrides, out: Path, new: bool):
-    """Rank 0 checks everything and takes the lock; all ranks get its plan or raise
-    :class:`BadInput`. Returns (plan, lock descriptor or None)."""
+def _agree(comm, job_path, overrides, out: Path, new: bool, extend: bool):
+    """Rank 0 checks everything, takes the lock and extends the run file if asked; all
+    ranks get its plan or raise :class:`BadInput`. Returns (plan, lock descriptor or
+    None)."""
     plan = lock = None
     if comm.rank == 0:
         try:
-            plan = _plan(job_path, overrides, out, new, comm.size)
+            plan = _plan(job_path, overrides, out, new, extend, comm.size)
             if plan.mode != "complete" or plan.damaged:
                 lock = take_lock(out)
             if plan.rewind or plan.damaged:
                 store.fall_back(out, dict(plan.rewind), list(plan.damaged))
+            if plan.mode == "extend":
+                plan = _extended(plan, out)
         except RunLocked as err:
             plan = BadInput(f"{out}: in use by another sdmpi run ({err}); wait for it to "
                             f"finish or stop it")
@@ -157,7 +163,7 @@ def _execute(comm, plan: Plan, out: Path, factory, stream) -> bool:
 # --------------------------------------------------------------------------- checks (rank 0)
 
 
-def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
+def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) -> Plan:
     try:
         job = load_job(job_path, overrides)
     except JobError as err:
@@ -176,10 +182,23 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job)
     _check_output(out, new)
-    _check_resources(job, job_path, out, new, size)
+    _check_resources(job, job_path, out, new, size, extend)
+    plan = _mode(job, out, new, extend)
+    if 0 in plan.progress and plan.mode != "complete":  # tasks to start: check their start
+        try:
+            start_file.load(job)
+        except start_file.StartError as err:
+            raise BadInput(f"{job_path}: 1 problem\n  - {err}") from None
+    return plan
+
+
+def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
+    """The plan for this job and output file: new, resume, extend or complete."""
     tasks = enumerate_tasks(job)
     meta = (json.dumps(versions()),
             datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+    if extend and not out.exists():
+        raise BadInput(f"{out}: does not exist; --extend lengthens an existing run file")
     if out.exists() and not new:
         try:
             summary = store.inspect(out)
@@ -188,7 +207,14 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
                       if store.is_run_file(out) else "Choose another output file (-o).")
             raise BadInput(f"{err}\nLeft untouched. {advice}") from None
         if resume_hash(summary.job) != resume_hash(job):
-            raise BadInput(_different_job(out, summary.job, job))
+            if not extend or extension_hash(summary.job) != extension_hash(job):
+                raise BadInput(_different_job(out, summary.job, job, extend))
+            problems = extension.problems(summary, job)
+            if problems:
+                raise BadInput("\n".join([f"{out}: cannot be extended to this job:",
+                                          *(f"  {p}" for p in problems), "Left untouched."]))
+            return Plan(canonical_text(job), "extend", tuple(int(p) for p in summary.progress),
+                        summary.slots, *meta)
         progress = tuple(step for step, _ in summary.resume)
         slots = tuple(slot for _, slot in summary.resume)
         mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
@@ -200,6 +226,21 @@ def _plan(job_path, overrides, out: Path, new: bool, size: int) -> Plan:
         damaged = tuple((d.task_id, d.slot) for d in summary.damage if d.what == "state")
         return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
+
+
+def _extended(plan: Plan, out: Path) -> Plan:
+    """Rank 0: lengthen the run file to the plan's job (:func:`.extension.extend`)."""
+    try:
+        summary = extension.extend(out, parse_job(plan.job_text), plan.job_text, plan.versions)
+    except (OSError, store.StoreError) as err:
+        out.with_name(out.name + ".part").unlink(missing_ok=True)
+        raise BadInput(f"{out}: could not be extended ({err}); left untouched") from None
+    steps = sum(t.n_steps for t in summary.tasks)
+    said = (f"extended {out} to {steps} steps in all ({sum(plan.progress)} committed steps "
+            f"copied)")
+    return dataclasses.replace(plan, mode="complete" if summary.complete else "resume",
+                               progress=tuple(int(p) for p in summary.progress),
+                               slots=summary.slots, extension=said)
 
 
 def _check_backend(job) -> None:
@@ -217,15 +258,17 @@ def _check_backend(job) -> None:
         raise BadInput(f"solver.backend = {backend!r} needs PETSc here: {err}") from None
 
 
-def _check_resources(job, job_path, out: Path, new: bool, size: int) -> None:
+def _check_resources(job, job_path, out: Path, new: bool, size: int,
+                     extend: bool = False) -> None:
     """Refuse a job that cannot fit: the memory of the ranks on this machine, and (for a
-    run file still to be created) the room for it in the output's file system."""
+    run file still to be created, or the longer copy an extension writes beside the run
+    file) the room for it in the output's file system."""
     from ..hydro.solvers import backend_for
 
     backend = backend_for(job.solver.backend, job.system.n_particles,
                           job.ensemble.ranks_per_task)
-    creating = new or not out.exists()
-    replaced = out.stat().st_size if out.exists() and creating else 0
+    creating = new or extend or not out.exists()
+    replaced = out.stat().st_size if out.exists() and creating and not extend else 0
     problems = resources.problems(job, backend, resources.ranks_on_this_node(size),
                                   out.parent if creating else None,
                                   store.run_file_bytes(job) - replaced)
@@ -263,13 +306,20 @@ def _key_values(job) -> dict[str, str]:
     return values
 
 
-def _different_job(out: Path, stored, job) -> str:
+def _different_job(out: Path, stored, job, extend: bool) -> str:
     old, now = _key_values(stored), _key_values(job)
     keys = list(old) + [k for k in now if k not in old]
+    differ = [k for k in keys if old.get(k) != now.get(k)]
     diffs = [f"  {k}: file has {old.get(k, '(absent)')}, this job has {now.get(k, '(absent)')}"
-             for k in keys if old.get(k) != now.get(k)]
+             for k in differ]
+    hint = []
+    if extend:
+        hint = [f"--extend allows only the length keys to differ ({', '.join(sorted(LENGTH_KEYS))})"]
+    elif all(k in LENGTH_KEYS for k in differ):
+        hint = ["Only the length differs: add --extend to lengthen the run (what is "
+                "committed is kept)."]
     return "\n".join([f"{out}: holds a different job ({stored.job.name!r}); it differs in:",
-                      *diffs,
+                      *diffs, *hint,
                       "Left untouched. Use --new to replace it (its data are lost), or "
                       "choose another output file (-o)."])
 
@@ -345,6 +395,8 @@ class _Driver:
                       f"{socket.gethostname()}; tasks {mine}")
         todo = [t for t in tasks if plan.progress[t.task_id] < t.n_steps]
         steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
+        if plan.extension:
+            self.say(plan.extension)
         if plan.mode == "resume":
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")
@@ -360,6 +412,11 @@ class _Driver:
             # realisations on the group's communicator (collective solves); the leader writes
             extra = {"comm": group} if group.size > 1 else {}
             realisations = {tid: self.factory(job, tasks[tid], **extra) for tid in mine}
+            fresh = [tid for tid in mine if plan.progress[tid] == 0]
+            if fresh and job.system.start == "file":
+                configurations = start_file.load(job)
+                for tid in fresh:
+                    start_file.apply(realisations[tid], configurations.positions(tasks[tid]))
             layouts = {tid: store.TaskLayout.of(r) for tid, r in realisations.items()} \
                 if leader else {}
             if plan.mode == "new":
@@ -425,10 +482,13 @@ class _Driver:
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every
+        recorder = None
         if leader:
             datasets = run_file.samples(tid)
             buffers = {k: np.empty((min(chunk, n), *shape), dtype)
                        for k, (shape, dtype, _, _) in real.sample_fields().items()}
+            if self.job.output.trajectory_every:
+                recorder = trajectory.Recorder(self.job, task, real.box, run_file.file)
         self.log.info(f"task {tid}: {'resumed at' if start else 'started at'} step {start} of {n}")
         t_task = time.perf_counter()
         io_before = self.t_io
@@ -438,11 +498,15 @@ class _Driver:
             end = min((step // chunk + 1) * chunk, n)
             t0 = time.perf_counter()
             while step < end:
+                if recorder:
+                    recorder.before(step, real)
                 sample = real.advance(1)
                 fault("step")
                 if leader:
                     for k, buf in buffers.items():
                         buf[step - committed] = sample[k][0]
+                if recorder:
+                    recorder.after(sample, real)
                 step += 1
                 progress.add(steps=1)
                 if self.stop.requested(group):
@@ -452,6 +516,8 @@ class _Driver:
             self.t_step += t1 - t0
             if leader:
                 slot = 0 if slot < 0 else 1 - slot
+                if recorder:
+                    recorder.write()  # frames first: the commit below makes them valid
                 run_file.commit(tid, datasets, committed, step, buffers, real.get_state(), slot)
                 self.t_io += time.perf_counter() - t1
             committed = step

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..config import JobError, Task, enumerate_tasks, job_hash, parse_job, resume_hash
 from ..config import units
+from . import trajectory
 from .faults import fault
 
 FORMAT = "sdmpi-run"
@@ -141,6 +142,7 @@ def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versi
         progress.attrs["description"] = "samples committed per task (valid up to)"
         for task in tasks:
             _create_task(f, job, task, layouts[task.task_id])
+        trajectory.create(f, job, tasks, layouts)
 
 
 def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
@@ -188,13 +190,15 @@ STATE_PER_PARTICLE = 16 * 8
 
 
 def run_file_bytes(job) -> float:
-    """Estimated size of a job's run file: every sample dataset (exact: they are all
-    allocated at creation), two state slots per task and the per-task overhead."""
+    """Estimated size of a job's run file: every sample dataset and trajectory frame
+    (exact: they are all allocated at creation), two state slots per task and the per-task
+    overhead."""
     from ..dynamics.realisation import sample_fields
 
     row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
     per_task = TASK_OVERHEAD + 2 * STATE_PER_PARTICLE * job.system.n_particles
-    return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job)))
+    return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job))
+                 + trajectory.file_bytes(job))
 
 
 # --------------------------------------------------------------------------- write
@@ -285,6 +289,24 @@ class RunFile:
         os.fsync(self._fd)                        # all of the above on disk first
         fault("commit")
         self._progress[task_id] = stop
+
+
+def checksum_slot(f, task_id: int, slot: int, step: int) -> None:
+    """Write the checksums of checkpoint ``slot`` (its state at ``step``) of a task from
+    the data in the open file ``f``: the sample checksums of rows below ``step``, then the
+    state's (as :meth:`RunFile.commit` does; used when data are copied into a new layout,
+    sdmpi.ensemble.extension)."""
+    key = task_key(task_id)
+    ckpt, samples = f[f"checkpoints/{key}"], f[f"tasks/{key}/samples"]
+    if "sample_crc" not in ckpt:
+        return
+    table = np.zeros(ckpt["sample_crc"].shape[1:], "u4")
+    block = int(ckpt["sample_crc"].attrs["block"])
+    for j, name in enumerate(sorted(samples)):
+        _extend_checksums(table[:, j], block, 0, samples[name][:step], samples[name].dtype)
+    group = ckpt[f"slot{slot}"]
+    ckpt["sample_crc"][slot] = table
+    ckpt["state_crc"][slot] = [crc32(group[name][()]) for name in sorted(group)] + [crc32(table)]
 
 
 def _extend_checksums(column, block: int, start: int, rows, dtype) -> None:

@@ -48,6 +48,15 @@ class Lattice:
         frac -= np.floor(frac)
         return frac @ self.vectors
 
+    def nearest_image(self, displacements):
+        """The lattice image of each displacement (..., 3) with fractional coordinates in
+        [-1/2, 1/2]: the displacement itself whenever |d . b_i| < 1/2 for every reciprocal
+        vector b_i, i.e. when it is shorter than half the distance between each pair of
+        opposite cell faces (used to unwrap positions between nearby times)."""
+        frac = displacements @ self.reciprocal.T
+        frac -= np.round(frac)
+        return frac @ self.vectors
+
     def image_shifts(self, reach):
         """Lattice translations n . L with |n_i| <= ceil(reach |b_i|) + 1: every image of a
         point of the primary cell that can lie within `reach` of another point of it."""
@@ -59,14 +68,30 @@ class Lattice:
     def wave_vectors(self, kmax):
         """Reciprocal lattice vectors k = 2 pi n . b with 0 < |k| <= kmax, one of each
         +-k pair (the sums below use that the terms at -k are complex conjugates)."""
-        counts = np.ceil(kmax * np.linalg.norm(self.vectors, axis=1) / (2 * np.pi)).astype(int)
-        ranges = [np.arange(-c, c + 1) for c in counts]
-        n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
-        # keep the half space: first non-zero integer component positive
-        first = np.where(n[:, 0] != 0, n[:, 0], np.where(n[:, 1] != 0, n[:, 1], n[:, 2]))
-        n = n[first > 0]
-        k = 2 * np.pi * n @ self.reciprocal
-        return k[np.einsum("ij,ij->i", k, k) <= kmax * kmax]
+        counts = np.ceil(kmax * np.linalg.norm(self.vectors, axis=1) / (2 * np.pi)).astype(np.int64)
+        out = np.empty((int(np.prod(2 * counts + 1)) // 2, 3))
+        return out[:_wave_vectors(counts, 2 * np.pi * self.reciprocal, float(kmax), out)]
+
+
+@numba.njit(cache=True)
+def _wave_vectors(counts, recip, kmax, out):
+    """Fills out with k = n . recip for the integer n, |n_c| <= counts[c], in the half
+    space (first non-zero n_c positive) with |k| <= kmax, in lexicographic order of n;
+    returns how many."""
+    count = 0
+    for n0 in range(-counts[0], counts[0] + 1):
+        for n1 in range(-counts[1], counts[1] + 1):
+            for n2 in range(-counts[2], counts[2] + 1):
+                first = n0 if n0 != 0 else (n1 if n1 != 0 else n2)
+                if first <= 0:
+                    continue
+                k0 = n0 * recip[0, 0] + n1 * recip[1, 0] + n2 * recip[2, 0]
+                k1 = n0 * recip[0, 1] + n1 * recip[1, 1] + n2 * recip[2, 1]
+                k2 = n0 * recip[0, 2] + n1 * recip[1, 2] + n2 * recip[2, 2]
+                if k0 * k0 + k1 * k1 + k2 * k2 <= kmax * kmax:
+                    out[count, 0], out[count, 1], out[count, 2] = k0, k1, k2
+                    count += 1
+    return count
 
 
 @numba.njit(cache=True)

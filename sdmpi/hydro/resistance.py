@@ -142,6 +142,29 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     return GrandResistance(matrix, pairs, plan, pos)
 
 
+def mobility_divergence(resistance_at, base, h=1e-5):
+    """The divergences (div M (6N,), div A (5N,)), (div X)_i = sum_j dX_ij/dx_j over the
+    3N translations, of M = R_FU^-1 and A = R_SU R_FU^-1 at the configuration of the
+    GrandResistance base, by centred finite differences of step h with base's pair sets
+    (its plan): kT div M is the Brownian drift, -kT div A the mean Brownian stresslets.
+    resistance_at(positions, plan) assembles R (as `grand_resistance` with a plan)."""
+    n = base.n_particles
+    div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
+    for p in range(n):
+        for c in range(3):
+            col = 6 * p + c
+            columns = []
+            for sign in (1, -1):
+                moved = base.positions.copy()
+                moved[p, c] += sign * h
+                r_fu, _, r_su, _ = resistance_at(moved, base.plan).blocks()
+                m_col = np.linalg.inv(r_fu)[:, col]
+                columns.append((m_col, r_su @ m_col))
+            div_m += (columns[0][0] - columns[1][0]) / (2 * h)
+            div_a += (columns[0][1] - columns[1][1]) / (2 * h)
+    return div_m, div_a
+
+
 @dataclass
 class SplitResistance:
     """R = M_inf^-1 + L without M_inf^-1 (for `krylov.KrylovSolver`): the far-field

@@ -1,0 +1,90 @@
+"""Benchmark: ms per Brownian SD step of one realisation, in Cholesky equivalents.
+
+The seed study's setting (jobs/schaink2000_newtonian.toml: phi = 0.45, dt = 5e-4 t_D,
+Brownian, oscillatory shear, dense solver, ewald_tolerance 1e-6), one rank, BLAS on one
+thread (the Makefile pins it), for N = 27, 64, 125. A step includes both hydrodynamic
+evaluations of the midpoint scheme, the overlap correction, the drift and the Brownian
+stresslets (`Realisation.advance`). Each size is timed in blocks of steps interleaved
+with blocks of one 297 x 297 LAPACK Cholesky (dpotrf) in the same process; the medians
+of their CPU times give "Cholesky-equivalents per step", a figure that carries across
+machines and loads (wall-clock ms are recorded too; on an idle machine they agree).
+Writes bench/step.json.
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/bench_step.py
+"""
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import numpy as np
+from scipy.linalg import lapack
+
+from sdmpi.config import enumerate_tasks, load_job
+from sdmpi.dynamics import Realisation
+
+JOB = "jobs/schaink2000_newtonian.toml"
+
+
+def cholesky_ms(spd, repeat=20):
+    """(wall, CPU) ms of one dpotrf of spd."""
+    w0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(repeat):
+        lapack.dpotrf(spd)
+    return 1e3 * (time.perf_counter() - w0) / repeat, 1e3 * (time.process_time() - c0) / repeat
+
+
+def time_steps(n, blocks, steps_per_block, spd):
+    """Median wall and CPU ms per step and per Cholesky over interleaved blocks; the
+    Cholesky-equivalents from the CPU times (robust when other processes share the cores)."""
+    job = load_job(JOB, overrides=[f"system.n_particles={n}"])
+    task = enumerate_tasks(job)[0]
+    real = Realisation(job, task)
+    real.advance(3)  # warm-up: numba caches, lubrication tables
+    step, chol = [], []
+    for _ in range(blocks):
+        chol.append(cholesky_ms(spd))
+        w0, c0 = time.perf_counter(), time.process_time()
+        real.advance(steps_per_block)
+        step.append((1e3 * (time.perf_counter() - w0) / steps_per_block,
+                     1e3 * (time.process_time() - c0) / steps_per_block))
+    (step_wall, step_cpu), (chol_wall, chol_cpu) = np.median(step, axis=0), np.median(chol, axis=0)
+    return {"ms_per_step": float(step_wall), "cholesky_ms": float(chol_wall),
+            "cpu_ms_per_step": float(step_cpu), "cpu_cholesky_ms": float(chol_cpu),
+            "cholesky_equivalents": float(step_cpu / chol_cpu),
+            "steps": blocks * steps_per_block, "dt": task.dt, "phi": task.phi,
+            "ewald_tolerance": job.hydrodynamics.ewald_tolerance, "backend": real.backend}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[27, 64, 125])
+    ap.add_argument("--blocks", type=int, default=7)
+    ap.add_argument("--seconds", type=float, default=3.0, help="rough stepping time per block and size")
+    ap.add_argument("--out", default="bench/step.json")
+    args = ap.parse_args()
+    a = np.random.default_rng(0).standard_normal((297, 297))
+    spd = a @ a.T + 297 * np.eye(297)
+    guess_ms = {27: 8.0, 64: 60.0, 125: 300.0}
+    results = {"command": "make bench (python bench/bench_step.py)", "job": JOB,
+               "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+               "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+               "date": time.strftime("%Y-%m-%d", time.gmtime()), "single": {},
+               "batched": None}  # batched realisations: not implemented yet
+    print(f"{'N':>5} {'ms/step':>9} {'Cholesky':>9} {'cpu ms':>9} {'cpu Chol':>9} {'Ch-equiv':>9}")
+    for n in args.sizes:
+        per_block = max(2, int(1e3 * args.seconds / args.blocks / guess_ms.get(n, 0.02 * n ** 2)))
+        r = time_steps(n, args.blocks, per_block, spd)
+        results["single"][str(n)] = r
+        print(f"{n:5d} {r['ms_per_step']:9.2f} {r['cholesky_ms']:9.3f} {r['cpu_ms_per_step']:9.2f} "
+              f"{r['cpu_cholesky_ms']:9.3f} {r['cholesky_equivalents']:9.1f}", flush=True)
+    results["load_average"] = os.getloadavg()  # other work on the machine while it ran
+    with open(args.out, "w") as fh:
+        json.dump(results, fh, indent=2)
+    print(f"written {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,270 @@
+"""Hydrodynamic models: what the integrator asks of the hydrodynamics at one configuration.
+
+A model (`hydrodynamic_model(job, ...)`) is evaluated at a configuration,
+``model.at(positions, strain)``, which assembles and factorises whatever the model needs and
+returns an *evaluation* with
+
+* ``velocities(forces, einf)``: rigid-body velocities relative to the imposed flow, (N, 6)
+  U', Omega' = R_FU^-1 (F + R_FE e_inf) for forces/torques (N, 6) and E_inf (N, 5);
+* ``stresslets(velocities, einf)``: S = R_SE e_inf - R_SU U' (N, 5);
+* ``brownian(rng, kT, dt)``: a `BrownianTerms` of the step, the Brownian velocities
+  R_FU^-1 F_B + kT div R_FU^-1 (drift included; F_B of covariance 2 kT R_FU / dt) and an
+  estimate of the Brownian stresslets -kT div(R_SU R_FU^-1) (Schaink et al. 2000, eq. 16);
+* ``pairs``: the pairs within the interparticle-force cut-off (`lubrication.PairList`,
+  true gaps), ``relative_mobility(pairs, mask)``: each pair's mobility of relative motion
+  along its line of centres (for the collision forces of `collisions`), ``stats()``: solver
+  statistics of the evaluation.
+
+Models (``hydrodynamics.model``):
+
+* ``stokesian``: full Stokesian dynamics, R = M_inf^-1 + lubrication (Durlofsky, Brady &
+  Bossis 1987; Brady et al. 1988), on any `hydro.solvers` backend;
+* ``far-field``: the periodic far-field (Rotne-Prager-level, FTS) mobility alone, R = M_inf^-1,
+  no lubrication: Brownian dynamics with hydrodynamic interactions;
+* ``free-draining``: no hydrodynamic interactions, R_FU = diag(6 pi a, 8 pi a^3),
+  R_SE e = (20/3) pi a^3 E, R_SU = 0: zero drift, no factorisation.
+
+Drift schemes (``brownian.scheme``) of the resistance models, for the Ito equation
+dx = [... + kT div R_FU^-1] dt + sqrt(2 kT dt) R_FU^-1/2 dW:
+
+* ``rfd`` (default on the direct backends): Euler-Maruyama for the noise, R_FU^-1(x) F_B, and
+  a random finite difference for the divergences (Delong, Balboa Usabiaga & Donev, J. Chem.
+  Phys. 140, 134110 (2014); Sprinkle, Balboa Usabiaga, Patankar & Donev, J. Chem. Phys. 147,
+  244103 (2017)) taken along the noise's own directions: with F = C z (covariance R_FU), the
+  displacement direction m = R_FU^-1 F (covariance R_FU^-1, so <m_k F_j> = delta_kj) and a
+  small length epsilon,
+
+      kT div R_FU^-1        ~ (kT/epsilon) [R_FU^-1(x + epsilon m) - R_FU^-1(x)] F,
+      -kT div(R_SU R_FU^-1) ~ -(kT/epsilon) [(R_SU R_FU^-1)(x + epsilon m) - (R_SU R_FU^-1)(x)] F,
+
+  whose means over z are the divergences to O(epsilon^2) (the odd moments of z vanish) at
+  every gap. This is Fixman's midpoint below with the half step (dt/2) sqrt(2 kT/dt)
+  replaced by epsilon = 6 pi RFD_STEP hydrodynamics.min_gap (a displacement of ~RFD_STEP
+  min_gap per sphere): the same directions, so the same variance as the midpoint, which
+  weights the stiff lubrication directions by the noise itself (an isotropic random
+  difference has a ~100x larger variance of the Brownian stress at phi = 0.1), but a
+  displacement far below the gaps the overlap correction leaves, so a pair just separated
+  sees the true gradient of its lubrication where a finite half step would cross the floor
+  and see none. The difference of two direct solves loses log10(cond R_FU) + log10(1/
+  RFD_STEP min_gap) of the 16 digits: ~6 remain relative to the drift at min_gap = 1e-4.
+* ``midpoint``: Fixman's midpoint scheme as used for SD by Banchio & Brady, J. Chem. Phys.
+  118, 10323 (2003): x* = x + (dt/2) R_FU^-1(x) F_B, then R_FU^-1(x*) F_B, whose mean is
+  kT div R_FU^-1 to O(dt); the Brownian stresslet -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B.
+  Its displacement is O(sqrt(dt)), so it suits iterative solvers (petsc-krylov, whose
+  tolerance would swamp a difference over epsilon), but near contact the half step crosses
+  the minimum-gap floor and its overlap correction: its drift is too small at gaps below
+  ~4 dt (59% of the exact drift at a gap of 2e-4 with dt = 5e-4).
+
+Both schemes evaluate the displaced configuration with the pair sets of x and at the same
+strain, so the difference is smooth.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..hydro.basis import to_five
+from ..hydro.geometry import Lattice
+from ..hydro.lubrication import close_pairs
+from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, noise_shape, resolve_backend, solver_stats,
+                             take_preconditioner)
+
+#: hydrodynamics.model choices
+MODELS = ("stokesian", "far-field", "free-draining")
+#: brownian.scheme choices (resistance models)
+SCHEMES = ("rfd", "midpoint")
+#: the random finite difference's length in units of hydrodynamics.min_gap (mean radii)
+RFD_STEP = 1e-2
+
+
+@dataclass
+class BrownianTerms:
+    """One step's Brownian velocities (N, 6), drift included, and Brownian stresslets (N, 5),
+    and how many overlapping pairs its displaced evaluation had to separate (midpoint)."""
+
+    velocities: np.ndarray
+    stresslets: np.ndarray
+    midpoint_overlaps: int = 0
+
+
+def default_scheme(backend):
+    """The drift scheme a backend gets when brownian.scheme is absent: rfd on the direct
+    backends, midpoint on the iterative one (module docstring)."""
+    return "midpoint" if backend in MATRIX_FREE else "rfd"
+
+
+class ResistanceEvaluation:
+    """A resistance model (stokesian, far-field) at one configuration: its resistance
+    (`hydro.resistance`), the backend's solver of it, and the force pair list."""
+
+    def __init__(self, model, resistance, solver, pairs, strain):
+        self.model, self.resistance, self.solver, self.pairs = model, resistance, solver, pairs
+        self.strain = strain
+        self.positions = resistance.positions
+        self.n_particles = resistance.n_particles
+        self._solvers = [solver]
+
+    def velocities(self, forces, einf):
+        return self.solver.velocities(forces, einf)
+
+    def stresslets(self, velocities, einf):
+        return self.solver.stresslets(velocities, einf)
+
+    def relative_mobility(self, i, j, e):
+        """e.(M_jj + M_ii - M_ij - M_ji).e of the pairs (i, j) with unit lines of centres
+        e (M = R_FU^-1): one solve per pair, unit and opposite forces on j and i."""
+        n = self.n_particles
+        out = np.empty(len(i))
+        zero = np.zeros((n, 5))
+        for k in range(len(i)):
+            f = np.zeros((n, 6))
+            f[j[k], :3] += e[k]
+            f[i[k], :3] -= e[k]
+            u = self.solver.velocities(f, zero)
+            out[k] = e[k] @ (u[j[k], :3] - u[i[k], :3])
+        return out
+
+    def brownian(self, rng, kT, dt):
+        return self.brownian_terms(rng.standard_normal(noise_shape(self.solver)), kT, dt)
+
+    def brownian_terms(self, z, kT, dt):
+        """The step's `BrownianTerms` for the standard normal noise z (`solvers.noise_shape`):
+        F_B = sqrt(2 kT/dt) C z (C C^T = R_FU, or any F_B of that covariance), the
+        displacement direction m = R_FU^-1 C z (module docstring)."""
+        unit_force = self.solver.brownian_forces(z)
+        zero = np.zeros((self.n_particles, 5))
+        m = self.solver.velocities(unit_force, zero)
+        noise = math.sqrt(2 * kT / dt) * m
+        if self.model.scheme == "midpoint":
+            step = 0.5 * dt * math.sqrt(2 * kT / dt)
+            mid, found = self.model.displaced(self, self.positions + step * m[:, :3], separate=True)
+            self._solvers.append(mid)
+            take_preconditioner(mid, self.solver)  # petsc-krylov: refactorise the start's factor
+            u_mid = mid.velocities(math.sqrt(2 * kT / dt) * unit_force, zero)
+            return BrownianTerms(u_mid, mid.stresslets(u_mid, zero) - self.solver.stresslets(noise, zero), found)
+        step = self.model.rfd_step * 6 * math.pi  # m is ~ 1/(6 pi a) per unit of z
+        moved, _ = self.model.displaced(self, self.positions + step * m[:, :3], separate=False)
+        self._solvers.append(moved)
+        m_moved = moved.velocities(unit_force, zero)
+        drift = (kT / step) * (m_moved - m)
+        stress = (kT / step) * (moved.stresslets(m_moved, zero) - self.solver.stresslets(m, zero))
+        return BrownianTerms(noise + drift, stress)
+
+    def stats(self):
+        """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""
+        stats = [solver_stats(s) for s in self._solvers]
+        return {"solver_iterations": sum(s["iterations"] for s in stats),
+                "solver_residual": max(s["residual"] for s in stats),
+                "lanczos_iterations": sum(s["lanczos"] for s in stats)}
+
+
+class ResistanceModel:
+    """Stokesian dynamics (lubrication on) or its far field alone (lubrication off) on a
+    `hydro.solvers` backend; `at` evaluates it at a configuration."""
+
+    def __init__(self, radii, box, *, lubrication, ewald_tol, cutoff, min_gap, backend="dense",
+                 far_field=None, comm=None, tolerance=None, lanczos_tolerance=None, scheme=None,
+                 separate=None, on_error=None):
+        self.radii, self.box, self.comm = radii, box, comm
+        self.backend = resolve_backend(backend, len(radii), comm)
+        self.scheme = default_scheme(self.backend) if scheme is None else scheme
+        self.lubrication, self.cutoff, self.min_gap = lubrication, cutoff, min_gap
+        self.rfd_step = RFD_STEP * min_gap
+        self._hydro = dict(lubrication=lubrication, ewald_tol=ewald_tol, cutoff=cutoff, min_gap=min_gap)
+        if self.backend in MATRIX_FREE:
+            self._hydro["far_field"] = far_field
+        self._solver_args = {} if tolerance is None else dict(tolerance=tolerance,
+                                                               lanczos_tolerance=lanczos_tolerance)
+        self._separate = separate  # positions, strain -> (positions, overlaps found)
+        self._on_error = on_error  # LinAlgError -> exception to raise
+
+    def _assemble(self, positions, strain, plan=None):
+        try:
+            return assemble(self.backend, positions, self.radii, self.box, strain, plan=plan,
+                            comm=self.comm, **self._hydro)
+        except np.linalg.LinAlgError as err:
+            if self._on_error is None:
+                raise
+            raise self._on_error(err) from err
+
+    def _solver(self, resistance):
+        return make_solver(self.backend, resistance, self.comm, **self._solver_args)
+
+    def at(self, positions, strain):
+        res = self._assemble(positions, strain)
+        if self.lubrication:
+            pairs = res.pairs  # the lubrication pairs are the force pairs (same cut-off)
+        else:
+            pairs = close_pairs(res.positions, self.radii, Lattice(self.box, strain), self.cutoff, self.min_gap)
+        return ResistanceEvaluation(self, res, self._solver(res), pairs, strain)
+
+    def displaced(self, evaluation, positions, separate):
+        """The solver at displaced positions with the pair sets of `evaluation` (and its
+        strain); separate: remove overlaps first (counted). Returns (solver, overlaps)."""
+        found = 0
+        if separate and self._separate is not None:
+            positions, found = self._separate(positions, evaluation.strain)
+        res = self._assemble(positions, evaluation.strain, plan=evaluation.resistance.plan)
+        return self._solver(res), found
+
+
+class FreeDrainingEvaluation:
+    """No hydrodynamic interactions at one configuration (module docstring)."""
+
+    def __init__(self, radii, positions, pairs):
+        self.positions, self.pairs = positions, pairs
+        self.n_particles = len(radii)
+        self._mobility = np.hstack([np.repeat(1 / (6 * np.pi * radii)[:, None], 3, axis=1),
+                                    np.repeat(1 / (8 * np.pi * radii ** 3)[:, None], 3, axis=1)])
+        self._stresslet = (20 / 3) * np.pi * radii ** 3  # R_SE per sphere
+
+    def velocities(self, forces, einf):
+        return self._mobility * forces
+
+    def stresslets(self, velocities, einf):
+        return self._stresslet[:, None] * np.asarray(einf)
+
+    def relative_mobility(self, i, j, e):
+        """1/(6 pi a_i) + 1/(6 pi a_j) of the pairs (i, j)."""
+        inv = self._mobility[:, 0]
+        return inv[i] + inv[j]
+
+    def brownian(self, rng, kT, dt):
+        z = rng.standard_normal((self.n_particles, 6))
+        return BrownianTerms(math.sqrt(2 * kT / dt) * np.sqrt(self._mobility) * z,
+                             np.zeros((self.n_particles, 5)))
+
+    def stats(self):
+        return {"solver_iterations": 0, "solver_residual": 0.0, "lanczos_iterations": 0}
+
+
+class FreeDrainingModel:
+    """Isolated-sphere mobilities (Stokes' laws) for every sphere; the force pairs within
+    the cut-off are searched here."""
+
+    scheme = None
+
+    def __init__(self, radii, box, *, cutoff, min_gap):
+        self.radii, self.box, self.cutoff, self.min_gap = radii, box, cutoff, min_gap
+
+    def at(self, positions, strain):
+        lattice = Lattice(self.box, strain)
+        pos = lattice.wrap(positions)
+        return FreeDrainingEvaluation(self.radii, pos, close_pairs(pos, self.radii, lattice, self.cutoff,
+                                                                   self.min_gap))
+
+
+def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None):
+    """The model of job.hydrodynamics.model for spheres of these radii in this box
+    (comm: the ranks that solve together; separate(positions, strain) -> (positions,
+    overlaps): the overlap correction the midpoint scheme applies at its half step;
+    on_error(LinAlgError) -> the exception raised when R_FU loses positive definiteness)."""
+    hyd = job.hydrodynamics
+    if hyd.model == "free-draining":
+        return FreeDrainingModel(radii, box, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)
+    return ResistanceModel(radii, box, lubrication=hyd.model == "stokesian" and hyd.lubrication,
+                           ewald_tol=hyd.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
+                           backend=job.solver.backend, far_field=job.solver.far_field, comm=comm,
+                           tolerance=job.solver.tolerance, lanczos_tolerance=job.solver.lanczos_tolerance,
+                           scheme=job.brownian.scheme, separate=separate, on_error=on_error)
