@@ -128,17 +128,16 @@ def resource_text(job, ranks: int, output) -> str:
     from .ensemble.store import run_file_bytes
     from .hydro.solvers import backend_for
 
-    gib, rpt = resources.gib, job.ensemble.ranks_per_task
-    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
+    gib = resources.gib
+    backend = backend_for(job.solver.backend, job.system.n_particles,
+                          job.ensemble.ranks_per_task)
     size, memory = run_file_bytes(job), resources.memory_per_rank(job, backend)
     available = resources.available_memory()
-    busy = min(ranks, len(enumerate_tasks(job)) * rpt)
     where = Path(output).resolve().parent
     lines = [f"  run file: about {gib(size)}; memory: about {gib(memory)} per rank"
              + ("" if available is None else f" ({gib(available)} available here)")]
-    problems = resources.memory_problems(job, backend, busy, available)
-    if where.is_dir():
-        problems += resources.disk_problems(job, size, where)
+    problems = resources.problems(job, backend, ranks, where if where.is_dir() else None,
+                                  size)
     lines += [f"WARNING: {p}\n  (sdmpi run would refuse this job here)" for p in problems]
     return "\n".join(lines)
 

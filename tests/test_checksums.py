@@ -95,8 +95,11 @@ def test_random_bit_flips_are_all_detected(reference, tmp_path):
     assert (injected, detected) == (TRIALS, TRIALS)
 
 
-@pytest.mark.parametrize("kind", ["samples", "state"])
-def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, kind):
+@pytest.mark.parametrize("kind, ranks", [("samples", None),
+                                         pytest.param("state", 2, marks=pytest.mark.mpi)])
+def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, kind, ranks):
+    if ranks and ens.MPIRUN is None:
+        pytest.skip("mpirun not found")
     regions = [r for r in committed_regions(reference) if r[0] == 5 and r[1] == kind
                and r[2] in ("stress_brownian", "positions")]
     _, _, name, offset, size, _ = regions[0]
@@ -111,7 +114,7 @@ def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, 
         assert "task 5: samples/stress_brownian of steps 20..29 fail" in reduced.stderr
     else:  # the checksums of the last interval were in the damaged checkpoint
         assert "task 5: samples of steps 40..47 cannot be verified" in reduced.stderr
-    res = ens.sdmpi("run", job_file, "-o", out)
+    res = ens.sdmpi("run", job_file, "-o", out, ranks=ranks)
     assert res.returncode == 0, res.stderr
     assert "WARNING: damaged: task 5" in res.stdout
     restart = 0 if kind == "samples" else 40  # samples: before the damage; state: older slot
@@ -150,3 +153,22 @@ def test_files_without_checksums_are_read_unverified(reference, tmp_path):
     assert not summary.checksummed and summary.damage == ()
     info = ens.sdmpi("info", out)
     assert info.returncode == 0 and "checksums: none" in info.stdout
+
+
+def test_damaged_unused_slot_of_a_complete_run_is_discarded(reference, job_file, tmp_path):
+    """The older checkpoint slot of a complete task, damaged: nothing to recompute, the
+    run marks the slot as never written and the file verifies again, data untouched."""
+    out = tmp_path / "run.h5"
+    shutil.copy(reference, out)
+    with h5py.File(out, "r") as f:
+        ckpt = f["checkpoints/000003"]
+        older = int(np.argmin(ckpt["slot_step"][()]))
+        offset = ckpt[f"slot{older}/positions"].id.get_offset()
+    flip(out, offset + 7, 6)
+    assert [str(d) for d in inspect(out).damage] == [
+        f"task 3: checkpoint slot {older} (state at step 40) fails its checksum"]
+    res = ens.sdmpi("run", job_file, "-o", out)
+    assert res.returncode == 0 and "already complete" in res.stdout, res.stderr
+    assert "WARNING: damaged: task 3: checkpoint slot" in res.stdout
+    assert inspect(out).damage == ()
+    assert ens.task_data(out) == ens.task_data(reference)

@@ -23,7 +23,8 @@ import math
 import os
 import shutil
 
-from .loader import Problem
+from .problems import Problem
+from .tasks import enumerate_tasks
 
 DENSE_MATRICES = 3          # 11N x 11N matrices alive at once (peak of a dense solve)
 BASE_BYTES = 300 * 2 ** 20  # interpreter, libraries, compiled kernels
@@ -133,3 +134,17 @@ def disk_problems(job, run_file_bytes: float, directory) -> list[Problem]:
                     job.integration.periods,
                     allowed="fewer periods, steps per period, realisations or frequencies, "
                             "output.per_particle = false, or a file system with more room")]
+
+
+def problems(job, backend: str, ranks: int, directory=None,
+             run_file_bytes: float = 0.0) -> list[Problem]:
+    """Every resource problem of ``job`` run by ``ranks`` ranks on this machine with the
+    resolved ``backend``: too dilute to start, out of memory, and, given the
+    ``directory`` of a run file still to be written, out of disk."""
+    found = start_problems(job)
+    if not found:
+        busy = min(ranks, len(enumerate_tasks(job)) * job.ensemble.ranks_per_task)
+        found = memory_problems(job, backend, busy, available_memory())
+    if directory is not None:
+        found += disk_problems(job, run_file_bytes, directory)
+    return found

@@ -69,6 +69,8 @@ class Plan:
     versions: str      # JSON
     created: str       # UTC ISO 8601
     notes: tuple = ()  # damage found by the checksums, and where tasks resume instead
+    rewind: tuple = ()    # (task id, step): /progress to move back before running
+    damaged: tuple = ()   # (task id, slot): checkpoint slots that fail their checksums
     extension: str = ""  # what --extend did (said before the run starts)
 
 
@@ -124,8 +126,10 @@ def _agree(comm, job_path, overrides, out: Path, new: bool, extend: bool):
     if comm.rank == 0:
         try:
             plan = _plan(job_path, overrides, out, new, extend, comm.size)
-            if plan.mode != "complete":
+            if plan.mode != "complete" or plan.damaged:
                 lock = take_lock(out)
+            if plan.rewind or plan.damaged:
+                store.fall_back(out, dict(plan.rewind), list(plan.damaged))
             if plan.mode == "extend":
                 plan = _extended(plan, out)
         except RunLocked as err:
@@ -143,6 +147,9 @@ def _agree(comm, job_path, overrides, out: Path, new: bool, extend: bool):
 
 def _execute(comm, plan: Plan, out: Path, factory, stream) -> bool:
     """Everything after the checks (see the module docstring)."""
+    if comm.rank == 0:
+        for note in plan.notes:
+            print(f"WARNING: {note}", file=stream, flush=True)
     if plan.mode == "complete":
         if comm.rank == 0:
             print(f"{out}: already complete ({len(plan.progress)} tasks); nothing to do",
@@ -210,12 +217,14 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
                         summary.slots, *meta)
         progress = tuple(step for step, _ in summary.resume)
         slots = tuple(slot for _, slot in summary.resume)
-        notes = tuple(f"damaged: {d}" for d in summary.damage) + tuple(
-            f"task {t.task_id}: recomputing from step {step} (committed up to {done}), "
-            f"bit for bit as before the damage"
-            for t, step, done in zip(tasks, progress, summary.progress) if step < done)
         mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
-        return Plan(canonical_text(job), mode, progress, slots, *meta, notes)
+        rewind = tuple((t.task_id, step) for t, step, done in
+                       zip(tasks, progress, summary.progress) if step < done)
+        notes = tuple(f"damaged: {d}" for d in summary.damage) + tuple(
+            f"task {tid}: recomputing from step {step} (committed up to "
+            f"{summary.progress[tid]}), bit for bit as before the damage" for tid, step in rewind)
+        damaged = tuple((d.task_id, d.slot) for d in summary.damage if d.what == "state")
+        return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
 
 
@@ -256,15 +265,13 @@ def _check_resources(job, job_path, out: Path, new: bool, size: int,
     file) the room for it in the output's file system."""
     from ..hydro.solvers import backend_for
 
-    rpt = job.ensemble.ranks_per_task
-    backend = backend_for(job.solver.backend, job.system.n_particles, rpt)
-    busy = min(resources.ranks_on_this_node(size), len(enumerate_tasks(job)) * rpt)
-    problems = resources.start_problems(job) or resources.memory_problems(
-        job, backend, busy, resources.available_memory())
-    if new or extend or not out.exists():
-        replaced = out.stat().st_size if out.exists() and not extend else 0
-        problems += resources.disk_problems(job, store.run_file_bytes(job) - replaced,
-                                            out.parent)
+    backend = backend_for(job.solver.backend, job.system.n_particles,
+                          job.ensemble.ranks_per_task)
+    creating = new or extend or not out.exists()
+    replaced = out.stat().st_size if out.exists() and creating and not extend else 0
+    problems = resources.problems(job, backend, resources.ranks_on_this_node(size),
+                                  out.parent if creating else None,
+                                  store.run_file_bytes(job) - replaced)
     if problems:
         raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
 
@@ -390,8 +397,6 @@ class _Driver:
         steps_todo = sum(t.n_steps - plan.progress[t.task_id] for t in todo)
         if plan.extension:
             self.say(plan.extension)
-        for note in plan.notes:
-            self.say(f"WARNING: {note}")
         if plan.mode == "resume":
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")
@@ -473,7 +478,7 @@ class _Driver:
         if start > 0:
             real.set_state(run_file.read_state(tid, slot))
         if leader:
-            run_file.begin(tid, slot, start)
+            run_file.begin(tid, slot)
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every

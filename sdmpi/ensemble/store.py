@@ -243,19 +243,14 @@ class RunFile:
         group = self.file[f"checkpoints/{task_key(task_id)}/slot{slot}"]
         return {name: ds[()] for name, ds in group.items()}
 
-    def begin(self, task_id: int, slot: int, step: int) -> None:
-        """Prepare a task's commits from checkpoint ``slot`` at ``step`` (-1 and 0: from
-        scratch): take the slot's sample checksums as the running ones, and move
-        ``/progress`` back to ``step`` if the file is ahead of it (a resume that falls back
-        past a damaged checkpoint or damaged samples)."""
+    def begin(self, task_id: int, slot: int) -> None:
+        """Prepare a task's commits from checkpoint ``slot`` (-1: from scratch): take the
+        slot's sample checksums as the running ones."""
         ckpt = self.file[f"checkpoints/{task_key(task_id)}"]
         if "sample_crc" in ckpt:  # files written before checksums existed have none
             table = ckpt["sample_crc"]
             rows = table[slot] if slot >= 0 else np.zeros(table.shape[1:], "u4")
             self._checksums[task_id] = (rows, int(table.attrs["block"]))
-        if self._progress[task_id] != step:
-            self._progress[task_id] = step
-            os.fsync(self._fd)
 
     def samples(self, task_id: int) -> dict:
         """name -> dataset of a task's sample stream."""
@@ -326,6 +321,30 @@ def _extend_checksums(column, block: int, start: int, rows, dtype) -> None:
         lo = hi
 
 
+def fall_back(path, progress: dict, damaged: list) -> None:
+    """Undo what failed its checksums (one process, under the run's lock, before the
+    run opens the file): move ``/progress`` back (task id -> step, the resume point
+    :func:`inspect` found), sync, then mark every damaged ``(task id, slot)`` as never
+    written (``slot_step`` -1), sync. Each stage leaves a consistent file."""
+    with h5py.File(path, "r+") as f:
+        for tid, step in progress.items():
+            f["progress"][tid] = step
+        f.flush()
+        _fsync(path)
+        for tid, slot in damaged:
+            f[f"checkpoints/{task_key(tid)}/slot_step"][slot] = -1
+        f.flush()
+    _fsync(path)
+
+
+def _fsync(path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 # --------------------------------------------------------------------------- inspect
 
 
@@ -338,6 +357,7 @@ class Damage:
     task_id: int
     what: str
     where: str
+    slot: int = -1  # the damaged checkpoint slot ("state")
 
     def __str__(self) -> str:
         return f"task {self.task_id}: {self.where}"
@@ -474,7 +494,7 @@ def _verify_task(f, task, done: int):
             intact.append((step, slot))
         else:
             damage.append(Damage(tid, "state", f"checkpoint slot {slot} (state at step "
-                                               f"{step}) fails its checksum"))
+                                               f"{step}) fails its checksum", slot))
     verified = intact[0][0] if intact else 0
     first_bad = done
     if verified < done:
