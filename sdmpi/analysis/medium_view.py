@@ -10,7 +10,7 @@ The filter is linear and acts on every particle alike, so it commutes with the s
 particles: applied to the stored bulk hydrodynamic stress (1/V) sum_i S_0,i of a run in
 the viscous medium (``samples/stress_hydrodynamic``), it gives the bulk stress that a run
 in the Maxwell medium stores (``stress_hydrodynamic_maxwell``), equal to rounding. The
-Brownian and interparticle stresses are the viscous medium's in both (the seed's
+Brownian and interparticle stresses are the viscous medium's in both (Schaink et al.'s
 protocol). So one Newtonian run holds the results of every Maxwell medium whose shortest
 relaxation time exceeds its time step, and a Maxwell run's viscous stress gives its
 Newtonian view.

@@ -1,10 +1,10 @@
 """Analytic models for overlays and checks. Viscosities are relative to the medium's.
 
-Relative viscosity laws: Einstein (dilute), Batchelor-Green (O(phi^2)), seed 000's
+Relative viscosity laws: Einstein (dilute), Batchelor-Green (O(phi^2)), Schaink et al.'s (2000)
 polynomial fit (eq. 38), and the empirical concentrated-suspension laws Krieger-Dougherty,
 Maron-Pierce and Eilers (all with a maximum packing fraction phi_max). Einstein is the
 dilute limit of all but Maron-Pierce, whose slope is 2/phi_max (Einstein only for
-phi_max = 0.8). Maxwell-medium moduli and viscosities (seed 000 eqs. 36, 41-42).
+phi_max = 0.8). Maxwell-medium moduli and viscosities (Schaink et al. 2000, eqs. 36, 41-42).
 """
 
 import numpy as np
@@ -16,13 +16,13 @@ def einstein(phi):
 
 
 def batchelor_green(phi):
-    """eta/eta_m = 1 + 2.5 phi + 5.2 phi^2 (Batchelor & Green 1972; seed 000 eq. 37):
+    """eta/eta_m = 1 + 2.5 phi + 5.2 phi^2 (Batchelor & Green 1972; Schaink et al. 2000, eq. 37):
     hydrodynamic O(phi^2) result without Brownian motion; valid for phi <~ 0.1-0.2."""
     return 1.0 + 2.5 * phi + 5.2 * phi ** 2
 
 
 def schaink_eta_h(phi):
-    """eta_H/eta_m = 2.5 phi + 5.2 phi^2 + 3.01 phi^3 + 47.71 phi^4 (seed 000 eq. 38):
+    """eta_H/eta_m = 2.5 phi + 5.2 phi^2 + 3.01 phi^3 + 47.71 phi^4 (Schaink et al. 2000, eq. 38):
     polynomial fit to SD hydrodynamic viscosities (N = 27, Brownian, omega = 2 pi),
     stated within 1% for 0 <= phi <= 0.45. The high-frequency viscosity is 1 + eta_H."""
     return 2.5 * phi + 5.2 * phi ** 2 + 3.01 * phi ** 3 + 47.71 * phi ** 4
@@ -37,14 +37,14 @@ def _modes(eta, lam):
 
 
 def maxwell_viscosity(omega, eta, lam):
-    """Complex viscosity eta* = eta' - i eta'' of a multi-mode Maxwell medium (seed 000
+    """Complex viscosity eta* = eta' - i eta'' of a multi-mode Maxwell medium (Schaink et al. 2000,
     eq. 36, summed over modes; each mode obeys lam_k dS/dt + S = eta_k gamma_dot, eq. 2):
         eta'  = sum_k eta_k / (1 + (lam_k w)^2),
         eta'' = sum_k eta_k lam_k w / (1 + (lam_k w)^2).
     omega: angular frequency (any shape, 1/t_D); eta, lam: per-mode viscosities
     (relative to eta_m; sum_k eta_k is the zero-shear viscosity) and relaxation times
     (t_D). Exact linear viscoelasticity for all w; the medium stress is linear only for
-    small Weissenberg numbers (seed eq. 20). Returns (eta', eta'') shaped like omega."""
+    small Weissenberg numbers (Schaink et al. eq. 20). Returns (eta', eta'') shaped like omega."""
     eta, lam = _modes(eta, lam)
     w = np.asarray(omega, float)[..., None]
     d = 1.0 + (lam * w) ** 2
@@ -52,7 +52,7 @@ def maxwell_viscosity(omega, eta, lam):
 
 
 def maxwell_moduli(omega, eta, lam):
-    """Storage and loss moduli of a multi-mode Maxwell medium (seed 000 eq. 36 with
+    """Storage and loss moduli of a multi-mode Maxwell medium (Schaink et al. 2000, eq. 36 with
     eq. 19, G' = w eta'', G'' = w eta'; standard Maxwell model, e.g. Ferry 1980):
         G'  = sum_k eta_k lam_k w^2 / (1 + (lam_k w)^2),
         G'' = sum_k eta_k w / (1 + (lam_k w)^2).
@@ -65,14 +65,14 @@ def maxwell_moduli(omega, eta, lam):
 
 def maxwell_eta_h(omega, eta_h0, eta, lam):
     """Hydrodynamic contribution to eta* of spheres in a multi-mode Maxwell medium
-    (seed 000 eqs. 41-42, correspondence principle):
+    (Schaink et al. 2000, eqs. 41-42, correspondence principle):
         eta*_H(w) = (eta_H(0)/eta_0m) eta*_m(w),   eta_0m = sum_k eta_k,
     i.e. eta'_H = eta_h0 sum_k eta_k/(1 + (lam_k w)^2) and
     eta''_H = eta_h0 sum_k eta_k lam_k w/(1 + (lam_k w)^2).
     eta_h0 = eta_H(0)/eta_0m: the hydrodynamic viscosity increment of the same spheres
     in a Newtonian medium (e.g. schaink_eta_h(phi), or an SD result), assumed
     independent of w (seed Fig. 7). Validity: particle dynamics unaffected by the
-    medium's elasticity, t_B << t <= lambda, low Re and Wi (seed eqs. 20, 32); the
+    medium's elasticity, t_B << t <= lambda, low Re and Wi (Schaink et al. eqs. 20, 32); the
     Brownian contribution is not included. Returns (eta'_H, eta''_H), units of eta."""
     eta1, eta2 = maxwell_viscosity(omega, eta, lam)
     f = np.asarray(eta_h0, float)
@@ -99,7 +99,7 @@ def _check_below_max(phi, phi_max):
 
 def maron_pierce(phi, phi_max=0.64):
     """eta/eta_m = (1 - phi/phi_max)^(-2) (Maron & Pierce, J. Colloid Sci. 11, 80 (1956);
-    the form used by seed 003 and, with phi_max fitted, for non-Brownian suspensions by
+    the form used by Finke et al. 2020 and, with phi_max fitted, for non-Brownian suspensions by
     e.g. Zarraga, Hill & Leighton, J. Rheol. 44, 185 (2000), Mari et al., J. Rheol. 58
     (2014)). Krieger-Dougherty with the exponent [eta] phi_max fixed at 2. Empirical,
     0 <= phi < phi_max. Dilute limit 1 + (2/phi_max) phi: Einstein's 2.5 phi only for

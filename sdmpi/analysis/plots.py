@@ -1,11 +1,11 @@
 """Figures of a reduced oscillatory ensemble (matplotlib, Agg, PNG).
 
 * :func:`plot_moduli`: G'(w) and G''(w) per contribution, log-log, one standard error
-  bars; the medium (exact, seed eq. 36) as a curve. Log axes cannot show values <= 0
+  bars; the medium (exact, Schaink et al. eq. 36) as a curve. Log axes cannot show values <= 0
   (e.g. G' of a Newtonian medium, or a noisy small contribution): those points are
   left out and the legend says how many.
-* :func:`plot_viscosities`: eta'(w) = G''/w and eta''(w) = G'/w (seed eq. 19) relative to
-  eta_m, log w, linear eta; the medium curve and the seed's prediction of the
+* :func:`plot_viscosities`: eta'(w) = G''/w and eta''(w) = G'/w (Schaink et al. eq. 19) relative to
+  eta_m, log w, linear eta; the medium curve and Schaink et al.'s prediction of the
   hydrodynamic part: eq. 38 eta_H(phi) (w-independent) in a Newtonian medium, eqs. 41-42
   (eta*_H(w) = eta_H(phi) eta*_m(w)/eta_0m, with eq. 38's eta_H) in a Maxwell medium.
 * :func:`plot_lissajous`: stress-strain loops of one task, phase-averaged over its
@@ -14,8 +14,8 @@
 Steady shear:
 
 * :func:`plot_running`: running averages (1/t) int_0^t of eta, N1, N2 and Pi per
-  contribution from t = 0 (seed 001 Figs. 9-10), the mean over realisations as thick
-  lines and each realisation's total as thin lines; the discarded start-up shaded and
+  contribution from t = 0 (Dratler & Schowalter 1996, Figs. 9-10), the mean over realisations
+  as thick lines and each realisation's total as thin lines; the discarded start-up shaded and
   the reported mean +- its 95% confidence interval (from the samples after it) as a band.
 
 Units: w in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m; steady shear: t
@@ -164,7 +164,7 @@ def _save(fig, red, phi, path) -> Path:
 
 
 def hydrodynamic_prediction(job, phi, omega):
-    """The seed's hydrodynamic (eta'_H, eta''_H) relative to eta_m: eq. 38
+    """Schaink et al.'s hydrodynamic (eta'_H, eta''_H) relative to eta_m: eq. 38
     (w-independent, eta''_H = 0) for a Newtonian medium, eqs. 41-42 with eq. 38's
     eta_H(phi) for a Maxwell medium; eq. 38 is a fit for 0 <= phi <= 0.45."""
     omega = np.asarray(omega, float)
@@ -178,7 +178,7 @@ def hydrodynamic_prediction(job, phi, omega):
 
 def plot_viscosities(red, path, phi) -> Path:
     """eta', eta'' vs w per contribution at one phi, with the analytic medium curve and
-    the seed's hydrodynamic prediction (eq. 38; eqs. 41-42 for Maxwell media)."""
+    Schaink et al.'s hydrodynamic prediction (eq. 38; eqs. 41-42 for Maxwell media)."""
     sel = red.phi == phi
     w = red.control[sel]
     grid = _omega_grid(w)

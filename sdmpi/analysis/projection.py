@@ -1,4 +1,4 @@
-"""Per-period moduli of one stress signal by Fourier projection (seed 000 eqs. 17-19).
+"""Per-period moduli of one stress signal by Fourier projection (Schaink et al. 2000, eqs. 17-19).
 
 Conventions (DESIGN.md): strain gamma(t) = gamma0 sin(w t); the xy stress of one
 realisation (or one contribution to it) is written as
@@ -30,7 +30,7 @@ import numpy as np
 
 
 def project_periods(stress, gamma0, omega, samples_per_period, discard_periods=0, t0=0.0):
-    """Per-period G'(w), G''(w) of sampled stress signals (seed eq. 18, rectangle rule).
+    """Per-period G'(w), G''(w) of sampled stress signals (Schaink et al. eq. 18, rectangle rule).
 
     stress: (..., n_samples) sigma_xy at t_k = t0 + k 2 pi/(w n), k = 0, 1, ...
     (leading axes: realisations, contributions, ... are projected independently).
@@ -61,6 +61,6 @@ def project_periods(stress, gamma0, omega, samples_per_period, discard_periods=0
 
 
 def viscosities(g_prime, g_dprime, omega):
-    """(eta', eta'') = (G''/w, G'/w), relative to eta_m (seed eq. 19,
+    """(eta', eta'') = (G''/w, G'/w), relative to eta_m (Schaink et al. eq. 19,
     eta* = eta' - i eta''). Linear, so it converts standard errors the same way."""
     return np.asarray(g_dprime) / omega, np.asarray(g_prime) / omega

@@ -1,6 +1,6 @@
 """Gather and reduce: run files -> ensemble-averaged moduli with one standard error.
 
-Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
+Pipeline (Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
 
 1. Open each run file read-only and validate it (:func:`sdmpi.ensemble.store.inspect`:
    format, version, stored job, progress, checkpoints). Several files are reduced
@@ -12,7 +12,7 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
 2. Per task, read only the committed samples (``/progress``, the "valid up to") of the
    xy stress of each stored contribution, sampled at t_k = k dt (so t0 = 0):
    hydrodynamic (``stress_hydrodynamic_maxwell`` for Maxwell media: the hydrodynamic
-   stresslets filtered by the medium's modes, seed eqs. 33-35, 42; the unfiltered
+   stresslets filtered by the medium's modes, eqs. 33-35, 42; the unfiltered
    ``stress_hydrodynamic`` is the viscous-medium signal and is not used), Brownian
    (eq. 16) and interparticle.
 3. Oscillatory jobs: project every whole period after the ``discard_periods`` start-up
@@ -35,12 +35,12 @@ Pipeline (issue 5; seed 000 = Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 3
 
 Another medium after the fact (``reduce_runs(paths, medium=...)``, ``sdmpi reduce
 --medium``; :mod:`.medium_view`): the hydrodynamic stress is then the stored viscous one,
-``stress_hydrodynamic``, filtered by that medium's Maxwell modes (seed eqs. 33-35, 42;
+``stress_hydrodynamic``, filtered by that medium's Maxwell modes (Schaink et al. eqs. 33-35, 42;
 unfiltered for a Newtonian medium), and the medium row is that medium's (eq. 36); the
 trajectories, and so the Brownian and interparticle stresses, are the same in both media.
 
-Steady-shear jobs (seed 001 sec. 2) are reduced to ``viscosity.csv`` instead, one row
-per (phi, rate, component), from every sample after ``discard_steps`` of the stored
+Steady-shear jobs (Dratler & Schowalter 1996, sec. 2) are reduced to ``viscosity.csv`` instead,
+one row per (phi, rate, component), from every sample after ``discard_steps`` of the stored
 particle-stress 6-vectors Sigma (xx yy zz xy xz yz) of each contribution. The bulk
 stress is sigma = -p I + 2 eta_m E_inf + Sigma (p the fluid pressure, tension positive),
 and per sample
@@ -53,7 +53,7 @@ and per sample
 
 all made dimensionless with eta_m gamma_dot (multiply by the rate for eta_m/t_D in a
 Brownian job). Components: ``medium`` (eta = its zero-shear viscosity, the sum of the
-Maxwell modes' eta_k or 1; N1 = N2 = Pi = 0: the medium's linear stress, seed 000 eq. 2,
+Maxwell modes' eta_k or 1; N1 = N2 = Pi = 0: the medium's linear stress, Schaink et al. 2000, eq. 2,
 has no normal stresses; exact, errors 0), ``hydrodynamic``, ``brownian``,
 ``interparticle``, ``collision`` and ``total`` (medium + the parts, sample by sample). NB:
 SD's FTS stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
@@ -63,13 +63,13 @@ blocking within a realisation and spread between realisations (:mod:`.errors`, t
 larger of the two) give one standard error ``*_err`` with ``dof`` degrees of freedom
 (those of the larger estimate); ``*_ci95`` is the half-width of the 95% confidence interval, the wider of
 t_{0.975, R-1} x err_between and t_{0.975, dof_within} x err_within (Student t; the sub-average method of Allen & Tildesley 1987 that
-seed 001 uses). For figures, running averages (1/t) int_0^t of every quantity from t = 0
-(start-up included) are kept per realisation (:attr:`Reduction.running`).
+Dratler & Schowalter 1996 uses). For figures, running averages (1/t) int_0^t of every quantity
+from t = 0 (start-up included) are kept per realisation (:attr:`Reduction.running`).
 Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
 
 Monolayers (``system.geometry = "monolayer"``, sdmpi.dynamics.monolayer) store stresses per
-layer volume 2 a L^2, so their eta is seed 001's eq. 6 and the ``phi`` column holds the
-areal fraction; realisations stopped on an overlap (``integration.overlap_stop``)
+layer volume 2 a L^2, so their eta is Dratler & Schowalter's (1996) eq. 6 and the ``phi``
+column holds the areal fraction; realisations stopped on an overlap (``integration.overlap_stop``)
 contribute their samples before the stop, with a note.
 Partial runs are reduced from what is committed; every incomplete task is named in
 :attr:`Reduction.notes`, and a task with no whole period (no sample) after the discarded
@@ -249,7 +249,7 @@ class Reduction:
 
 
 def medium_moduli(job: Job, omega):
-    """(G'_m, G''_m) of the suspending medium alone, in eta_m/t_D (seed eq. 36, 19).
+    """(G'_m, G''_m) of the suspending medium alone, in eta_m/t_D (Schaink et al. eq. 36, 19).
 
     Newtonian: sigma_xy = eta_m gamma_dot, so G' = 0 and G'' = eta_m w = w (eta_m = 1).
     Maxwell, modes (eta_k, lambda_k): :func:`.models.maxwell_moduli`,
@@ -618,7 +618,7 @@ def _stack_blocking(per_real):
 
 
 def _exact_medium(ens: Ensemble, job: Job, groups, kind) -> Ensemble:
-    """Put the medium's exact values (seed eq. 36; steady shear: eta_0m and no normal
+    """Put the medium's exact values (Schaink et al. eq. 36; steady shear: eta_0m and no normal
     stresses) into row 0 with zero errors, instead
     of the average of identical numbers (equal to round-off) or NaN when no data."""
     mean, err = ens.mean.copy(), ens.err.copy()

@@ -108,7 +108,7 @@ def _time_step(job):
     if job.brownian.enabled:
         smallest = min(job.system.class_radii)
         if smallest == 1.0:
-            limits.append((1.0, "the diffusion time t_D = 1 (seed eq. 14a)"))
+            limits.append((1.0, "the diffusion time t_D = 1 (Schaink et al. eq. 14a)"))
         else:  # size classes: t_D is the largest spheres' diffusion time
             limits.append((smallest ** 3, "the diffusion time a^2/D0(a) = a^3 t_D = "
                            f"{smallest ** 3:.4g} of the smallest spheres (radius {smallest:g})"))
@@ -160,13 +160,13 @@ def _monolayer_start(job):
 
 
 def _monolayer(job):
-    """Monolayers are seed 001's case: non-Brownian steady shear of equal spheres in a
-    Newtonian medium, hard (with the minimum-gap rule) or with the short-range repulsion;
-    the layer's z-images stay outside the lubrication cut-off."""
+    """Monolayers are Dratler & Schowalter's (1996) case: non-Brownian steady shear of equal
+    spheres in a Newtonian medium, hard (with the minimum-gap rule) or with the short-range
+    repulsion; the layer's z-images stay outside the lubrication cut-off."""
     system = job.system
     if system.geometry != "monolayer":
         return []
-    why = "monolayers are non-Brownian steady shear of equal spheres (seed 001)"
+    why = "monolayers are non-Brownian steady shear of equal spheres (Dratler & Schowalter 1996)"
     problems = []
     for path, value, ok, allowed in (
             ("shear.protocol", job.shear.protocol, job.shear.protocol == "steady", '"steady"'),

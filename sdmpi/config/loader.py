@@ -422,9 +422,10 @@ def _apply_physical(raw: dict, st: _Pass) -> None:
     if optical:
         for name, example in zip(units.OPTICAL_KEYS, (2.72, 1.85, 1.65, 1.36, 1.43e15)):
             require(name, f"with {', '.join('physical.' + k for k in optical)}: the Hamaker "
-                    "constant of seed 003 eq. 6 needs all of "
+                    "constant of Finke et al. (2020) eq. 6 needs all of "
                     + ", ".join(units.OPTICAL_KEYS), example)
-        require("temperature", "for the Hamaker constant of seed 003 eq. 6 (its kT term)", 298.15)
+        require("temperature", "for the Hamaker constant of Finke et al. (2020) eq. 6 "
+                "(its kT term)", 298.15)
         if phys["hamaker"] is not None:
             problems.append(Problem("physical.hamaker", "conflicts with physical."
                                     f"{optical[0]} (the Hamaker constant from eq. 6)",

@@ -9,12 +9,12 @@ eta_m = the medium's zero-shear viscosity, time t_D = a^2/D0 = 6 pi eta_m a^3 / 
 
 ``[physical]`` gives the scales (``radius`` in nm, ``viscosity`` in Pa s, ``temperature``
 in K) and, instead of the reduced keys, physical values that the loader converts once:
-shear rate (1/s), frequencies (rad/s), Hamaker constant (J, or eq. 6 of seed 003 from
+shear rate (1/s), frequencies (rad/s), Hamaker constant (J, or eq. 6 of Finke et al. 2020 from
 dielectric constants and refractive indices), cap gap and Debye length (nm), surface
 potential (mV). :data:`CONVERTED` says which reduced key each one sets.
 
 The Peclet number is Pe = 6 pi eta_m a^3 gamma_dot / kT = gamma_dot t_D, the shear rate
-of a Brownian job in its reduced units (seed 003 eq. 14 defines Pe with 3 pi, half this).
+of a Brownian job in its reduced units (Finke et al. 2020, eq. 14 defines Pe with 3 pi, half this).
 
 Constants: SI 2019 exact values of k_B and h, CODATA 2018 vacuum permittivity.
 This module uses the standard library only.
@@ -48,7 +48,7 @@ CONVERTED = {
 
 def hamaker_lifshitz(particle_permittivity, medium_permittivity, particle_refractive_index,
                      medium_refractive_index, absorption_frequency, temperature):
-    """Hamaker constant A (J) of two identical bodies 1 across a medium 3 (seed 003
+    """Hamaker constant A (J) of two identical bodies 1 across a medium 3 (Finke et al. 2020
     eq. 6; Israelachvili, Intermolecular and Surface Forces, 3rd ed. (2011), eq. 13.16,
     the Tabor-Winterton approximation of Lifshitz theory):
 

@@ -17,8 +17,8 @@ so :func:`force_law` multiplies every strength by ``FORCE_UNIT`` = 6 pi.
 
 Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
 
-* :class:`Repulsion` (seed 001 eq. 9): F0 tau e^(-tau h)/(1 + e^(-tau h)).
-* :class:`VanDerWaals` (seed 003 eqs. 4-5 = Hamaker, Physica 4, 1058 (1937), for
+* :class:`Repulsion` (Dratler & Schowalter 1996, eq. 9): F0 tau e^(-tau h)/(1 + e^(-tau h)).
+* :class:`VanDerWaals` (Finke et al. 2020, eqs. 4-5 = Hamaker, Physica 4, 1058 (1937), for
   spheres of radii a_i, a_j at centre distance r = a_i + a_j + h):
       U(h) = -(A/6) [2 a_i a_j/(h (2a_i + 2a_j + h)) + 2 a_i a_j/((2a_i + h)(2a_j + h))
                      + ln(h (2a_i + 2a_j + h)/((2a_i + h)(2a_j + h)))],
@@ -27,7 +27,7 @@ Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
   (the seed writes b for h, r for the radii; with r^2 - (a_i + a_j)^2 = h (2a_i + 2a_j + h)
   and r^2 - (a_i - a_j)^2 = (2a_i + h)(2a_j + h) these are Hamaker's eqs.). Limits:
   F -> -A R/(6 h^2) as h -> 0 (Derjaguin, R = a_i a_j/(a_i + a_j)); F -> -(32/3) A a_i^3
-  a_j^3 / r^7 (London) as h -> inf. Capped below ``cap_gap`` (seed 003: 0.4 nm, the
+  a_j^3 / r^7 (London) as h -> inf. Capped below ``cap_gap`` (Finke et al. 2020: 0.4 nm, the
   minimum roughness): F(h < cap) = F(cap), U continued linearly, so overlapping or
   touching spheres feel a finite attraction.
 * :class:`DoubleLayer` (DLVO electrostatic repulsion at constant, low surface potential
@@ -37,8 +37,8 @@ Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
   written in reduced units as U = psi^2 R ln(1 + e^(-h/lambda_D)) with lambda_D = 1/kappa
   in a and the reduced surface potential psi, psi^2 = 4 pi eps eps0 a psi0^2 / E_unit
   (= (e psi0/kT)^2 a / l_B for Brownian jobs, l_B the Bjerrum length). For equal spheres
-  it is the seed-001 repulsion with F0 = psi^2/2, tau = 1/lambda_D; far away it is the
-  linear superposition form 4 pi eps eps0 psi0^2 R e^(-kappa h) (low potential). Valid for
+  it is the Dratler & Schowalter (1996) repulsion with F0 = psi^2/2, tau = 1/lambda_D; far away
+  it is the linear superposition form 4 pi eps eps0 psi0^2 R e^(-kappa h) (low potential). Valid for
   kappa a >> 1, h << a, |e psi0/kT| <~ 2.
 * :class:`CriticalLoadRepulsion` (Mari, Seto, Morris & Denn, J. Rheol. 58 (2014)): the
   repulsion of the frictional-contact model (sdmpi.dynamics.contacts), F0 exp(-h/lambda)
@@ -65,8 +65,8 @@ TAIL = 1e-3
 
 @dataclass(frozen=True)
 class Repulsion:
-    """F(h) = F0 tau exp(-tau h) / (1 + exp(-tau h)) (seed 001, Brady & Bossis 1985):
-    an electrostatic-like repulsion of range 1/tau; F(0) = F0 tau / 2, F -> F0 tau e^{-tau h}
+    """F(h) = F0 tau exp(-tau h) / (1 + exp(-tau h)) (Dratler & Schowalter 1996, Brady & Bossis
+    1985): an electrostatic-like repulsion of range 1/tau; F(0) = F0 tau / 2, F -> F0 tau e^{-tau h}
     far away, and F(h) = -dU/dh with U = F0 ln(1 + exp(-tau h))."""
 
     f0: float

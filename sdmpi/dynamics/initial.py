@@ -257,9 +257,9 @@ def hard_disk_monolayer(n_particles, phi_a, rng, z=0.0, sweeps=200, strain=0.0):
     Start: N of the m x m sites of a square lattice, m = ceil(sqrt N), spaced L/m > 2 (so
     phi_a < pi N / (4 m^2), = pi/4 when N = m^2; a random choice of sites when N < m^2),
     then hard-disk Metropolis MC in the plane (as :func:`hard_sphere_fluid`, 2D moves),
-    which samples the equilibrium hard-disk fluid at phi_a (seed 001: random starts), with
-    Lees-Edwards images at the given strain (rows L/m > 2 apart in y: no overlap at any
-    strain at the start)."""
+    which samples the equilibrium hard-disk fluid at phi_a (Dratler & Schowalter 1996: random
+    starts), with Lees-Edwards images at the given strain (rows L/m > 2 apart in y: no overlap
+    at any strain at the start)."""
     m = math.isqrt(n_particles - 1) + 1
     side = square_side(n_particles, phi_a)
     if side / m <= 2.0:

@@ -13,7 +13,7 @@ linear in time, the update is exact (h = dt / lambda_k):
                    + (S_0(t0 + dt) - S_0(t0)) (1 - (1 - exp(-h)) / h)].
 
 The medium's own stress obeys the same law with 2 eta_m E_inf as source; its moduli are
-analytic (seed eq. 36) and are added by the reducer, not computed here.
+analytic (Schaink et al. eq. 36) and are added by the reducer, not computed here.
 """
 
 import math

@@ -1,4 +1,4 @@
-"""Sheared monolayers of non-Brownian spheres (seed 001: Dratler & Schowalter, J. Fluid
+"""Sheared monolayers of non-Brownian spheres (Dratler & Schowalter, J. Fluid
 Mech. 325, 53 (1996), after Brady & Bossis, J. Fluid Mech. 155, 105 (1985)).
 
 Geometry. N spheres of radius a = 1 with centres in the plane z = Lz/2 of the box
@@ -24,16 +24,16 @@ z -> Lz - z, which maps the grand resistance onto itself, so R couples the mirro
 components (U_x, U_y, Omega_z, and E_xx, E_yy, E_zz, E_xy) only among themselves: the
 out-of-plane velocity U_z and the rotations about in-plane axes, Omega_x and Omega_y, of
 the full FTS solution vanish (measured ~1e-17, tests/test_monolayer.py), and the in-plane
-ones equal the solution of the seed's reduced 3N x 3N problem (its eq. 2: F_x, F_y, T_z).
-sdmpi solves the full problem and sets the mirror-odd velocities to 0 so that rounding
+ones equal the solution of Dratler & Schowalter's reduced 3N x 3N problem (its eq. 2: F_x, F_y,
+T_z). sdmpi solves the full problem and sets the mirror-odd velocities to 0 so that rounding
 never moves a centre out of the plane. Brownian noise would excite them; Brownian
 monolayers are refused by the loader.
 
-Viscosity (seed eq. 6). The seed's relative viscosity is
+Viscosity (Dratler & Schowalter's eq. 6). Dratler & Schowalter's relative viscosity is
 eta = 1 + 3 phi_a <S*_xy> + (interparticle terms), S* = S/(6 pi eta_m a^3 gamma_dot):
 the particle stress of the layer is its stresslet (and virial) per unit area divided by
 the layer thickness 2a, Sigma = (1/(2 a L^2)) sum (S - x F_P). So a monolayer's samples
-use the volume 2 a L^2 (not L^2 Lz), and `sdmpi reduce` turns them into the seed's eta,
+use the volume 2 a L^2 (not L^2 Lz), and `sdmpi reduce` turns them into Dratler & Schowalter's eta,
 eta_h (row ``hydrodynamic``) and eta_p (row ``interparticle``) unchanged, with the column
 ``phi`` holding phi_a. Dilute limit: S_xy = (10/3) pi a^3 eta_m gamma_dot per sphere gives
 eta = 1 + (5/3) phi_a.
@@ -47,9 +47,9 @@ count once) and ``min_gap`` the deepest, at each step. When an overlap exceeds
 warns, keeps its last configuration, and every later sample is NaN (counts -1), which
 `sdmpi reduce` takes as the end of that realisation's data.
 
-Repulsion (seed eq. 9, `forces.Repulsion`): F(h) = F0 tau e^(-tau h)/(1 + e^(-tau h)),
-gamma* = 6 pi eta_m a^2 gamma_dot / (2 F0). In the job's force unit
-6 pi eta_m a^2 gamma_dot, ``interparticle.f0`` = 1/(2 gamma*) (the seed's gamma* = 1 is
+Repulsion (Dratler & Schowalter's eq. 9, `forces.Repulsion`): F(h) = F0 tau e^(-tau h)/(1 +
+e^(-tau h)), gamma* = 6 pi eta_m a^2 gamma_dot / (2 F0). In the job's force unit
+6 pi eta_m a^2 gamma_dot, ``interparticle.f0`` = 1/(2 gamma*) (Dratler & Schowalter's gamma* = 1 is
 f0 = 0.5).
 """
 
@@ -76,7 +76,7 @@ class Monolayer:
         side = square_side(n, phi_a)
         self.n_particles, self.phi_a = n, phi_a
         self.box = np.array([side, side, job.system.layer_spacing * side])
-        #: the layer's volume 2 a L^2 that normalises its stresses (seed eq. 6)
+        #: the layer's volume 2 a L^2 that normalises its stresses (Dratler & Schowalter's eq. 6)
         self.volume = 2.0 * side * side
         self.overlap_stop = job.integration.overlap_stop
         #: the step at which the run stopped on an overlap, -1 while running

@@ -1,6 +1,6 @@
 """One SD realisation: Brownian hard spheres in a sheared periodic box, stepped in time.
 
-Overdamped Stokesian dynamics in configuration space (seed 000 eqs. 13, 32; Ito):
+Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 13, 32; Ito):
 
     dx = [U_inf(x) + R_FU^-1 (F_P + R_FE e_inf) + kT div R_FU^-1] dt
          + sqrt(2 kT dt) R_FU^-1/2 dW,
@@ -11,7 +11,7 @@ Phys. 118, 10323 (2003): a Brownian force F_B = sqrt(2 kT/dt) C z with R_FU = C 
 x* = x + (dt/2) R_FU^-1(x) F_B; then the Brownian velocity R_FU^-1(x*) F_B, whose mean
 over z is kT div R_FU^-1 to O(dt) (the drift) and whose covariance is 2 kT R_FU^-1/dt
 (fluctuation-dissipation). The same pair of evaluations gives the Brownian stresslet
--kT div(R_SU R_FU^-1) (seed eq. 16) as -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B,
+-kT div(R_SU R_FU^-1) (Schaink et al. eq. 16) as -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B,
 whose mean is the divergence to O(dt). The midpoint rather than a random finite
 difference because its displacements stay bounded (a mobility times a force) for
 near-contact pairs, where an RFD divides large resistance differences by a small step.
@@ -30,8 +30,8 @@ them, and a, kT = 6 pi and t_D keep their meaning (those of the largest spheres)
 
 Hard spheres: lubrication keeps overlaps rare; those produced by a finite step are
 counted and removed by the potential-free correction of `forces.remove_overlaps` before
-the step's hydrodynamics (seed 000 sec. III, Bossis & Brady 1984). An optional pair
-repulsion (`forces.Repulsion`, seed 001) adds F_P.
+the step's hydrodynamics (Schaink et al. 2000, sec. III, Bossis & Brady 1984). An optional pair
+repulsion (`forces.Repulsion`, Dratler & Schowalter 1996) adds F_P.
 
 Frictional contacts (`contacts`, interparticle.kind = "frictional", non-Brownian): overlaps
 are contacts, not corrected; their spring forces and torques join F_P (and its stress),
@@ -126,7 +126,8 @@ class Realisation:
         self.protocol = protocol_of(job, task)
         # radii in a (the largest radius): all 1, or job.system.size_classes class by class
         self.radii = np.array(job.system.radii, dtype=float)
-        # seed 001 monolayers (sdmpi.dynamics.monolayer): their own box, start and volume
+        # Dratler & Schowalter 1996 monolayers (sdmpi.dynamics.monolayer): their own box, start
+        # and volume
         self.monolayer = Monolayer(job, task.phi) if job.system.geometry == "monolayer" else None
         if self.monolayer is None:
             pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0),
@@ -228,7 +229,8 @@ class Realisation:
     def _start(self, k, strain, lattice):
         """The step's start configuration: (positions, Collisions, or a stopped sample)."""
         pos = lattice.wrap(self.positions)
-        if self.monolayer is not None:  # seed 001: overlaps counted and kept; a deep one stops the run
+        # Dratler & Schowalter 1996: overlaps counted and kept; a deep one stops the run
+        if self.monolayer is not None:
             n_overlaps, overlap_gap = self.monolayer.overlaps(pos, self.radii, lattice)
             return pos, Collisions.none(n_overlaps, overlap_gap)
         if self.contacts is not None:  # frictional contacts: overlaps are the springs' compression

@@ -83,36 +83,24 @@ GMRES_RESTART = 200
 #: of the whole G, computed by every rank for itself (sequential PETSc: the iteration
 #: counts do not depend on the split; no gather of G), on the pattern of G's full 6x6
 #: blocks (zeros inside the blocks kept: ICC(0) on the pattern of the nonzero entries alone
-#: stalls, 839 iterations at N = 1000). Block ILU on BAIJ (block size 6) gives the factor
-#: of ICC on the AIJ matrix with full blocks (solutions equal to 1.5e-14) 3-6x faster to set
-#: up and 2-3x faster to apply (N = 1000, phi = 0.45, level 1: 0.03 against 0.09-0.17 s,
-#: 0.44-0.53 against 0.93-1.7 ms), storing L and U (~2x ICC's memory, ~20 MB at N = 4096).
-#: Equal while no pivot needs a shift: PETSc's ICC shifts the whole diagonal when a pivot
-#: is not positive (Manteuffel), ILU here shifts a singular pivot block ("inblocks"), so a
-#: near-singular G degrades the preconditioner instead of stopping the solve (GMRES does
-#: not need it definite). Measured with ICC on AIJ (the iterations are the same),
-#: per solve (phi = 0.45, solver tolerance 1e-6, the
-#: isolated-sphere D; ICC(0) / ICC(1) / exact sparse Cholesky (MUMPS)): N = 343 44 / 38
-#: / -, N = 1000 50 / 42 / 42 iterations, set-up 0.015 / 0.38 / 0.3 s, 0.55 / 1.5 / 7 ms
-#: per application; N = 4096 64 / 51 iterations, set-up 0.07 / 0.94 / 7-13 s (MUMPS
-#: 100-150 ms per application); phi = 0.55, N = 343: 58 / 52 / 51. With the scaled D
-#: (self_resistance_scale), N = 1000: ICC(0) 48-52, ICC(1) 31-33, ICC(2) 31-33 (set-up
-#: 0.06 / 0.5 / 2.7 s); RCM or nested-dissection orderings: no fewer iterations, slower.
-#: Block Jacobi per rank would drop the lubrication of the pairs across the split (5-10x
-#: the iterations on 2 ranks)
+#: stalls). Block ILU on BAIJ (block size 6) gives the factor of ICC on the AIJ matrix
+#: with full blocks, in PETSc's block kernels, storing L and U. Equal while no pivot needs
+#: a shift: PETSc's ICC shifts the whole diagonal when a pivot is not positive
+#: (Manteuffel), ILU here shifts a singular pivot block ("inblocks"), so a near-singular
+#: G degrades the preconditioner instead of stopping the solve (GMRES does not need it
+#: definite). Level 1 needs about as few iterations as the exact sparse Cholesky factor at
+#: a fraction of its cost; level 0 needs more, level 2 no fewer; block Jacobi per rank
+#: would drop the lubrication of the pairs across the split (measurements:
+#: docs/numerics.md, "Parameter choices")
 FILL_LEVELS = 1
 OPTIONS_PREFIX = "sdmpi_krylov_schur_"
 INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "ilu", "pc_factor_levels": str(FILL_LEVELS),
                  "pc_factor_shift_type": "inblocks"}
 #: G keeps the lubrication coupling (off-diagonal blocks) of pairs closer than this surface
 #: gap, in mean radii (2 h / (a_i + a_j)); farther pairs keep their diagonal parts only (G
-#: stays positive definite). Measured (N = 1000, tolerance 1e-6, flow / force solve
-#: iterations, ICC(1) set-up, application): phi = 0.45, all pairs (gap < 2) 31/33, 0.66 s,
-#: 3.0 ms; gap < 1: 32/34, 0.10 s, 1.2 ms; < 0.5: 33/37, 0.04 s, 0.7 ms; < 0.25: 44/48;
-#: phi = 0.55, all 38/40, 1.8 s, 15 ms; < 1: 41/45, 0.25 s, 4 ms; < 0.5: 43/47, 0.07 s,
-#: 0.75 ms; phi = 0.3, all 23/24, 0.36 s, 2.5 ms; < 1: 24/25, 0.15 s, 0.9 ms; < 0.5:
-#: 27/28. Near contact at tolerance 1e-8 (tests/test_krylov.py, N = 125, phi = 0.5): all
-#: 49, < 1: 55, < 0.5: 64 iterations; so 1, not 0.5
+#: stays positive definite): a factor several times cheaper for about one more iteration
+#: per solve; below a gap of 1 the iterations grow, near contact most (measurements:
+#: docs/numerics.md, "Parameter choices")
 PRECONDITIONER_MAX_GAP = 1.0
 #: the preconditioner's far-field self resistance grows with the volume fraction like
 #: (1 - phi)^-SELF_RESISTANCE_EXPONENT (self_resistance_scale)
@@ -121,22 +109,17 @@ SELF_RESISTANCE_EXPONENT = 2.5
 #: hindered more than rotation, the stresslet less (self_resistance_weights)
 SELF_RESISTANCE_WEIGHTS = (1.5, 1.0, 0.6)
 #: the Lanczos preconditioner's long waves: the lattice's Fourier modes k = 2 pi n.b with
-#: 0 < |n|^2 <= LONG_WAVES (92 wave vectors, 46 pairs +-k, 184 columns; `LongWaveFactor`).
-#: Measured (phi = 0.45, Lanczos tolerance 1e-4, Ewald 1e-4, iterations at N = 1000 /
-#: 4096): no preconditioner 42 / 58, D alone 42 / 61, |n|^2 <= 3 30 / 39, <= 5 27 / 37,
-#: <= 8 24 / 32, <= 12 22 / 28, <= 16 22 / - (applying P is cheap against a far-field
-#: product, 3N x 184 numbers per rank; building it, ~0.05 s at N = 1000 for <= 8 and
-#: 0.19 s at 4096 on one rank, grows with the square of the columns)
+#: 0 < |n|^2 <= LONG_WAVES (92 wave vectors, 46 pairs +-k, 184 columns; `LongWaveFactor`):
+#: more modes take fewer Lanczos iterations, with diminishing returns beyond 8, while the
+#: cost of building P grows with the square of the columns (measurements:
+#: docs/numerics.md, "Parameter choices")
 LONG_WAVES = 8
 #: far-field operators by name (see far_field_operator)
 FAR_FIELDS = ("dense", "spectral")
 #: the default far field is dense below this many particles (its matrix is 11N x 11N),
-#: spectral from there on (bench/bench_krylov.py --far-field, phi = 0.45, 2 ranks, per
-#: Brownian step: tolerances 1e-6 / 1e-4 / 1e-4 (session 3) N = 125 dense 0.40 s,
-#: spectral 0.59 s, N = 343 dense 2.3 s, spectral 1.6 s; 1e-4 / 1e-4 / 1e-4 (single-
-#: precision real-space blocks) N = 125 dense 0.43 s, spectral 0.37 s, N = 343 dense
-#: 2.34 s, spectral 0.81 s: the crossover moves below 125 at the fast settings, kept at
-#: 200 for the tight defaults, where the dense matrix is also the exact reference)
+#: spectral from there on (the crossover of bench/bench_krylov.py --far-field lies below
+#: this at the fast tolerances; at the tight defaults the dense matrix is also the exact
+#: reference; measurements: docs/numerics.md, "Parameter choices")
 DENSE_FAR_FIELD_MAX_N = 200
 
 
@@ -569,9 +552,8 @@ class KrylovSolver:
         self.schur.assemble()
 
     def _baij(self, csr, comm):
-        """A PETSc BAIJ matrix (6x6 blocks; block kernels: ~2x faster products and 2-3x
-        faster incomplete factors than AIJ) of 6N columns from this rank's block rows csr
-        (`_block_csr`) on comm."""
+        """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this
+        rank's block rows csr (`_block_csr`) on comm."""
         rows = 6 * (len(csr[0]) - 1)
         mat = self._PETSc.Mat().createBAIJ([(rows, 6 * self.n), (rows, 6 * self.n)], 6, csr=csr, comm=comm)
         mat.assemble()

@@ -10,7 +10,7 @@ Pairs: all (i, j, image) with centre distance r < a_i + a_j + cutoff (a_i + a_j)
 including a particle and its own periodic images; the correction decays like r^-4..r^-7
 beyond it. Gap regularisation: a pair closer than a_i + a_j + min_gap (a_i + a_j)/2
 (touching or overlapping) is evaluated at that minimum gap (default epsilon = 1e-4 of
-the mean radius, as in seed 001's minimum-separation rule), so R stays finite and
+the mean radius, as in Dratler & Schowalter's (1996) minimum-separation rule), so R stays finite and
 positive definite; such pairs are counted.
 
 Evaluation (tabulated, `lubrication_matrix`). R_2B and R_2B,inf are both invariant
@@ -212,8 +212,8 @@ def lubrication_sparse(positions, radii, pairs, factors=False):
 def _rigid_cholesky(res, out):
     """out[p] = the lower Cholesky factor of the 12 rigid-body rows and columns (U, Omega
     of either sphere: 0-5 and NDOF..NDOF+5) of each pair's 22x22 block res[p], from its
-    lower triangle (as LAPACK's potrf; ~2.5x faster than numpy's batched cholesky on
-    12x12 blocks, N = 4096: 55 against 136 ms). Returns the first pair that is not positive definite, else -1."""
+    lower triangle (as LAPACK's potrf; faster than numpy's batched cholesky on 12x12
+    blocks). Returns the first pair that is not positive definite, else -1."""
     for p in range(res.shape[0]):
         for a in range(12):
             ra = a if a < 6 else a + NDOF - 6

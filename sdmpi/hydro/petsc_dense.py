@@ -4,7 +4,7 @@ Same interface and equations as `solvers.DenseSolver` (see `sdmpi.hydro.solvers`
 
     U' = R_FU^-1 (F + R_FE e_inf),   S = R_SE e_inf - R_SU U',   F_B = C z with R_FU = C C^T.
 
-What is distributed, and what is not (this version):
+What is distributed, and what is not:
 
 - R_FU (6N x 6N) is a PETSc MATMPIDENSE over the communicator (each rank copies only
   its own block of rows out of the replicated numpy R), converted to MATSCALAPACK (2-D
@@ -20,8 +20,7 @@ What is distributed, and what is not (this version):
   3.18 does not wrap it; if that fails, R_FU is factorised a second time for the copy).
 - R_FE, R_SU, R_SE products stay replicated numpy on every rank, and so does the
   assembly of R (`grand_resistance`, including the O((11N)^3) inverse of M_inf): every
-  rank of the communicator holds the whole (11N)^2 matrix. Distributing the assembly is
-  what is left for large N (issue 6).
+  rank of the communicator holds the whole (11N)^2 matrix.
 
 Inputs and outputs are replicated numpy arrays; every method is collective over the
 communicator (all its ranks must build the same solver and call the same methods in the

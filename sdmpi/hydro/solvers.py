@@ -28,9 +28,8 @@ from scipy.linalg import lapack
 from .krylov import DEFAULT_TOL
 from .resistance import grand_resistance, split_resistance
 
-#: `auto` picks petsc-krylov from this many particles on (bench/bench_krylov.py, one rank,
-#: phi = 0.45, Brownian step: dense 0.29 s at N = 125 and 4.7 s at N = 343, petsc-krylov
-#: 2.3 s at N = 343)
+#: `auto` picks petsc-krylov from this many particles on (where it overtakes dense on one
+#: rank in bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
 AUTO_KRYLOV_MIN_N = 300
 
 

@@ -115,7 +115,7 @@ _POW_ALIAS, _POW_WINDOW = 4, 4  # powers of the polynomial prefactors
 #: Ewald tolerances from which the real-space blocks are stored in single precision
 #: (rounding ~6e-8 relative, <= 1% of the tolerance; exactly symmetric all the same, as
 #: each block serves both M_ij x_j and M_ij^T x_i): the real-space product streams its
-#: blocks from memory, so half the bytes make it 1.3-1.5x faster (N = 1000, one rank)
+#: blocks from memory, so half the bytes make it faster (docs/numerics.md)
 SINGLE_PRECISION_TOL = 1e-5
 
 
@@ -143,7 +143,7 @@ def _pair_blocks(pos, radii, pi, pj, shift, table, xi, basis, blocks):
 def _pairs_product(pi, pj, blocks, x, y):
     """y += sum over pair images of M_ij x_j + M_ij^T x_i (blocks[p] = M_ij). The two
     particles' parts of x and y go through local arrays: no aliasing of the slices (a pair
-    image of a particle with itself has i = j), so the loops vectorise (~20% faster)."""
+    image of a particle with itself has i = j), so the loops vectorise."""
     xi, xj = np.empty(NDOF), np.empty(NDOF)
     yi, yj = np.empty(NDOF), np.empty(NDOF)
     for p in range(pi.shape[0]):
@@ -463,7 +463,7 @@ def _kept_modes(scale):
 
 
 #: cost of the FFTs + k-space kernel per grid point, in units of the real-space product
-#: per pair image (bench/bench_spectral.py, N = 1000 and 4096, tol 1e-4: measured 0.3-0.5)
+#: per pair image (measured with bench/bench_spectral.py: docs/numerics.md)
 _FFT_COST_PER_GRID_POINT = 0.4
 
 
