@@ -6,7 +6,7 @@
 At the frequency nearest --omega (default 6 pi, the caption's; the text says 2 pi):
 + 1 + eta'_H/eta_m and o 1 + (eta'_H + eta'_B)/eta_m (our "total", which adds the
 interparticle part, zero for hard spheres) per phi, with the Batchelor-Green relation
-(seed eq. 37, dashed) and the seed's fit of its SD eta_H (eq. 38, solid, stated within 1%
+(Schaink et al. eq. 37, dashed) and Schaink et al.'s fit of its SD eta_H (eq. 38, solid, stated within 1%
 for 0 <= phi <= 0.45). Needs runs at several phi (one job with a phi list, or several jobs)
 to show a curve; with one phi it still prints the comparison.
 """
@@ -50,10 +50,10 @@ def draw(reductions, path, omega=6 * math.pi):
               file=sys.stderr)
     fig, (ax,) = figure()
     grid = np.linspace(0, max(0.5, max(p[0] for p in points) * 1.1), 200)
-    ax.plot(grid, batchelor_green(grid), "--", color="0.3", label="Batchelor & Green (seed eq. 37)")
+    ax.plot(grid, batchelor_green(grid), "--", color="0.3", label="Batchelor & Green (Schaink et al. eq. 37)")
     g38 = grid[grid <= 0.45]
     ax.plot(g38, 1 + schaink_eta_h(g38), "-", color="tab:blue", lw=1,
-            label="1 + η_H/η_m, seed eq. 38 (0 ≤ φ ≤ 0.45)")
+            label="1 + η_H/η_m, Schaink et al. eq. 38 (0 ≤ φ ≤ 0.45)")
     arr = np.array(points)
     ax.errorbar(arr[:, 0], arr[:, 2], yerr=arr[:, 3], fmt="+", ms=9, color="tab:blue",
                 capsize=3, label="SD: 1 + η′_H/η_m")
@@ -62,12 +62,12 @@ def draw(reductions, path, omega=6 * math.pi):
     omegas = ", ".join(sorted({f"{p[1]:.4g}" for p in points}))
     ax.set_xlabel("volume fraction φ")
     ax.set_ylabel("η′ / η_m")
-    ax.set_title(f"Fig. 2 (seed 000): η′ vs φ at ω = {omegas} /t_D\n"
+    ax.set_title(f"Fig. 2 (Schaink et al. 2000): η′ vs φ at ω = {omegas} /t_D\n"
                  f"{reductions[0].job.job.name}; bars ± one standard error", fontsize=9)
     ax.grid(True, alpha=0.25)
     ax.legend(fontsize=8)
     save(fig, path)
-    print_table("\nFig. 2: ours vs the seed (eq. 38 reproduces the seed's SD eta_H within 1%)",
+    print_table("\nFig. 2: ours vs the seed (eq. 38 reproduces Schaink et al.'s SD eta_H within 1%)",
                 ["phi", "omega", "1+eta'_H (SD)", "1+eta_H eq.38", "dev.", "eq. 37", "total eta' (SD)"],
                 [(f"{p:g}", f"{w:.4g}", pm(h, he), f"{1 + schaink_eta_h(p):.4g}",
                   f"{100 * (h / (1 + schaink_eta_h(p)) - 1):+.1f}%", f"{batchelor_green(p):.4g}",

@@ -6,10 +6,10 @@
 Total moduli (medium + hydrodynamic + Brownian + interparticle) vs omega, log-log, one
 panel per phi. The seed compares with omega^(-1/2) fits to experiments (van der Werff et
 al. 1989) whose parameters it does not print; overlaid here are what can be computed:
-the medium plus the seed's hydrodynamic part, G'' = omega (1 + eta_H(phi)) with eta_H from
+the medium plus Schaink et al.'s hydrodynamic part, G'' = omega (1 + eta_H(phi)) with eta_H from
 eq. 38 (the high-frequency limit, where the Brownian part fades), and an omega^(1/2) guide
 (the experiments' eta', eta'' ~ omega^(-1/2)) through our lowest-frequency G''. The table
-checks the seed's statement that G' reaches a plateau for omega > 8 pi.
+checks Schaink et al.'s statement that G' reaches a plateau for omega > 8 pi.
 """
 
 import math
@@ -50,7 +50,7 @@ def draw(reductions, path):
                     color="tab:red", capsize=3, label="SD: G″ (total)")
         grid = np.geomspace(w.min() / 1.5, w.max() * 1.5, 100)
         ax.plot(grid, grid * (1 + schaink_eta_h(phi)), "--", color="tab:blue",
-                label="G″ = ω (1 + η_H), η_H of seed eq. 38")
+                label="G″ = ω (1 + η_H), η_H of Schaink et al. eq. 38")
         if np.isfinite(g2[0]):
             ax.plot(grid, g2[0] * np.sqrt(grid / w[0]), ":", color="0.4",
                     label="∝ ω^½ (experiments: η′, η″ ∝ ω^-½)")
@@ -60,7 +60,7 @@ def draw(reductions, path):
         log_axes(ax, np.concatenate([g1, g2]))   # y range from the values, not the bars
         ax.set_xlabel("ω  [1/t_D]")
         ax.set_ylabel("G′, G″  [η_m/t_D]")
-        ax.set_title(f"Fig. 4 (seed 000): φ = {phi:g}, N = {red.job.system.n_particles}\n"
+        ax.set_title(f"Fig. 4 (Schaink et al. 2000): φ = {phi:g}, N = {red.job.system.n_particles}\n"
                      f"{red.job.job.name}; bars ± one standard error"
                      + ("" if red.complete else "; PARTIAL"), fontsize=9)
         ax.grid(True, which="both", alpha=0.25)

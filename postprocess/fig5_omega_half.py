@@ -70,7 +70,7 @@ def draw(reductions, path):
     ax.set_xlabel("ω^-½  [t_D^½]")
     ax.set_ylabel("η′/η_m, η″/η_m  (total)")
     ax.set_xlim(left=0)
-    ax.set_title("Fig. 5 (seed 000): complex viscosity vs ω^-½\n"
+    ax.set_title("Fig. 5 (Schaink et al. 2000): complex viscosity vs ω^-½\n"
                  f"{reductions[0].job.job.name}; bars ± one standard error", fontsize=9)
     ax.grid(True, alpha=0.25)
     legend_below(ax)

@@ -5,8 +5,8 @@
 
 (a) eta'/eta_m, (b) eta''/eta_m vs omega: dots the hydrodynamic part eta_H, crosses the
 total eta = eta_m + eta_H + eta_B (+ interparticle, zero for hard spheres); lines: the
-medium (eta' = 1) and the seed's eq. 38 fit of its SD eta_H(phi) (omega-independent).
-The table checks the seed's statements: eta'_H is constant within 2% over all
+medium (eta' = 1) and Schaink et al.'s eq. 38 fit of its SD eta_H(phi) (omega-independent).
+The table checks Schaink et al.'s statements: eta'_H is constant within 2% over all
 frequencies, and eq. 38 reproduces the SD eta_H within 1% (0 <= phi <= 0.45).
 """
 
@@ -47,7 +47,7 @@ def draw(reductions, path):
                 grid = np.geomspace(w.min() / 1.5, w.max() * 1.5, 50)
                 pred = schaink_eta_h(phi) if column == "eta_prime" else 0.0
                 ax.plot(grid, np.full_like(grid, pred), "--", color=c, lw=1,
-                        label=f"η_H seed eq. 38, φ = {phi:g}" if column == "eta_prime"
+                        label=f"η_H Schaink et al. eq. 38, φ = {phi:g}" if column == "eta_prime"
                         else None)
             w, h, he = series(red, phi, "hydrodynamic", "eta_prime")
             _, h2, he2 = series(red, phi, "hydrodynamic", "eta_dprime")
@@ -58,7 +58,7 @@ def draw(reductions, path):
             eq38 = schaink_eta_h(phi)
             print_table(f"\nFig. 7, phi = {phi:g}: seed: eta'_H constant within 2% over omega "
                         f"(ours: spread (max-min)/mean = {100 * spread:.1f}%); eq. 38 "
-                        f"eta_H = {eq38:.4g}, within 1% of the seed's SD",
+                        f"eta_H = {eq38:.4g}, within 1% of Schaink et al.'s SD",
                         ["omega", "eta'_H (SD)", "eq. 38", "SD/eq.38 - 1", "eta''_H (SD)",
                          "total eta'", "total eta''"],
                         [(f"{w[i]:.4g}", pm(h[i], he[i]), f"{eq38:.4g}",
@@ -70,7 +70,7 @@ def draw(reductions, path):
         ax.set_xscale("log")
         ax.set_xlabel("ω  [1/t_D]")
         ax.set_ylabel(name[4:])
-        ax.set_title(f"Fig. 7{name[:3]} (seed 000), {reductions[0].job.job.name}", fontsize=9)
+        ax.set_title(f"Fig. 7{name[:3]} (Schaink et al. 2000), {reductions[0].job.job.name}", fontsize=9)
         ax.grid(True, which="both", alpha=0.25)
         legend_below(ax)
     fig.suptitle("hard spheres in a Newtonian medium; bars ± one standard error", fontsize=9)

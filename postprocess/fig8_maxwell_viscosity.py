@@ -3,8 +3,8 @@
 
     postprocess/fig8_maxwell_viscosity.py MAXWELL_RUN.h5 [...] [--newtonian RUN.h5 ...] [-o fig8.png]
 
-(a) eta'/eta_m, (b) eta''/eta_m vs omega: solid line the medium eta*_m(omega) (seed eq. 36,
-summed over modes); crosses our eta_m + eta_H; dashed the seed's prediction eta_m + eta_H
+(a) eta'/eta_m, (b) eta''/eta_m vs omega: solid line the medium eta*_m(omega) (Schaink et al. eq. 36,
+summed over modes); crosses our eta_m + eta_H; dashed Schaink et al.'s prediction eta_m + eta_H
 with eta*_H(omega) = (eta_H(0)/eta_0m) eta*_m(omega) (eqs. 41-42) and eta_H(0) from eq. 38;
 dots the total eta_m + eta_H + eta_B. With --newtonian (run files of the Newtonian job at
 the same phi) eta_H(0) is also taken from our own SD (eta'_H averaged over omega, weighted
@@ -65,11 +65,11 @@ def draw(reductions, newtonian, path):
                 _, md, _ = series(red, phi, "medium", column)
                 _, h, he = series(red, phi, "hydrodynamic", column)
                 _, t, te = series(red, phi, "total", column)
-                ax.plot(grid, medium, "-", color="0.3", lw=1.4, label="medium η_m(ω), seed eq. 36")
+                ax.plot(grid, medium, "-", color="0.3", lw=1.4, label="medium η_m(ω), Schaink et al. eq. 36")
                 ax.errorbar(w, md + h, yerr=he, fmt="+", ms=10, color="tab:blue", capsize=3,
                             label="SD: η_m + η_H")
                 ax.plot(grid, medium + pred, "--", color="tab:blue", lw=1.2,
-                        label="η_m + η_H, seed eqs. 41-42 with η_H(0) of eq. 38")
+                        label="η_m + η_H, Schaink et al. eqs. 41-42 with η_H(0) of eq. 38")
                 if ours is not None:
                     own = maxwell_eta_h(grid, ours[0] / eta.sum(), eta, lam)[q]
                     ax.plot(grid, medium + own, ":", color="tab:green", lw=1.4,
@@ -93,7 +93,7 @@ def draw(reductions, newtonian, path):
         ax.set_xlabel("ω  [1/t_D]")
         ax.set_ylabel(name[4:])
         ax.set_ylim(bottom=0)
-        ax.set_title(f"Fig. 8{name[:3]} (seed 000), {reductions[0].job.job.name}", fontsize=9)
+        ax.set_title(f"Fig. 8{name[:3]} (Schaink et al. 2000), {reductions[0].job.job.name}", fontsize=9)
         ax.grid(True, which="both", alpha=0.25)
         ax.legend(fontsize=7.5)
     modes = ", ".join(f"η={m.eta:g}, λ={m.lam:g} t_D" for m in reductions[0].job.medium.modes)

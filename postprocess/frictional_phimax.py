@@ -19,7 +19,7 @@ only error). Then
 
 * phi scan: for every (mu, k_n, k_t, f_r0) with at least two phi, a weighted
   least-squares fit of log eta_r to log of Krieger-Dougherty, (1 - phi/phi_max)^(-2.5
-  phi_max) (sdmpi.analysis.models; the seed's model), and of Maron-Pierce, (1 -
+  phi_max) (sdmpi.analysis.models; the MigFlow thesis's model), and of Maron-Pierce, (1 -
   phi/phi_max)^(-2) (the divergence Mari et al. 2014 fit for phi_J), one parameter
   phi_max, weights 1/(eta_err/eta)^2. Its standard error phi_max_err is curve_fit's for
   these absolute weights, multiplied by sqrt(chi^2/dof) when that exceeds 1 (scatter

@@ -2,7 +2,7 @@
 
 1. An isolated sphere and Hasimoto's simple cubic lattice (periodic Ewald sums).
 2. The high-frequency hydrodynamic viscosity of equilibrium hard-sphere suspensions at
-   phi = 0.45 (N = 27), averaged over independent configurations, against seed 000
+   phi = 0.45 (N = 27), averaged over independent configurations, against Schaink et al. 2000
    eq. 38 (Schaink et al. 2000).
 """
 
@@ -43,7 +43,7 @@ def main():
         print(f"   configuration {c + 1}: eta_H = {values[-1]:.4f}")
     mean, err = np.mean(values), np.std(values, ddof=1) / math.sqrt(len(values))
     print(f"   eta'_inf = 1 + eta_H = {1 + mean:.4f} +- {err:.4f} (one standard error)")
-    print(f"   seed 000 eq. 38:      1 + eta_H = {1 + schaink_eta_h(args.phi):.4f}")
+    print(f"   Schaink et al. 2000 eq. 38:      1 + eta_H = {1 + schaink_eta_h(args.phi):.4f}")
     print(f"   ({time.perf_counter() - t0:.1f} s)")
 
 

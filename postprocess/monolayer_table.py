@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Seed 001 (Dratler & Schowalter, J. Fluid Mech. 325 (1996)): sheared monolayers, purely
 hydrodynamic vs with the short-range repulsion; our viscosities and overlap statistics
-next to the seed's statements, as Markdown tables.
+next to Dratler & Schowalter's (1996) statements, as Markdown tables.
 
     postprocess/monolayer_table.py RUN.h5 [RUN2.h5 ...]
 
@@ -9,7 +9,7 @@ Run files of jobs/monolayer_hydro.toml and jobs/monolayer_repulsion.toml (or any
 monolayer jobs; files of one model are reduced together, so extra realisations with
 another seed can be added). Per model and areal fraction phi_a:
 
-- eta = 1 + eta_h + eta_p (seed eq. 6; `sdmpi reduce`'s total row) and its parts eta_h
+- eta = 1 + eta_h + eta_p (Dratler & Schowalter 1996 eq. 6; `sdmpi reduce`'s total row) and its parts eta_h
   (hydrodynamic) and eta_p (interparticle), +- one standard error (`eta_of`);
 - overlaps per configuration (n_overlaps, mean and largest over the samples after the
   start-up and before a stop), the deepest overlap and the smallest surface gap;
@@ -34,7 +34,7 @@ from sdmpi.ensemble.store import task_key
 
 MODELS = {"none": "hydrodynamic only", "repulsion": "repulsion"}
 
-#: the seed's statements (sec. 4), per model and areal fraction
+#: Dratler & Schowalter's (1996) statements (sec. 4), per model and areal fraction
 SEED = {
     ("none", 0.2): "usually <= 1 overlap per 25-sphere configuration",
     ("none", 0.5): "overlaps > 10 most of the time, > 20 often (Fig. 4); ~1 per 2 spheres; "

@@ -367,7 +367,7 @@ def draw_fixed_dt(newt, fixed, path):
                                                  for w in fixed.control})))):
         w, h, e = series(red, phi, "hydrodynamic", "eta_prime")
         ax.errorbar(w, h, yerr=e, fmt=fmt, mfc="none", capsize=3, label=label)
-    ax.axhline(schaink_eta_h(phi), ls="--", color="0.4", label="seed eq. 38")
+    ax.axhline(schaink_eta_h(phi), ls="--", color="0.4", label="Schaink et al. eq. 38")
     ax.set_xscale("log")
     ax.set_xlabel("ω  [1/t_D]")
     ax.set_ylabel("η′_H / η_m")

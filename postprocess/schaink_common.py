@@ -4,8 +4,8 @@
 Each figure script takes run files (complete, partial or small: whatever is committed is
 used), reduces them with :func:`sdmpi.analysis.reduce.reduce_runs` (files of the same
 system together, different systems, e.g. several volume fractions run as separate
-jobs, apart), draws the figure with the seed's models overlaid, and prints a table of
-our numbers next to the seed's statements. Units: omega in 1/t_D, moduli in eta_m/t_D,
+jobs, apart), draws the figure with Schaink et al.'s models overlaid, and prints a table of
+our numbers next to Schaink et al.'s statements. Units: omega in 1/t_D, moduli in eta_m/t_D,
 viscosities relative to eta_m.
 """
 

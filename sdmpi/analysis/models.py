@@ -71,7 +71,7 @@ def maxwell_eta_h(omega, eta_h0, eta, lam):
     eta''_H = eta_h0 sum_k eta_k lam_k w/(1 + (lam_k w)^2).
     eta_h0 = eta_H(0)/eta_0m: the hydrodynamic viscosity increment of the same spheres
     in a Newtonian medium (e.g. schaink_eta_h(phi), or an SD result), assumed
-    independent of w (seed Fig. 7). Validity: particle dynamics unaffected by the
+    independent of w (Schaink et al. Fig. 7). Validity: particle dynamics unaffected by the
     medium's elasticity, t_B << t <= lambda, low Re and Wi (Schaink et al. eqs. 20, 32); the
     Brownian contribution is not included. Returns (eta'_H, eta''_H), units of eta."""
     eta1, eta2 = maxwell_viscosity(omega, eta, lam)

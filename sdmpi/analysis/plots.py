@@ -40,7 +40,7 @@ STYLE = {  # component -> (colour, marker)
     "collision": ("tab:red", "v"),
     "total": ("black", "D"),
 }
-LABEL = {"medium": "medium (exact, seed eq. 36)", "hydrodynamic": "hydrodynamic",
+LABEL = {"medium": "medium (exact, Schaink et al. 2000 eq. 36)", "hydrodynamic": "hydrodynamic",
          "brownian": "Brownian", "interparticle": "interparticle", "collision": "collision",
          "total": "total"}
 
@@ -185,8 +185,8 @@ def plot_viscosities(red, path, phi) -> Path:
     fig, (a1, a2) = _figure(2)
     maxwell = red.job.medium.kind == "maxwell"
     pred = hydrodynamic_prediction(red.job, phi, grid)
-    pred_label = ("hydrodynamic, seed eqs. 41-42 with η_H(φ) of eq. 38" if maxwell
-                  else "hydrodynamic, seed eq. 38 (ω-independent)")
+    pred_label = ("hydrodynamic, Schaink et al. eqs. 41-42 with η_H(φ) of eq. 38" if maxwell
+                  else "hydrodynamic, Schaink et al. eq. 38 (ω-independent)")
     for q, ax, name in ((1, a1, "η′"), (0, a2, "η″")):
         # eta' = G''/w (quantity 1), eta'' = G'/w (quantity 0)
         for c, comp in _active(red, sel):
@@ -203,7 +203,7 @@ def plot_viscosities(red, path, phi) -> Path:
         ax.axhline(0.0, color="0.7", lw=0.6)
         ax.set_xscale("log")
         _plain_log_ticks(ax.xaxis, *ax.get_xlim())
-        _frequency_axes(ax, f"{name} / η_m", f"{name}(ω) = {'G″' if q == 1 else 'G′'}/ω  (seed eq. 19)")
+        _frequency_axes(ax, f"{name} / η_m", f"{name}(ω) = {'G″' if q == 1 else 'G′'}/ω  (Schaink et al. eq. 19)")
     return _save(fig, red, phi, path)
 
 

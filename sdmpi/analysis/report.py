@@ -64,6 +64,7 @@ import numpy as np
 
 from .. import __version__
 from .errors import SOURCES
+from .tables import csv_value
 from .trust import TRUST_UNITS
 from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError
 
@@ -82,14 +83,6 @@ UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/
          "eta_err_Pa_s": "Pa s", "eta_ci95_Pa_s": "Pa s", "shear_stress_Pa": "Pa"}
 
 
-def _fmt(x) -> str:
-    if isinstance(x, str):
-        return x
-    if isinstance(x, (int, np.integer)):
-        return str(int(x))
-    return "nan" if math.isnan(x) else repr(float(x))
-
-
 def write_csv(red, path) -> Path:
     """The table of ``red`` as CSV (header = ``red.columns``)."""
     path = Path(path)
@@ -97,7 +90,7 @@ def write_csv(red, path) -> Path:
         out = csv.writer(fh)
         out.writerow(red.columns)
         for row in red.rows():
-            out.writerow([_fmt(row[c]) for c in red.columns])
+            out.writerow([csv_value(row[c]) for c in red.columns])
     return path
 
 
@@ -257,7 +250,7 @@ def write_errors_csv(red, path) -> Path:
         out = csv.writer(fh)
         out.writerow(columns)
         for row in error_rows(red):
-            out.writerow([_fmt(row[c]) for c in columns])
+            out.writerow([csv_value(row[c]) for c in columns])
     return Path(path)
 
 

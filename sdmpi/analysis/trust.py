@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .tables import csv_value
+
 #: warn when more overlapping pairs than this are corrected per step (on average)
 OVERLAPS_PER_STEP_WARN = 0.02
 #: warn when a step starts with an overlap deeper than this (surface gap, radii)
@@ -120,13 +122,12 @@ def warnings_of(red, rows) -> list[str]:
 
 def write_trust_csv(red, rows, path) -> Path:
     """trust.csv: phi, omega (or rate), then :data:`TRUST_COLUMNS`."""
-    from .report import _fmt
     columns = ("phi", red.columns[1]) + TRUST_COLUMNS
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(columns)
         for row in rows:
-            out.writerow([_fmt(row[c]) for c in columns])
+            out.writerow([csv_value(row[c]) for c in columns])
     return Path(path)
 
 

@@ -348,7 +348,7 @@ class Integration:
     in periods (``periods``, the first ``discard_periods`` left out of the moduli) or in
     time (``duration``, the first ``discard_duration`` left out); a duration is rounded up
     to whole periods at each frequency, P(omega) = ceil(duration omega / 2 pi), and so is the
-    discarded start-up, because the moduli are projections over whole periods (seed eq.
+    discarded start-up, because the moduli are projections over whole periods (Schaink et al. eq.
     18). A duration gives every frequency the same time in t_D, so that slow structural
     relaxation (diffusion times) is sampled alike at high and low frequency.
     steady / none: ``n_steps`` steps of ``dt``, the first ``discard_steps`` not averaged.

@@ -38,12 +38,12 @@ eta_h (row ``hydrodynamic``) and eta_p (row ``interparticle``) unchanged, with t
 ``phi`` holding phi_a. Dilute limit: S_xy = (10/3) pi a^3 eta_m gamma_dot per sphere gives
 eta = 1 + (5/3) phi_a.
 
-Overlaps (seed sec. 3, Bossis & Brady, J. Chem. Phys. 80, 5141 (1984)). Pairs closer
+Overlaps (Dratler & Schowalter 1996 sec. 3; Bossis & Brady, J. Chem. Phys. 80, 5141 (1984)). Pairs closer
 than the gap epsilon = ``hydrodynamics.min_gap``, overlapping ones included, get the
 lubrication of that gap (`sdmpi.hydro.lubrication`) but are not moved (unlike the bulk's
 potential-free correction); ``n_overlaps`` counts the overlapping pairs (periodic images
 count once) and ``min_gap`` the deepest, at each step. When an overlap exceeds
-``integration.overlap_stop`` (seed sec. 4: 2% of a radius) the realisation stops: it
+``integration.overlap_stop`` (Dratler & Schowalter sec. 4: 2% of a radius) the realisation stops: it
 warns, keeps its last configuration, and every later sample is NaN (counts -1), which
 `sdmpi reduce` takes as the end of that realisation's data.
 
@@ -105,7 +105,7 @@ class Monolayer:
             self.stopped_at = step
             log.warning(f"task {task_id}: stopped at step {step}: two spheres overlap by "
                         f"{-min_gap:.3g} a > integration.overlap_stop = {self.overlap_stop:g} "
-                        f"(seed 001); the remaining samples are NaN")
+                        f"(Dratler & Schowalter 1996); the remaining samples are NaN")
         return self.stopped_at >= 0
 
     @staticmethod

@@ -5,22 +5,19 @@ Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 
     dx = [U_inf(x) + R_FU^-1 (F_P + R_FE e_inf) + kT div R_FU^-1] dt
          + sqrt(2 kT dt) R_FU^-1/2 dW,
 
-integrated with Fixman's midpoint scheme as used for SD by Banchio & Brady, J. Chem.
-Phys. 118, 10323 (2003): a Brownian force F_B = sqrt(2 kT/dt) C z with R_FU = C C^T
-(Cholesky) and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt; a half step
-x* = x + (dt/2) R_FU^-1(x) F_B; then the Brownian velocity R_FU^-1(x*) F_B, whose mean
-over z is kT div R_FU^-1 to O(dt) (the drift) and whose covariance is 2 kT R_FU^-1/dt
-(fluctuation-dissipation). The same pair of evaluations gives the Brownian stresslet
--kT div(R_SU R_FU^-1) (Schaink et al. eq. 16) as -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B,
-whose mean is the divergence to O(dt). The midpoint rather than a random finite
-difference because its displacements stay bounded (a mobility times a force) for
-near-contact pairs, where an RFD divides large resistance differences by a small step.
-The mid configuration is evaluated with the pair sets of x (no pair crosses a cut-off
-between the two evaluations, so the difference is smooth) and at the same strain.
+integrated explicitly (Euler-Maruyama) with the hydrodynamics of a model
+(`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated once per step
+at the step's start: a Brownian force F_B = sqrt(2 kT/dt) C z with R_FU = C C^T and
+z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation), and the drift
+kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et al. eq. 16)
+estimated by the model's drift scheme (`models`: a random finite difference along the
+noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys. 118, 10323
+(2003)).
 
-Stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz, units eta_m/t_D = kT/(6 pi a^3)):
-hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf; Brownian
-(1/V) sum S_B; interparticle -(1/V) sum (x F_P + R_SU R_FU^-1 F_P). Maxwell media filter
+Stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz, units eta_m/t_D = kT/(6 pi a^3);
+the registry `config.stresses`): hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1
+R_FE) e_inf; Brownian (1/V) sum S_B; interparticle -(1/V) sum (x F_P + R_SU R_FU^-1 F_P);
+collision (`collisions`), the stress of the overlap correction's impulses. Maxwell media filter
 S_H by their modes (`media`). Units: a = 1, eta_m = 1, D0 = kT/(6 pi eta_m a) = 1, so
 kT = 6 pi and time is in t_D = a^2/D0; non-Brownian runs use the same code with kT = 0.
 
@@ -28,8 +25,8 @@ Size classes (`job.system.size_classes`): every particle has its own radius a_i 
 of the largest, a = 1); the hydrodynamics, the overlap correction and the pair forces use
 them, and a, kT = 6 pi and t_D keep their meaning (those of the largest spheres).
 
-Hard spheres: lubrication keeps overlaps rare; those produced by a finite step are
-counted and removed by the potential-free correction of `forces.remove_overlaps` before
+Hard spheres: lubrication keeps overlaps rare; pairs brought into contact by a finite step
+are counted and separated by the potential-free correction of `collisions.separate` before
 the step's hydrodynamics (Schaink et al. 2000, sec. III, Bossis & Brady 1984). An optional pair
 repulsion (`forces.Repulsion`, Dratler & Schowalter 1996) adds F_P.
 
