@@ -67,7 +67,7 @@ def draw(reductions, path, omega=6 * math.pi):
     ax.grid(True, alpha=0.25)
     ax.legend(fontsize=8)
     save(fig, path)
-    print_table("\nFig. 2: ours vs the seed (eq. 38 reproduces Schaink et al.'s SD eta_H within 1%)",
+    print_table("\nFig. 2: ours vs Schaink et al. 2000 (eq. 38 reproduces Schaink et al.'s SD eta_H within 1%)",
                 ["phi", "omega", "1+eta'_H (SD)", "1+eta_H eq.38", "dev.", "eq. 37", "total eta' (SD)"],
                 [(f"{p:g}", f"{w:.4g}", pm(h, he), f"{1 + schaink_eta_h(p):.4g}",
                   f"{100 * (h / (1 + schaink_eta_h(p)) - 1):+.1f}%", f"{batchelor_green(p):.4g}",

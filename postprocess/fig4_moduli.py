@@ -4,7 +4,7 @@
     postprocess/fig4_moduli.py RUN.h5 [RUN2.h5 ...] [-o fig4.png]
 
 Total moduli (medium + hydrodynamic + Brownian + interparticle) vs omega, log-log, one
-panel per phi. The seed compares with omega^(-1/2) fits to experiments (van der Werff et
+panel per phi. Schaink et al. compare with omega^(-1/2) fits to experiments (van der Werff et
 al. 1989) whose parameters it does not print; overlaid here are what can be computed:
 the medium plus Schaink et al.'s hydrodynamic part, G'' = omega (1 + eta_H(phi)) with eta_H from
 eq. 38 (the high-frequency limit, where the Brownian part fades), and an omega^(1/2) guide
@@ -66,7 +66,7 @@ def draw(reductions, path):
         ax.grid(True, which="both", alpha=0.25)
         legend_below(ax)
         ref = int(np.argmin(np.abs(w - 8 * math.pi)))
-        print_table(f"\nFig. 4, phi = {phi:g}: seed: 'G' attains a plateau value for "
+        print_table(f"\nFig. 4, phi = {phi:g}: Schaink et al.: 'G' attains a plateau value for "
                     f"omega > 8 pi' (ratio to our G' at omega = {w[ref]:.4g})",
                     ["omega", "omega/pi", "G' (SD)", "G'/G'(8pi)", "G'' (SD)",
                      "omega(1+eta_H eq.38)"],

@@ -3,8 +3,8 @@
 
     postprocess/fig5_omega_half.py RUN.h5 [RUN2.h5 ...] [-o fig5.png]
 
-The experiments the seed compares with (van der Werff et al. 1989) found eta' and eta''
-linear in omega^(-1/2); the seed reports that its eta'' agrees, while its eta' lies
+The experiments Schaink et al. compare with (van der Werff et al. 1989) found eta' and eta''
+linear in omega^(-1/2); Schaink et al. report that their eta'' agrees, while its eta' lies
 below the experiments and levels off ("for small omega eta' is constant"). We plot the
 total eta', eta'' per phi against omega^(-1/2) (omega in 1/t_D) with weighted straight-line
 fits to our points, and print the fits: a straight line describes eta'' if its
@@ -76,7 +76,7 @@ def draw(reductions, path):
     legend_below(ax)
     save(fig, path)
     print_table("\nFig. 5: straight lines eta = a + b omega^(-1/2) fitted to our points "
-                "(seed: eta'' linear like the experiments; eta' levels off)",
+                "(Schaink et al.: eta'' linear like the experiments; eta' levels off)",
                 ["phi", "", "a", "b", "chi2/dof", "values (ascending omega)"], rows)
 
 

@@ -56,7 +56,7 @@ def draw(reductions, path):
             ok = np.isfinite(h)
             spread = (h[ok].max() - h[ok].min()) / h[ok].mean() if ok.sum() > 1 else np.nan
             eq38 = schaink_eta_h(phi)
-            print_table(f"\nFig. 7, phi = {phi:g}: seed: eta'_H constant within 2% over omega "
+            print_table(f"\nFig. 7, phi = {phi:g}: Schaink et al.: eta'_H constant within 2% over omega "
                         f"(ours: spread (max-min)/mean = {100 * spread:.1f}%); eq. 38 "
                         f"eta_H = {eq38:.4g}, within 1% of Schaink et al.'s SD",
                         ["omega", "eta'_H (SD)", "eq. 38", "SD/eq.38 - 1", "eta''_H (SD)",

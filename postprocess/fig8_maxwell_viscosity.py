@@ -80,7 +80,7 @@ def draw(reductions, newtonian, path):
                                                       lam)[q])
             h1, e1, q1 = rows["eta_prime"]
             h2, e2, q2 = rows["eta_dprime"]
-            print_table(f"\nFig. 8, phi = {phi:g}: seed: eqs. 41-42 (with eq. 38's eta_H(0) = "
+            print_table(f"\nFig. 8, phi = {phi:g}: Schaink et al.: eqs. 41-42 (with eq. 38's eta_H(0) = "
                         f"{schaink_eta_h(phi):.4g}) describe the SD eta_H 'very well'"
                         + (f"; our Newtonian eta_H = {pm(*ours)}" if ours else ""),
                         ["omega", "eta'_H (SD)", "eq. 41", "SD/eq.41", "eta''_H (SD)",

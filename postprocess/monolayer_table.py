@@ -15,7 +15,7 @@ another seed can be added). Per model and areal fraction phi_a:
   start-up and before a stop), the deepest overlap and the smallest surface gap;
 - realisations stopped on an overlap deeper than integration.overlap_stop, and when.
 
-Then the ratio eta(repulsion)/eta(hydrodynamic) per phi_a. The seed gives its viscosities
+Then the ratio eta(repulsion)/eta(hydrodynamic) per phi_a. Dratler & Schowalter give their viscosities
 as figures only; its statements are quoted next to ours.
 """
 
@@ -122,7 +122,7 @@ def main(argv=None):
         sys.exit(f"error: {err}")
 
     print("| phi_a | model | eta | eta_h | eta_p | overlaps per config. mean / max "
-          "| deepest overlap (a) | smallest gap (a) | stopped (strain) | seed |")
+          "| deepest overlap (a) | smallest gap (a) | stopped (strain) | Dratler & Schowalter |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     totals = {}
     for kind, red in reductions.items():
@@ -139,7 +139,7 @@ def main(argv=None):
                   f"| {ov['smallest_gap']:.2g} | {stops} | {seed_says(kind, phi)} |")
     phis = sorted({phi for _, phi in totals})
     if "none" in reductions and "repulsion" in reductions:
-        print("\n| phi_a | eta(repulsion) / eta(hydrodynamic only) | seed |")
+        print("\n| phi_a | eta(repulsion) / eta(hydrodynamic only) | Dratler & Schowalter |")
         print("|---|---|---|")
         for phi in phis:
             if ("none", phi) in totals and ("repulsion", phi) in totals:

@@ -1,5 +1,5 @@
-"""Shared helpers of the scripts that rebuild Schaink et al., J. Rheol. 44 (2000) (seed
-000) figures from run files of the jobs/schaink2000_*.toml jobs.
+"""Shared helpers of the scripts that rebuild the figures of Schaink et al., J. Rheol. 44
+(2000) from run files of the jobs/schaink2000_*.toml jobs.
 
 Each figure script takes run files (complete, partial or small: whatever is committed is
 used), reduces them with :func:`sdmpi.analysis.reduce.reduce_runs` (files of the same
