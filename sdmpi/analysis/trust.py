@@ -12,7 +12,15 @@ file (docs/store.md):
 * ``min_gap_min``, ``min_gap_p01``, ``min_gap_p10``, ``min_gap_median``: the distribution
   of the per-step smallest surface gap (``min_gap``, in radii; negative: an overlap);
 * ``solver_iterations_per_step``, ``solver_residual_max``, ``lanczos_iterations_per_step``:
-  iterative-solver statistics (0 for the direct backends).
+  iterative-solver statistics (0 for the direct backends);
+* ``g_gap_1e-3``, ``g_gap_1e-2``, ``g_gap_1e-1``: the pair distribution function near contact
+  from the H5MD trajectories (``output.trajectory_every``; NaN without them), averaged over
+  the committed frames of every task and over the pair-gap shells h = r - a_i - a_j in
+  [0, 1e-3), [1e-3, 1e-2), [1e-2, 1e-1) (radii): pairs counted per shell divided by the count
+  an ideal gas of the same density would put there, sum_pairs 4 pi / (3 V) ((a_i + a_j +
+  h_hi)^3 - (a_i + a_j + h_lo)^3) per frame. For hard spheres in equilibrium it stays near
+  the contact value g(2a) in every shell; a pile-up of pairs at the smallest gaps (a drift
+  too small near contact) shows as a rise towards the first shell.
 
 Fields that a file does not hold are NaN. Warnings are raised when the overlap
 corrections per step exceed :data:`OVERLAPS_PER_STEP_WARN` at the start or at the
@@ -38,14 +46,17 @@ TRUST_COLUMNS = ("n_tasks", "steps", "time", "steps_per_time", "overlaps_per_tim
                  "overlaps_per_step", "midpoint_overlaps_per_time",
                  "midpoint_overlaps_per_step", "min_gap_min", "min_gap_p01", "min_gap_p10",
                  "min_gap_median", "solver_iterations_per_step", "solver_residual_max",
-                 "lanczos_iterations_per_step")
+                 "lanczos_iterations_per_step", "g_gap_1e-3", "g_gap_1e-2", "g_gap_1e-1")
 #: the unit of each column (time: the job's time unit)
 TRUST_UNITS = {"n_tasks": "count", "steps": "count", "time": "time unit",
                "steps_per_time": "1/time unit", "overlaps_per_time": "1/time unit",
                "overlaps_per_step": "1", "midpoint_overlaps_per_time": "1/time unit",
                "midpoint_overlaps_per_step": "1", "min_gap_min": "a", "min_gap_p01": "a",
                "min_gap_p10": "a", "min_gap_median": "a", "solver_iterations_per_step": "1",
-               "solver_residual_max": "1", "lanczos_iterations_per_step": "1"}
+               "solver_residual_max": "1", "lanczos_iterations_per_step": "1",
+               "g_gap_1e-3": "1", "g_gap_1e-2": "1", "g_gap_1e-1": "1"}
+#: the gap shells of the near-contact g (radii)
+GAP_SHELLS = (0.0, 1e-3, 1e-2, 1e-1)
 
 FIELDS = ("n_overlaps", "n_overlaps_midpoint", "min_gap", "solver_iterations",
           "solver_residual", "lanczos_iterations")
@@ -68,6 +79,36 @@ def group_samples(red, g):
                 steps += done
                 time += done * float(group.attrs["dt"])
     return {k: np.concatenate(v) for k, v in out.items() if v}, steps, time
+
+
+def near_contact_g(red, g):
+    """g in the GAP_SHELLS of group g from the committed trajectory frames of its tasks
+    (module docstring); NaN when the run holds no trajectories."""
+    from ..ensemble.store import task_key
+    from .reduce import _open_h5
+    from .trajectories import groups, read
+    counts, ideal = np.zeros(len(GAP_SHELLS) - 1), np.zeros(len(GAP_SHELLS) - 1)
+    edges = np.asarray(GAP_SHELLS)
+    for i, path in enumerate(red.files):
+        present = set(groups(path))
+        for col in np.flatnonzero(red.file_index == i):
+            key = task_key(int(red.task_id[g, col]))
+            if f"task_{key}" not in present:
+                continue
+            traj = read(path, f"task_{key}")
+            with _open_h5(path) as f:
+                radii = f[f"tasks/{key}/radii"][()]
+            a, b = np.triu_indices(len(radii), k=1)
+            contact = radii[a] + radii[b]
+            shell_volume = 4 * np.pi / 3 * ((contact[:, None] + edges[1:]) ** 3
+                                            - (contact[:, None] + edges[:-1]) ** 3).sum(axis=0)
+            for frame, x in enumerate(traj.positions):
+                lattice = traj.lattice(frame)
+                gap = np.linalg.norm(lattice.nearest_image(x[b] - x[a]), axis=1) - contact
+                counts += np.histogram(gap, edges)[0]
+                ideal += shell_volume / lattice.volume
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ideal > 0, counts / ideal, np.nan)
 
 
 def trust_rows(red) -> list[dict]:
@@ -99,6 +140,7 @@ def trust_rows(red) -> list[dict]:
             "solver_iterations_per_step": per_step("solver_iterations"),
             "solver_residual_max": per_step("solver_residual", np.max),
             "lanczos_iterations_per_step": per_step("lanczos_iterations"),
+            **dict(zip(("g_gap_1e-3", "g_gap_1e-2", "g_gap_1e-1"), near_contact_g(red, g).tolist())),
             "_gaps": gaps})
     return rows
 
