@@ -1,25 +1,19 @@
 """postprocess/frictional_phimax.py: phi_max intervals that cover a known phi_max."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sdmpi.analysis.reduce import confidence_half_width
+from tiny_runs import postprocess_script
 
-ROOT = Path(__file__).resolve().parent.parent
 #: the production scans' shape (README "Frictional contact"): volume fractions, realisations
 PHI = np.array([0.45, 0.50, 0.53, 0.56])
 R = 4
 
 
 def load_script():
-    spec = importlib.util.spec_from_file_location("frictional_phimax",
-                                                  ROOT / "postprocess" / "frictional_phimax.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    return script
+    return postprocess_script("frictional_phimax")
 
 
 def synthetic_scan(model, phi_max, spread, rng):

@@ -2,14 +2,13 @@
 tiny real runs (N = 8, a few periods): every table and figure, the Maxwell tables equal
 to `sdmpi reduce --medium`, and byte-identical tables when run again."""
 
-import importlib.util
 import math
 
 import numpy as np
 import pytest
 
 from sdmpi.cli import main as sdmpi_main
-from tiny_runs import ROOT, sdmpi_run
+from tiny_runs import postprocess_script, sdmpi_run
 
 TABLES = ["moduli.csv", "errors.csv", "units.json"]
 FIGURES = ["moduli.png", "omega_half.png", "eta_components.png", "maxwell.png",
@@ -17,11 +16,7 @@ FIGURES = ["moduli.png", "omega_half.png", "eta_components.png", "maxwell.png",
 
 
 def script():
-    spec = importlib.util.spec_from_file_location("schaink2000",
-                                                  ROOT / "postprocess" / "schaink2000.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return postprocess_script("schaink2000")
 
 
 @pytest.fixture(scope="module")

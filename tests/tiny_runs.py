@@ -2,6 +2,7 @@
 and 16 pi, 2 realisations) for the reducer's end-to-end tests: `sdmpi run` as a user
 runs it, one process each."""
 
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -31,3 +32,11 @@ def sdmpi_run(path, *extra, job="schaink2000_newtonian.toml"):
 def maxwell_run(path):
     """The same job in the Maxwell medium MODES, same job seed."""
     return sdmpi_run(path, "--set", 'medium.kind="maxwell"', "--set", f"medium.modes={MODES}")
+
+
+def postprocess_script(name):
+    """postprocess/<name>.py imported as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "postprocess" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
