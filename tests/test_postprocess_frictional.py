@@ -1,6 +1,5 @@
 """postprocess/frictional_phimax.py: phi_max intervals that cover a known phi_max."""
 
-
 import numpy as np
 import pytest
 
