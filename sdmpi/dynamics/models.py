@@ -64,7 +64,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..hydro.basis import to_five
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
 from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, noise_shape, resolve_backend, solver_stats,
