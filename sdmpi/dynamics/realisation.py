@@ -87,7 +87,7 @@ def sample_fields(job):
         "strain": ((), "f8", "1", "gamma(t_k)"),
         "rate": ((), "f8", "1/" + job.time_unit, "gamma_dot(t_k)"),
         **{c.dataset: ((6,), "f8", su, c.description) for c in CONTRIBUTIONS},
-        "n_overlaps": ((), "i4", "1", "overlapping pairs before correction"),
+        "n_overlaps": ((), "i4", "1", "pairs in contact (gap below hydrodynamics.min_gap) before correction"),
         "n_overlaps_midpoint": ((), "i4", "1", "overlapping pairs corrected at the Brownian midpoint"),
         "min_gap": ((), "f8", "a", "smallest surface gap before correction"),
         "solver_iterations": ((), "i4", "1", "Krylov iterations of the step's solves (0: direct backend)"),
