@@ -1,9 +1,10 @@
 """Two hard spheres in a periodic box at rest, stepped through the model interface and the
 overlap correction: the time fraction at small gaps against the exact equilibrium one (the
-relative position is uniform outside the excluded sphere), per drift scheme.
+relative position is uniform outside the excluded sphere), per drift scheme, with or
+without the near-contact correction (`sdmpi.dynamics.models`).
 
-    python bench/near_contact_pair.py SCHEME DT BOX STEPS [SEED]
-    python bench/near_contact_pair.py rfd 5e-4 4.1 200000      # docs/physics.md, ~10 min
+    python bench/near_contact_pair.py SCHEME DT BOX STEPS [SEED [uncorrected]]
+    python bench/near_contact_pair.py rfd 5e-4 4.1 100000 3    # docs/physics.md, ~5 min
 
 Errors: blocks of 1000 steps."""
 import math
@@ -15,11 +16,13 @@ import numpy as np
 from sdmpi.dynamics.collisions import separate
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.hydro.geometry import Lattice
+from sdmpi.hydro.solvers import noise_shape
 
 
 def main():
     scheme, dt, side, n = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
     seed = int(sys.argv[5]) if len(sys.argv) > 5 else 3
+    corrected_step = len(sys.argv) <= 6 or sys.argv[6] != "uncorrected"
     kt, min_gap, radii = 6 * math.pi, 1e-4, np.ones(2)
     lattice = Lattice(np.full(3, side), 0.0)
 
@@ -39,9 +42,14 @@ def main():
         d -= np.round(d / side) * side
         gaps[k] = np.linalg.norm(d) - 2
         at = model.at(pos, 0.0)
-        pos = at.positions + dt * at.brownian(rng, kt, dt).velocities[:, :3]
+        if corrected_step:
+            brownian = at.brownian(rng, kt, dt)
+        else:
+            brownian = at.brownian_terms(rng.standard_normal(noise_shape(at.solver)), kt, dt)
+        pos = at.positions + dt * brownian.velocities[:, :3]
     free = side ** 3 - 4 * math.pi * 8 / 3
-    print(f"{scheme} dt={dt} box={side} steps={n} contacts/step={contacts / n:.4f} "
+    print(f"{scheme} {'corrected' if corrected_step else 'uncorrected'} dt={dt} box={side} steps={n} seed={seed} "
+          f"contacts/step={contacts / n:.4f} "
           f"({time.time() - start:.0f} s)")
     for h in (3e-4, 1e-3, 3e-3, 1e-2, 3e-2):
         exact = 4 * math.pi / 3 * ((2 + h) ** 3 - 8) / free
