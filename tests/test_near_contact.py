@@ -85,6 +85,28 @@ def test_near_contact_correction_has_zero_mean():
     assert np.abs(mean).max() < 1e-12 * scale
 
 
+def test_near_contact_correction_is_pair_forces_through_the_mobility():
+    """Three spheres, two close pairs sharing sphere 0 (a many-body case): R_FU times the
+    correction's velocities is a sum of forces along the close pairs' lines of centres
+    (zero net force and torque, nothing on other directions), so a pair's correction moves
+    its neighbours only as the hydrodynamics couples them."""
+    pos = np.array([[5.0, 5.0, 5.0], [7.002, 5.0, 5.0], [5.0, 7.0005, 5.0]])
+    model = ResistanceModel(np.ones(3), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP)
+    at = model.at(pos, 0.0)
+    rng = np.random.default_rng(5)
+    z, z_near = rng.standard_normal((2, 3, 6))
+    m = at.solver.velocities(at.solver.brownian_forces(z), np.zeros((3, 5)))
+    v = at._near_contact(m, z_near, KT_REDUCED, 5e-4)
+    r_fu = at.resistance.blocks()[0]
+    force = (r_fu @ v.ravel()).reshape(3, 6)
+    e01, e02 = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
+    assert np.abs(v).max() > 0
+    assert np.abs(force[:, 3:]).max() < 1e-8 * np.abs(force).max()   # no torques
+    assert np.abs(force.sum(axis=0)).max() < 1e-8 * np.abs(force).max()
+    assert abs(force[1, 1]) + abs(force[1, 2]) + abs(force[2, 0]) + abs(force[2, 2]) < 1e-8 * np.abs(force).max()
+    assert force[1, :3] @ e01 != 0 and force[2, :3] @ e02 != 0
+
+
 @pytest.mark.parametrize("gap", [1e-3, 3e-3])
 def test_one_step_gap_distribution_is_the_squared_bessel_transition(gap):
     """Two spheres, one step of dt = 5e-4 from a gap h0, 2000 draws: the new gap against

@@ -71,20 +71,27 @@ Ross diffusion with a vanishing level), whose exact transition over dt is
     h1 = (sqrt(h0) + sqrt(c dt/2) z1)^2 + (c dt/2) z2^2,      z1, z2 ~ N(0, 1) independent,
 
 a scaled non-central chi-square with two degrees of freedom. Both schemes draw the drift
-along the noise's own direction, so their radial step is h0 + sqrt(2 c h0 dt) z1 + c dt z1^2
-(the drift kT M' m F is c z1^2): the same mean, but z2 = z1, so that h1 >= h0/2, and a pair
-can never close more than half its gap in one step; the layer h < ~c dt is then
-under-sampled (two spheres at dt = 5e-4: 0.2-0.4 of the equilibrium time below a gap of
-1e-3). The near-contact correction restores the exact transition for every pair with a gap
-below NEAR_CONTACT_GAP (the separation vector and gap h of the model's pair list): it adds to the pair's separation (split equally between its spheres)
+along the noise's own direction. Its singular part near contact is the lubrication term:
+with R_hh ~ A/h the pair's squeeze resistance, f_p the unit pair force (e on j, -e on i),
+m_h = f_p.m the pair's part of the step's direction m = R_FU^-1 C z, and G ~ h/A,
 
-    delta = (c dt/2) (z2^2 - z1^2) = (kT dt / 2h) (m'_h^2 - m_h^2),
+    kT div R_FU^-1  ~  R_FU^-1 f_p kT (A/h^2) m_h^2  ~  R_FU^-1 f_p kT m_h^2 / (G h),
 
-with m_h = e.(m_j - m_i) the pair's radial component of the step's direction m (so z1 =
-m_h/sqrt(G)) and m'_h that of an independent direction m' = R_FU^-1 C z' (z2 = m'_h/
-sqrt(G)), and c = kT G/h. G cancels, so one extra solve serves every pair; both terms have
-mean G, so delta has mean zero at every gap and the mean drift stays exactly the scheme's.
-Far from contact (h >> c dt) delta is a negligible O(dt^2) change of the step's variance.
+so the radial step is h0 + sqrt(2 c h0 dt) z1 + c dt z1^2 with z1 = m_h/sqrt(G): the right
+mean, but z2 = z1, so that h1 >= h0/2; a pair can never close more than half its gap in one
+step, and the layer h < ~c dt is under-sampled (two spheres at dt = 5e-4: 0.2-0.4 of the
+equilibrium time below a gap of 1e-3). The near-contact correction gives every pair with a
+gap below NEAR_CONTACT_GAP (the separation and gap h of the model's pair list) the exact
+transition: it replaces m_h^2 by (m_h^2 + m'_h^2)/2, with m'_h = f_p.m' from one
+independent direction m' = R_FU^-1 C z' (z2 = m'_h/sqrt(G)), i.e. it adds the velocities
+
+    R_FU^-1 sum_p w_p f_p,      w_p = kT (m'_h^2 - m_h^2) / (2 G_p h_p),
+
+which change the pair's own gap by (c dt/2)(z2^2 - z1^2) and move its neighbours as the
+hydrodynamics couples them. Both squares have mean G_p, so the correction has mean zero
+at every gap and the mean drift stays exactly the scheme's. Far from contact (h >> c dt)
+it is a negligible O(dt^2) change of the step's variance. Cost: two solves, and the G_p
+(`relative_mobility`) by one triangular solve for all pairs on the dense backend.
 """
 
 import math
@@ -94,8 +101,8 @@ import numpy as np
 
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
-from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, noise_shape, resolve_backend, solver_stats,
-                             take_preconditioner)
+from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, mobility_forms, noise_shape, resolve_backend,
+                             solver_stats, take_preconditioner)
 
 #: hydrodynamics.model choices
 MODELS = ("stokesian", "far-field", "free-draining")
@@ -125,6 +132,16 @@ def default_scheme(backend):
     return "midpoint" if backend in MATRIX_FREE else "rfd"
 
 
+def unit_pair_forces(i, j, e, n):
+    """Force sets (P, N, 6): for each pair p a unit force e_p on j_p and -e_p on i_p (its
+    line of centres), no torques."""
+    forces = np.zeros((len(i), n, 6))
+    rows = np.arange(len(i))
+    np.add.at(forces, (rows, j, slice(0, 3)), e)
+    np.add.at(forces, (rows, i, slice(0, 3)), -e)
+    return forces
+
+
 class ResistanceEvaluation:
     """A resistance model (stokesian, far-field) at one configuration: its resistance
     (`hydro.resistance`), the backend's solver of it, and the force pair list."""
@@ -144,17 +161,8 @@ class ResistanceEvaluation:
 
     def relative_mobility(self, i, j, e):
         """e.(M_jj + M_ii - M_ij - M_ji).e of the pairs (i, j) with unit lines of centres
-        e (M = R_FU^-1): one solve per pair, unit and opposite forces on j and i."""
-        n = self.n_particles
-        out = np.empty(len(i))
-        zero = np.zeros((n, 5))
-        for k in range(len(i)):
-            f = np.zeros((n, 6))
-            f[j[k], :3] += e[k]
-            f[i[k], :3] -= e[k]
-            u = self.solver.velocities(f, zero)
-            out[k] = e[k] @ (u[j[k], :3] - u[i[k], :3])
-        return out
+        e (M = R_FU^-1): f.M.f for unit and opposite forces f on j and i (`unit_pair_forces`)."""
+        return mobility_forms(self.solver, unit_pair_forces(i, j, e, self.n_particles))
 
     def brownian(self, rng, kT, dt):
         shape = noise_shape(self.solver)
@@ -190,24 +198,23 @@ class ResistanceEvaluation:
 
     def _near_contact(self, m, z_near, kT, dt):
         """Velocities (N, 6) of the near-contact correction (module docstring) for the step's
-        direction m and the independent noise z_near: delta / dt along each close pair's line
-        of centres, half on each sphere."""
+        direction m and the independent noise z_near: R_FU^-1 of the pair forces
+        w_p f_p, w_p = kT (m'_h^2 - m_h^2) / (2 G_p h_p)."""
         pairs = self.pairs
         mean_radius = 0.5 * pairs.radii_sum
         close = pairs.gap < NEAR_CONTACT_GAP * mean_radius
-        out = np.zeros((self.n_particles, 6))
+        n, zero = self.n_particles, np.zeros((self.n_particles, 5))
         if not close.any():
-            return out
+            return np.zeros((n, 6))
         i, j = pairs.i[close], pairs.j[close]
         e = pairs.dx[close] / np.linalg.norm(pairs.dx[close], axis=1)[:, None]
-        m_indep = self.solver.velocities(self.solver.brownian_forces(z_near), np.zeros((self.n_particles, 5)))
+        m_indep = self.solver.velocities(self.solver.brownian_forces(z_near), zero)
         m_h = np.einsum("pc,pc->p", e, m[j, :3] - m[i, :3])
         m_indep_h = np.einsum("pc,pc->p", e, m_indep[j, :3] - m_indep[i, :3])
         gap = np.maximum(pairs.gap[close], self.model.min_gap * mean_radius[close])  # the lubrication's floor
-        push = (0.25 * kT / gap * (m_indep_h ** 2 - m_h ** 2))[:, None] * e  # delta / (2 dt), along e
-        np.add.at(out[:, :3], j, push)
-        np.add.at(out[:, :3], i, -push)
-        return out
+        forces = unit_pair_forces(i, j, e, n)
+        weight = 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility_forms(self.solver, forces) * gap)
+        return self.solver.velocities(np.einsum("p,pkc->kc", weight, forces), zero)
 
     def stats(self):
         """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""

@@ -65,6 +65,14 @@ class DenseSolver:
         """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
         return (self._upper.T @ noise.ravel()).reshape(self.n, 6)
 
+    def mobility_forms(self, forces):
+        """f.R_FU^-1.f for each of the force sets forces (P, N, 6): |U^-T f|^2 with R_FU =
+        U^T U, one triangular solve for all P."""
+        y, info = lapack.dtrtrs(self._upper, forces.reshape(len(forces), -1).T, lower=0, trans=1)
+        if info != 0:
+            raise ValueError(f"trtrs: illegal argument {-info}")
+        return np.einsum("kp,kp->p", y, y)
+
 
 def _petsc_dense(resistance, comm=None):
     from .petsc_dense import PetscDenseSolver
@@ -130,6 +138,16 @@ def noise_shape(solver):
     """Shape of the standard normal noise `solver.brownian_forces` takes: (N, 6) unless
     the backend declares its own (noise_shape)."""
     return getattr(solver, "noise_shape", (solver.n, 6))
+
+
+def mobility_forms(solver, forces):
+    """f.R_FU^-1.f (P,) for the force sets forces (P, N, 6): the backend's own batched form
+    where it has one (dense), else one solve per set."""
+    forms = getattr(solver, "mobility_forms", None)
+    if forms is not None:
+        return forms(forces)
+    zero = np.zeros((solver.n, 5))
+    return np.array([np.vdot(f, solver.velocities(f, zero)) for f in forces])
 
 
 def take_preconditioner(solver, previous):

@@ -1,0 +1,131 @@
+"""The equilibrium structure kept at rest: N spheres at volume fraction phi, no shear, Brownian,
+stepped by one hydrodynamic model at the default time step, against Monte Carlo
+configurations of the same N and phi (`sdmpi.dynamics.initial.hard_sphere_fluid`, independent
+seeds): the pair distribution g in shells of surface gap near contact, and the
+high-frequency viscosity eta_H (`sdmpi.hydro.bulk.hydrodynamic_viscosity`) of the evolved
+configurations. Errors: one standard error (SD: blocks of the run; MC: over configurations).
+
+    python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
+
+MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
+the near-contact correction of `sdmpi.dynamics.models` off (for comparison). Prints one JSON
+line, appended to bench/near_contact_structure.json (docs/physics.md quotes it).
+"""
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sdmpi.config.loader import parse_job
+from sdmpi.dynamics import models
+from sdmpi.dynamics.initial import hard_sphere_fluid
+from sdmpi.dynamics.realisation import Realisation
+from sdmpi.config.tasks import enumerate_tasks
+from sdmpi.hydro.bulk import hydrodynamic_viscosity
+from sdmpi.hydro.geometry import Lattice
+
+#: shells of surface gap (in a) where g is counted
+EDGES = np.array([1e-4, 1e-3, 1e-2, 1e-1])
+JOB = """
+[job]
+name = "near-contact-structure"
+seed = {seed}
+[system]
+n_particles = {n}
+phi = [{phi}]
+[shear]
+protocol = "none"
+[brownian]
+enabled = true
+[integration]
+dt = 5e-4
+n_steps = {steps}
+discard_steps = 0
+[ensemble]
+realisations = 1
+[hydrodynamics]
+model = "{model}"
+"""
+
+
+def shell_counts(pos, box):
+    """Pairs per gap shell (EDGES) of one configuration (nearest images, unit radii)."""
+    a, b = np.triu_indices(len(pos), k=1)
+    gap = np.linalg.norm(Lattice(box, 0.0).nearest_image(pos[b] - pos[a]), axis=1) - 2.0
+    return np.histogram(gap, EDGES)[0]
+
+
+def ideal_counts(n, box):
+    """Pairs per shell of an ideal gas (g = 1) in the box."""
+    shells = 4 * math.pi / 3 * ((2 + EDGES[1:]) ** 3 - (2 + EDGES[:-1]) ** 3)
+    return n * (n - 1) / 2 * shells / np.prod(box)
+
+
+def monte_carlo(n, phi, configs, eta_every):
+    """g per shell and eta_H of independent Monte Carlo configurations."""
+    counts, etas = [], []
+    for k in range(configs):
+        pos, side = hard_sphere_fluid(n, phi, np.random.default_rng([7, n, int(1000 * phi), k]))
+        box = np.full(3, side)
+        counts.append(shell_counts(pos, box) / ideal_counts(n, box))
+        if k % eta_every == 0:
+            etas.append(hydrodynamic_viscosity(pos, box))
+    return np.array(counts), np.array(etas)
+
+
+def dynamics(model, n, phi, steps, eta_every, seed=11):
+    """g per shell (one row per step) and eta_H every eta_every steps of one run at rest, of
+    the configurations the model is evaluated at (each step's start, overlaps corrected)."""
+    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model))
+    real = Realisation(job, enumerate_tasks(job)[0])
+    ideal = ideal_counts(n, real.box)
+    counts, etas = np.empty((steps, len(EDGES) - 1)), []
+    for k in range(steps):
+        real.advance(1)
+        pos, _ = real._separate(real.positions, 0.0)
+        counts[k] = shell_counts(pos, real.box) / ideal
+        if k % eta_every == 0:
+            etas.append(hydrodynamic_viscosity(pos, real.box))
+    return counts, np.array(etas)
+
+
+def summary(samples, blocks=None):
+    """Mean and standard error (over blocks of consecutive samples, or over samples)."""
+    if blocks:
+        samples = samples[: len(samples) // blocks * blocks].reshape(blocks, -1, *samples.shape[1:]).mean(axis=1)
+    return samples.mean(axis=0), samples.std(axis=0, ddof=1) / math.sqrt(len(samples))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("model", choices=models.MODELS)
+    parser.add_argument("--n", type=int, default=27)
+    parser.add_argument("--phi", type=float, default=0.45)
+    parser.add_argument("--steps", type=int, default=10000)
+    parser.add_argument("--mc-configs", type=int, default=2000)
+    parser.add_argument("--uncorrected", action="store_true")
+    parser.add_argument("--out", default=str(Path(__file__).with_name("near_contact_structure.json")))
+    args = parser.parse_args()
+    if args.uncorrected:
+        models.NEAR_CONTACT_GAP = 0.0
+    start = time.perf_counter()
+    g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, eta_every=100)
+    g_mc, eta_mc = monte_carlo(args.n, args.phi, args.mc_configs, eta_every=20)
+    (g1, e1), (g2, e2) = summary(g_sd, blocks=20), summary(g_mc)
+    (h1, f1), (h2, f2) = summary(eta_sd, blocks=20), summary(eta_mc)
+    row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
+           "phi": args.phi, "dt": 5e-4, "steps": args.steps, "mc_configs": args.mc_configs,
+           "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
+           "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [h1, f1], "eta_h_mc": [h2, f2],
+           "seconds": round(time.perf_counter() - start)}
+    print(json.dumps(row))
+    with open(args.out, "a") as out:
+        out.write(json.dumps(row) + "\n")
+
+
+if __name__ == "__main__":
+    main()
