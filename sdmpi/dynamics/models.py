@@ -91,7 +91,10 @@ which change the pair's own gap by (c dt/2)(z2^2 - z1^2) and move its neighbours
 hydrodynamics couples them. Both squares have mean G_p, so the correction has mean zero
 at every gap and the mean drift stays exactly the scheme's. Far from contact (h >> c dt)
 it is a negligible O(dt^2) change of the step's variance. Cost: two solves, and the G_p
-(`relative_mobility`) by one triangular solve for all pairs on the dense backend.
+(`relative_mobility`) by one triangular solve for all pairs on the dense backend. It is
+applied on the direct backends only: an iterative solve's relative error, small against
+the whole of m, is large against the small radial parts m_h of close pairs, and divided by
+G_p h_p it would dominate the correction (petsc-krylov keeps the scheme's own step).
 """
 
 import math
@@ -167,7 +170,7 @@ class ResistanceEvaluation:
     def brownian(self, rng, kT, dt):
         shape = noise_shape(self.solver)
         z = rng.standard_normal(shape)
-        z_near = rng.standard_normal(shape) if self.model.lubrication else None
+        z_near = rng.standard_normal(shape) if self.model.near_contact else None
         return self.brownian_terms(z, kT, dt, z_near)
 
     def brownian_terms(self, z, kT, dt, z_near=None):
@@ -236,6 +239,9 @@ class ResistanceModel:
         self.scheme = default_scheme(self.backend) if scheme is None else scheme
         self.lubrication, self.cutoff, self.min_gap = lubrication, cutoff, min_gap
         self.rfd_step = RFD_STEP * min_gap
+        # the near-contact correction (module docstring): with lubrication, on the direct
+        # backends (an iterative solve's error is amplified in the small radial parts m_h)
+        self.near_contact = lubrication and self.backend not in MATRIX_FREE
         self._hydro = dict(lubrication=lubrication, ewald_tol=ewald_tol, cutoff=cutoff, min_gap=min_gap)
         if self.backend in MATRIX_FREE:
             self._hydro["far_field"] = far_field
