@@ -106,9 +106,10 @@ def test_dilute_hard_sphere_viscosity_limits():
     assert g1 / w ** 2 == pytest.approx(8 / 15, rel=1e-2) and g2 / w == pytest.approx(2.4, rel=1e-6)
     w = np.array([1e6, 1e8])
     c1, c2 = dilute_hard_sphere_viscosity(w)
-    assert np.allclose(c1, 3.6 / np.sqrt(w), rtol=1e-5) and np.allclose(c2, 3.6 * (1 / np.sqrt(w) - 1 / w), rtol=1e-5)
+    assert np.allclose(c1, 3.6 / np.sqrt(w), rtol=1e-5)
+    assert np.allclose(c2, 3.6 * (1 / np.sqrt(w) - 1 / w), rtol=1e-5)
     g1, g2 = dilute_hard_sphere_moduli(w)
-    assert np.allclose(g1, 3.6 * (np.sqrt(w) - 1), rtol=1e-6)
+    assert np.allclose(g1, 3.6 * (np.sqrt(w) - 1), rtol=0, atol=0.01)  # + O(w^-1/2)
     assert np.all(np.diff(dilute_hard_sphere_viscosity(np.geomspace(1e-3, 1e3, 50))[0]) < 0)
 
 
