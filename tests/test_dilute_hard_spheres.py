@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+#: allowance for the systematic offsets (docstring below), relative to the exact value
+SYSTEMATIC = 0.2
 
 
 def _bench():
@@ -25,19 +27,21 @@ def test_free_draining_collision_moduli_are_the_dilute_hard_sphere_result(tmp_pa
     The collision row, divided by phi^2, against the exact G'/phi^2 = 2.006, G''/phi^2 =
     5.408: the standard error of this run is ~0.7 for both (the equilibrium stress
     fluctuations, var G = 4 kT eta'/(gamma0^2 T V) by fluctuation-dissipation), and the
-    longer run of bench/dilute_hard_spheres.py (docs/physics.md) puts the mean within
-    TOLERANCE of exact at these parameters (the O(phi^3) excess, the time step's deficit
-    and the amplitude's O(gamma0^2) partly cancel). Tolerance: that systematic offset plus
-    3 standard errors. A missing or doubled impulse, the wrong sign, G' and G'' exchanged
+    longer runs of bench/dilute_hard_spheres.py (docs/physics.md) agree with exact within
+    their own ~9% errors at omega = 1, 3, 8. Unresolved systematics: the O(phi^3) excess
+    (a factor between g(2) and g(2)^2, +14% to +29% at phi = 0.05), the time step's deficit
+    (the contact value of the same runs is 6% low) and the amplitude's O(gamma0^2).
+    Tolerance: SYSTEMATIC = 20% of exact plus 3 standard errors. A missing or doubled impulse, the wrong sign, G' and G'' exchanged
     (a phase error of pi/2), or the collision stress counted per particle instead of per
     pair fails."""
     bench = _bench()
     process, run = bench.start(3.0, 0.2, 2e-3, 30.0, tmp_path)
-    row = bench.compare(process, run, 3.0, 0.2)
+    bench.finish(process)
+    row = bench.compare(run)
     assert row["hydrodynamic_eta_prime"] == pytest.approx(2.5 * 0.05, rel=1e-12)
     assert row["brownian_G_dprime"] == 0.0
     for name in ("G_prime", "G_dprime"):
         measured, err = row[f"{name}_over_phi2"], row[f"{name}_err_over_phi2"]
         exact = row[f"exact_{name}_over_phi2"]
         assert 0.2 < err < 1.5  # the error estimate is itself sane
-        assert abs(measured - exact) < SYSTEMATIC[name] + 3 * err, (name, measured, err, exact)
+        assert abs(measured - exact) < SYSTEMATIC * exact + 3 * err, (name, measured, err, exact)
