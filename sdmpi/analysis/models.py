@@ -5,6 +5,8 @@ polynomial fit (eq. 38), and the empirical concentrated-suspension laws Krieger-
 Maron-Pierce and Eilers (all with a maximum packing fraction phi_max). Einstein is the
 dilute limit of all but Maron-Pierce, whose slope is 2/phi_max (Einstein only for
 phi_max = 0.8). Maxwell-medium moduli and viscosities (Schaink et al. 2000, eqs. 36, 41-42).
+The exact O(phi^2) linear viscoelasticity of Brownian hard spheres without hydrodynamic
+interactions (Cichocki & Felderhof 1991).
 """
 
 import numpy as np
@@ -119,3 +121,56 @@ def eilers(phi, phi_max=0.64):
     same divergence as Maron-Pierce."""
     phi = _check_below_max(phi, phi_max)
     return (1.0 + 1.25 * phi / (1.0 - phi / phi_max)) ** 2
+
+
+def dilute_hard_sphere_viscosity(omega):
+    """O(phi^2) complex viscosity of Brownian hard spheres without hydrodynamic interactions,
+    eta*(w) - eta_m (1 + 5/2 phi) = phi^2 eta_m c*(w), exact as phi -> 0 (Cichocki &
+    Felderhof, Phys. Rev. A 43, 5405 (1991); Brady, J. Chem. Phys. 99, 567 (1993);
+    Lionberger & Russel, J. Rheol. 38, 1885 (1994)). Returns (c', c''), eta* = eta' - i eta''
+    (Schaink et al. 2000, eq. 19), for w in 1/t_D (t_D = a^2/D0, any shape).
+
+    Derivation. The pair distribution of two spheres, g(r, t), obeys the pair Smoluchowski
+    equation with the relative diffusivity 2 D0 (free draining) and the relative velocity
+    Gamma.r of the imposed flow u = Gamma.x, with no flux through contact r = 2a:
+    dg/dt + div(g Gamma.r - 2 D0 grad g) = 0, r.(g Gamma.r - 2 D0 grad g) = 0 at r = 2a,
+    g -> 1 far away. For E(t) = Re[E0 e^(i w t)] (traceless, symmetric) the linear
+    response is g = 1 + Re[f(r) (r^.E0.r^) e^(i w t)]: div(Gamma.r) = 0 and grad 1 = 0 leave
+    i w f = 2 D0 (f'' + 2 f'/r - 6 f/r^2) outside contact (an l = 2 harmonic), forced through
+    the boundary, f'(2a) = a/D0 (the convective flux 2a r^.E.r^ balanced by diffusion). The
+    decaying solution is the modified spherical Bessel function k_2(kappa r), kappa =
+    (i w/(2 D0))^(1/2) with Re kappa > 0, k_2(x) ~ e^-x (x^2 + 3x + 3)/x^3, so with
+    z = 2a kappa = (2 i w a^2/D0)^(1/2):
+
+        f(2a) = (2 a^2/D0) k_2(z)/(z k_2'(z)) = -(2 a^2/D0) (z^2 + 3z + 3)/(z^3 + 4z^2 + 9z + 9).
+
+    The hard-sphere (contact) stress, -(n^2 kT (2a)^3/2) oint r^r^ g(2a, r^) dOmega (Batchelor
+    1977; its trace is the contact osmotic pressure n kT 4 phi g(2a)), with
+    oint r^r^ (r^.E.r^) dOmega = (8 pi/15) E and n = 3 phi/(4 pi a^3), is 2 eta_m phi^2 c* E:
+
+        c*(w) = (36/5) (z^2 + 3z + 3)/(z^3 + 4z^2 + 9z + 9)
+              = (12/5) (1 + z + z^2/3)/(1 + z + 4z^2/9 + z^3/9)
+
+    in eta_m, using kT/D0 = 6 pi eta_m a. Limits: w -> 0, c* -> 12/5 (the zero-shear O(phi^2)
+    Brownian viscosity without hydrodynamic interactions; Bergenholtz, Brady & Vicic, J.
+    Fluid Mech. 456, 239 (2002)); w -> inf, c* ~ (36/5)(1/z - 1/z^2), i.e.
+    c' ~ (18/5)(w t_D)^(-1/2) and c'' ~ (18/5)[(w t_D)^(-1/2) - (w t_D)^-1].
+
+    The 5/2 phi is the single spheres' stresslet (20/3) pi a^3 E (Einstein), which sdmpi's
+    free-draining model puts in the hydrodynamic stress; c* is the whole interparticle part,
+    which sdmpi records as the collision stress (`dynamics.collisions`). Free draining has no
+    O(phi^2) hydrodynamic term."""
+    w = np.asarray(omega, float)
+    z = np.sqrt(2j * w)
+    c = 7.2 * (z * z + 3 * z + 3) / (z ** 3 + 4 * z * z + 9 * z + 9)
+    return c.real, -c.imag
+
+
+def dilute_hard_sphere_moduli(omega):
+    """G'/phi^2 and G''/phi^2 of dilute_hard_sphere_viscosity (G' = w eta'', G'' = w eta'),
+    in eta_m/t_D: the O(phi^2) moduli of hard spheres without hydrodynamic interactions,
+    G* = i w eta*. Limits: w -> 0, G'' ~ (12/5) w and G' ~ (8/15) w^2 (c* = (12/5)(1 - z^2/9
+    + O(z^3)): a mean relaxation time of 2/9 t_D); w -> inf, G' ~ (18/5)(w^(1/2) - 1), G'' ~ (18/5) w^(1/2)."""
+    c1, c2 = dilute_hard_sphere_viscosity(omega)
+    w = np.asarray(omega, float)
+    return w * c2, w * c1
