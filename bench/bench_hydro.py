@@ -39,7 +39,7 @@ def one_solve(pos, side, timings):
     pairs = lubrication.close_pairs(pos, radii, lattice)
     lubrication.lubrication_matrix(pos, radii, pairs, out=rmat)
     t4 = time.perf_counter()
-    solver = solvers.DenseSolver(resistance.GrandResistance(rmat, pairs, None, pos))
+    solver = solvers.DenseSolver(resistance.GrandResistance(rmat, pairs, None, pos, radii))
     e5 = np.broadcast_to(to_five(np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])), (n, 5))
     vel = solver.velocities(np.zeros((n, 6)), e5)
     solver.stresslets(vel, e5)

@@ -47,6 +47,18 @@ dx = [... + kT div R_FU^-1] dt + sqrt(2 kT dt) R_FU^-1/2 dW:
   sees the true gradient of its lubrication where a finite half step would cross the floor
   and see none. The difference of two direct solves loses log10(cond R_FU) + log10(1/
   RFD_STEP min_gap) of the 16 digits: ~6 remain relative to the drift at min_gap = 1e-4.
+  The displaced configuration is not assembled, inverted and factorised again: with
+  R(x + epsilon m) = R + Delta R and Delta R (m, 0) from `hydro.resistance.resistance_change`
+  (the far-field change by its own Ewald sums, the lubrication pair by pair), both
+  differences are taken to first order in Delta R,
+
+      R_FU^-1(x + epsilon m) F - m                ~ dm = -R_FU^-1 (Delta R_FU m),
+      -(R_SU R_FU^-1)(x + epsilon m) F + R_SU m   ~ -(Delta R_SU m) - R_SU dm.
+
+  The terms dropped are quadratic in Delta R, so cubic in z: zero mean, and the mean is
+  still the divergence to O(epsilon^2); per sample they are ~2e-4 of the drift at N = 27,
+  phi = 0.45, and the far-field change's looser Ewald tolerance (`farfield.
+  plan_far_field_change`) adds ~5e-5 (bench/rfd_accuracy.py, docs/performance.md).
 * ``midpoint``: Fixman's midpoint scheme as used for SD by Banchio & Brady, J. Chem. Phys.
   118, 10323 (2003): x* = x + (dt/2) R_FU^-1(x) F_B, then R_FU^-1(x*) F_B, whose mean is
   kT div R_FU^-1 to O(dt); the Brownian stresslet -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B.
@@ -102,8 +114,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..hydro.farfield import NDOF
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
+from ..hydro.resistance import resistance_change
 from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, mobility_forms, noise_shape, resolve_backend,
                              solver_stats, take_preconditioner)
 
@@ -192,11 +206,12 @@ class ResistanceEvaluation:
             return BrownianTerms(u_mid + near, mid.stresslets(u_mid, zero) - self.solver.stresslets(noise, zero),
                                  found)
         step = self.model.rfd_step * 6 * math.pi  # m is ~ 1/(6 pi a) per unit of z
-        moved, _ = self.model.displaced(self, self.positions + step * m[:, :3], separate=False)
-        self._solvers.append(moved)
-        m_moved = moved.velocities(unit_force, zero)
-        drift = (kT / step) * (m_moved - m)
-        stress = (kT / step) * (moved.stresslets(m_moved, zero) - self.solver.stresslets(m, zero))
+        direction = np.zeros((self.n_particles, NDOF))
+        direction[:, :6] = m
+        change = self.model.resistance_change(self, self.positions + step * m[:, :3], direction)
+        dm = -self.solver.velocities(change[:, :6], zero)  # (R + Delta R)_FU^-1 F - m, first order
+        drift = (kT / step) * dm
+        stress = (kT / step) * (self.solver.stresslets(dm, zero) - change[:, 6:])
         return BrownianTerms(noise + drift + near, stress)
 
     def _near_contact(self, m, z_near, kT, dt):
@@ -251,9 +266,12 @@ class ResistanceModel:
         self._on_error = on_error  # LinAlgError -> exception to raise
 
     def _assemble(self, positions, strain, plan=None):
+        # the rfd's resistance change needs M_inf^-1 of the start (direct backends only)
+        keep = {"keep_far_inverse": True} if plan is None and self.scheme == "rfd" and \
+            self.backend not in MATRIX_FREE else {}
         try:
             return assemble(self.backend, positions, self.radii, self.box, strain, plan=plan,
-                            comm=self.comm, **self._hydro)
+                            comm=self.comm, **self._hydro, **keep)
         except np.linalg.LinAlgError as err:
             if self._on_error is None:
                 raise
@@ -269,6 +287,12 @@ class ResistanceModel:
         else:
             pairs = close_pairs(res.positions, self.radii, Lattice(self.box, strain), self.cutoff, self.min_gap)
         return ResistanceEvaluation(self, res, self._solver(res), pairs, strain)
+
+    def resistance_change(self, evaluation, positions, vector):
+        """[R(positions) - R] v (N, 11) about the configuration of `evaluation`, to first
+        order (`hydro.resistance.resistance_change`)."""
+        return resistance_change(evaluation.resistance, positions, vector, Lattice(self.box, evaluation.strain),
+                                 self._hydro["ewald_tol"], self.min_gap)
 
     def displaced(self, evaluation, positions, separate):
         """The solver at displaced positions with the pair sets of `evaluation` (and its

@@ -332,6 +332,107 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         block[:, :] = 0.0
 
 
+@numba.njit(cache=True)
+def _real_space_change(pos, moved, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, w, out):
+    """Adds [M_r(moved) - M_r(pos)] w into out (N, 11): the change of the real-space sum of
+    `_real_space_sum` (same images) between two configurations, applied to w (N, 11),
+    block by block (no matrix is formed)."""
+    bounds = _power_bounds(table)
+    pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
+    v = np.empty((4, 5))
+    new, old = np.zeros((NDOF, NDOF)), np.zeros((NDOF, NDOF))
+    rvec = np.empty(3)
+    n_img = pi.shape[0]
+    for p in range(n_img):
+        i, j = pi[p], pj[p]
+        for c in range(3):
+            rvec[c] = moved[i, c] - moved[j, c] - shift[p, c]
+        r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
+        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
+        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, new)
+        for c in range(3):
+            rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
+        r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
+        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
+        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, old)
+        if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
+            continue
+        for a in range(NDOF):  # M_ij += D, M_ji += D^T with D = new - old
+            acc_i = 0.0
+            for b in range(NDOF):
+                d = new[a, b] - old[a, b]
+                acc_i += d * w[j, b]
+                out[j, b] += d * w[i, a]
+            out[i, a] += acc_i
+        new[:, :] = 0.0
+        old[:, :] = 0.0
+
+
+@numba.njit(cache=True)
+def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, kvec, row_c, scale, w, out):
+    """Adds [M_k(moved) - M_k(pos)] w into out (N, 11): the reciprocal sum of the pair form
+    above applied to w, from the cosines and sines (N, nk) of k.x at both configurations.
+    With c_j, s_j those of k.x_j and f_a(a_j) = 1 - row_c[a] a_j^2 k^2, per wave vector and
+    normal direction t the sums P_c,s = sum_j (c_j, s_j) sum_{a in U} f b_at w_ja and
+    Q_c,s (a in Omega, E) give (M w)_ia = scale f_a(a_i) b_at [c_i (P_c - Q_s) + s_i (P_s +
+    Q_c)] on the U rows and scale f_a(a_i) b_at [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the
+    others, scale = 2/V: O(N n_k) operations, no pair loop."""
+    n = w.shape[0]
+    proj = np.empty((n, 2))
+    fb = np.empty((n, NDOF))
+    for kk in range(kvec.shape[0]):
+        ksq = kvec[kk, 0] ** 2 + kvec[kk, 1] ** 2 + kvec[kk, 2] ** 2
+        for t in range(2):
+            for j in range(n):  # f b(k) per particle, its U and (Omega, E) parts of (f b)^T w_j
+                a2k2 = radii[j] ** 2 * ksq
+                even, odd = 0.0, 0.0
+                for a in range(NDOF):
+                    fb[j, a] = (1.0 - row_c[a] * a2k2) * b[kk, a, t]
+                    if a < 3:
+                        even += fb[j, a] * w[j, a]
+                    else:
+                        odd += fb[j, a] * w[j, a]
+                proj[j, 0], proj[j, 1] = even, odd
+            for side in range(2):
+                c, s = (cos_new, sin_new) if side == 0 else (cos_old, sin_old)
+                sign = scale if side == 0 else -scale
+                pc, ps, qc, qs = 0.0, 0.0, 0.0, 0.0
+                for j in range(n):
+                    pc += c[j, kk] * proj[j, 0]
+                    ps += s[j, kk] * proj[j, 0]
+                    qc += c[j, kk] * proj[j, 1]
+                    qs += s[j, kk] * proj[j, 1]
+                for i in range(n):
+                    u_part = sign * (c[i, kk] * (pc - qs) + s[i, kk] * (ps + qc))
+                    o_part = sign * (c[i, kk] * (qc + ps) + s[i, kk] * (qs - pc))
+                    for a in range(3):
+                        out[i, a] += fb[i, a] * u_part
+                    for a in range(3, NDOF):
+                        out[i, a] += fb[i, a] * o_part
+
+
+def far_field_change(positions, moved, radii, plan, w):
+    """[M_inf(moved) - M_inf(positions)] w (N, 11) for w (N, 11): the change of the far-field
+    mobility between two configurations with the pair images and wave vectors of the plan
+    (from `plan_far_field` at positions; moved a small displacement of it), applied to one
+    vector without forming either matrix. The self blocks do not change. Each sum is
+    evaluated at both configurations with the same terms, so the difference carries the
+    Ewald truncation error of the plan relative to itself (~tol of the change)."""
+    pos = np.ascontiguousarray(positions, dtype=float)
+    moved = np.ascontiguousarray(moved, dtype=float)
+    radii = np.ascontiguousarray(radii, dtype=float)
+    w = np.ascontiguousarray(w, dtype=float)
+    out = np.zeros_like(w)
+    xi = 0.0 if plan.params is None else plan.params.xi
+    grid = plan.grid
+    _real_space_change(pos, moved, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
+    if plan.params is not None:
+        old, new = pos @ plan.kvec.T, moved @ plan.kvec.T
+        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii,
+                           wave_amplitudes(plan.kvec, xi), plan.kvec, _ROW_C, 2.0 / plan.volume, w, out)
+    return out
+
+
 # ---------------------------------------------------------------------------------
 # reciprocal space and self terms (numpy + BLAS)
 # ---------------------------------------------------------------------------------
@@ -361,10 +462,10 @@ _PAIR_CHUNK = 2048  # pairs per matrix product (bounds the work arrays)
 
 
 @numba.njit(cache=True)
-def _wave_tensors(kvec, xi, basis, cos_entries, sin_entries, tcos, tsin):
-    """tcos[k, e], tsin[k, e] = (b b^T)[entry e] of the cosine and sine entries, for unit
-    radius factors (see the pair form above)."""
-    b = np.empty((NDOF, 2))
+def _wave_amplitudes(kvec, xi, basis, b):
+    """b[k] = the real 11x2 matrix b(k) of the pair form above for unit radius factors:
+    R(k) q_t sqrt(h)/k for the two unit vectors q_t normal to k (the factor i of the Omega
+    and E rows left out)."""
     q = np.empty(3)
     for kk in range(kvec.shape[0]):
         k0, k1, k2 = kvec[kk, 0], kvec[kk, 1], kvec[kk, 2]
@@ -387,22 +488,29 @@ def _wave_tensors(kvec, xi, basis, cos_entries, sin_entries, tcos, tsin):
                 q[1] = (k2 * p0 - k0 * p2) / kmag
                 q[2] = (k0 * p1 - k1 * p0) / kmag
             for c in range(3):
-                b[c, t] = scale * q[c]
-            b[3, t] = 0.5 * scale * (k1 * q[2] - k2 * q[1])
-            b[4, t] = 0.5 * scale * (k2 * q[0] - k0 * q[2])
-            b[5, t] = 0.5 * scale * (k0 * q[1] - k1 * q[0])
+                b[kk, c, t] = scale * q[c]
+            b[kk, 3, t] = 0.5 * scale * (k1 * q[2] - k2 * q[1])
+            b[kk, 4, t] = 0.5 * scale * (k2 * q[0] - k0 * q[2])
+            b[kk, 5, t] = 0.5 * scale * (k0 * q[1] - k1 * q[0])
             for m in range(5):
                 acc = 0.0
                 for a in range(3):
                     for c in range(3):
                         acc += kvec[kk, a] * basis[m, a, c] * q[c]
-                b[6 + m, t] = scale * acc
+                b[kk, 6 + m, t] = scale * acc
+
+
+@numba.njit(cache=True)
+def _wave_tensors(b, cos_entries, sin_entries, tcos, tsin):
+    """tcos[k, e], tsin[k, e] = (b b^T)[entry e] of the cosine and sine entries, for the
+    wave vectors' b (`_wave_amplitudes`)."""
+    for kk in range(b.shape[0]):
         for e in range(cos_entries.shape[0]):
             r, c = cos_entries[e, 0], cos_entries[e, 1]
-            tcos[kk, e] = b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1]
+            tcos[kk, e] = b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]
         for e in range(sin_entries.shape[0]):
             r, c = sin_entries[e, 0], sin_entries[e, 1]
-            tsin[kk, e] = b[r, 0] * b[c, 0] + b[r, 1] * b[c, 1]
+            tsin[kk, e] = b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]
 
 
 @numba.njit(cache=True)
@@ -436,6 +544,13 @@ def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entr
                         mob[rj + a, ri + b] += v_ba[p, e]
 
 
+def wave_amplitudes(kvec, xi):
+    """b(k) (nk, 11, 2) of every wave vector (`_wave_amplitudes`)."""
+    b = np.empty((len(kvec), NDOF, 2))
+    _wave_amplitudes(kvec, xi, BASIS, b)
+    return b
+
+
 def _wave_terms(radii, kvec, xi, volume):
     """What the reciprocal sum needs besides the positions: the cosine and sine tensors
     of every wave vector (scaled by 2/V, with the radius factors folded in when all radii
@@ -443,7 +558,7 @@ def _wave_terms(radii, kvec, xi, volume):
     whether the radii are equal."""
     nk = len(kvec)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
-    _wave_tensors(kvec, xi, BASIS, _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
+    _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
     tcos *= 2.0 / volume
     tsin *= 2.0 / volume
     ksq = np.einsum("ij,ij->i", kvec, kvec)[:, None]
@@ -501,8 +616,13 @@ def self_mobility(radius, xi=None):
     """Diagonal 11x11 self block: the isolated sphere, U = F/(6 pi a),
     Omega = L/(8 pi a^3), -E = -S 3/(20 pi a^3), minus (for xi given) the k-space
     Ewald field at r = 0, obtained from int d^3k/(2pi)^3 R(k) J^(k) R(k)^H with the
-    angular averages <I - kk> = 2/3, and 1/5 for the strain block."""
-    a = float(radius)
+    angular averages <I - kk> = 2/3, and 1/5 for the strain block (a fresh array)."""
+    return np.diag(_self_diagonal(float(radius), None if xi is None else float(xi)))
+
+
+@functools.lru_cache(maxsize=256)
+def _self_diagonal(a, xi):
+    """The diagonal of `self_mobility` (read-only, cached: a plan per step asks again)."""
     diag = np.empty(NDOF)
     diag[0:3] = 1 / (6 * math.pi * a)
     diag[3:6] = 1 / (8 * math.pi * a ** 3)
@@ -513,7 +633,8 @@ def self_mobility(radius, xi=None):
         diag[0:3] -= c * (2 / 3) * _h_integral([1.0, -2 * al, al * al], xi)
         diag[3:6] -= c * (1 / 6) * _h_integral([0.0, 1.0], xi)
         diag[6:11] -= c * (1 / 5) * _h_integral([0.0, 1.0, -2 * be, be * be], xi)
-    return np.diag(diag)
+    diag.flags.writeable = False
+    return diag
 
 
 # ---------------------------------------------------------------------------------
@@ -617,6 +738,27 @@ def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=Non
     grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
     return FarFieldPlan(par, images, lattice.wave_vectors(par.kcut), _cached_radial_table(par.xi),
                         grid, {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
+
+
+#: the far-field change (`far_field_change`) of a random finite difference is summed to this
+#: many times the Ewald tolerance of the mobility (at most CHANGE_TOL_MAX): it is a ~2% part
+#: of the Brownian drift (the many-body far field; lubrication carries the rest), so its
+#: relative error enters the drift ~50 times smaller (docs/numerics.md)
+CHANGE_TOL_FACTOR = 100.0
+CHANGE_TOL_MAX = 1e-4
+#: its splitting parameter, relative to `EwaldParameters.choose`'s: the change costs two
+#: real-space kernels per image but only O(N) operations per wave vector, so fewer images
+#: and more wave vectors than the assembly's balance are cheaper (measured optimum 1.3)
+CHANGE_XI_FACTOR = 1.3
+
+
+def plan_far_field_change(positions, radii, lattice, tol=DEFAULT_EWALD_TOL):
+    """The FarFieldPlan of `far_field_change` about (wrapped) positions for a mobility of
+    Ewald tolerance tol: tolerance min(CHANGE_TOL_FACTOR tol, CHANGE_TOL_MAX), splitting
+    parameter CHANGE_XI_FACTOR times the assembly's choice."""
+    tol = min(CHANGE_TOL_FACTOR * tol, CHANGE_TOL_MAX)
+    xi = None if lattice is None else CHANGE_XI_FACTOR * EwaldParameters.choose(lattice, tol).xi
+    return plan_far_field(positions, radii, lattice, tol, xi)
 
 
 def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD_TOL, xi=None, plan=None):

@@ -39,7 +39,7 @@ class Lattice:
         #: rows are the lattice vectors L1, L2, L3
         self.vectors = np.array([[lx, 0.0, 0.0], [self.strain * ly, ly, 0.0], [0.0, 0.0, lz]])
         #: rows b_i with b_i . L_j = delta_ij (reciprocal vectors without the 2 pi)
-        self.reciprocal = np.linalg.inv(self.vectors).T
+        self.reciprocal = np.array([[1 / lx, -self.strain / lx, 0.0], [0.0, 1 / ly, 0.0], [0.0, 0.0, 1 / lz]])
         self.volume = float(lx * ly * lz)
 
     def wrap(self, positions):

@@ -168,6 +168,30 @@ def lubrication_matrix(positions, radii, pairs, out=None):
     return out
 
 
+def lubrication_product(radii, pairs, vector):
+    """L v (N, 11) for v (N, 11): the near-field correction of `lubrication_matrix` applied
+    to one vector pair by pair, without forming the matrix."""
+    vector = np.ascontiguousarray(vector, dtype=float)
+    out = np.zeros_like(vector)
+    for pi, pj, res in pair_blocks(radii, pairs):
+        _pair_products(pi, pj, res, vector, out)
+    return out
+
+
+@numba.njit(cache=True)
+def _pair_products(pi, pj, res, v, out):
+    """out[(i, j)] += res[p] (v_i, v_j) for every pair p = (i, j) (22x22 blocks res)."""
+    for p in range(pi.shape[0]):
+        idx = (pi[p], pj[p])
+        for u in range(2):
+            for a in range(NDOF):
+                acc = 0.0
+                for s in range(2):
+                    for b in range(NDOF):
+                        acc += res[p, NDOF * u + a, NDOF * s + b] * v[idx[s], b]
+                out[idx[u], a] += acc
+
+
 def lubrication_sparse(positions, radii, pairs, factors=False):
     """The near-field correction of `lubrication_matrix` as a scipy BSR matrix
     (11 x 11 blocks): the same pair blocks, summed into the blocks (i, i), (i, j),

@@ -14,11 +14,12 @@ import numpy as np
 import scipy.sparse
 from scipy.linalg import lapack
 
-from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, plan_far_field
+from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, far_field_mobility, plan_far_field,
+                       plan_far_field_change)
 from .geometry import Lattice, find_pairs
 from .krylov import DenseFarField, far_field_operator
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_matrix,
-                          lubrication_sparse)
+                          lubrication_product, lubrication_sparse)
 
 
 @dataclass
@@ -27,17 +28,21 @@ class HydroPlan:
 
     far: FarFieldPlan | None  # built on first use
     near_images: tuple | None  # (i, j, shift) of the lubrication pairs, None: no lubrication
+    change: FarFieldPlan | None = None  # the sums of `resistance_change`, built on first use
 
 
 @dataclass
 class GrandResistance:
     """R (11N x 11N, dofs ordered per particle: 3 U, 3 Omega, 5 E), its close pairs,
-    the plan it was built with and the (wrapped) positions it was built at."""
+    the plan it was built with, the (wrapped) positions it was built at, the radii, and
+    M_inf^-1 alone where kept (for `resistance_change`)."""
 
     matrix: np.ndarray
     pairs: PairList
     plan: HydroPlan
     positions: np.ndarray
+    radii: np.ndarray
+    far_inverse: np.ndarray | None = None
 
     @property
     def n_particles(self):
@@ -126,20 +131,50 @@ def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap,
 
 def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
                      ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
-                     max_overlap=None, plan=None):
+                     max_overlap=None, plan=None, keep_far_inverse=False):
     """Assemble R. Positions are wrapped into the sheared cell, unless a plan from an
     earlier call is given: then they are used as given with the plan's pair sets (for
-    random finite differences about that configuration). max_overlap (mean radii):
-    raise ValueError for deeper overlaps before the expensive work."""
+    displaced configurations about that one). max_overlap (mean radii): raise ValueError
+    for deeper overlaps before the expensive work. keep_far_inverse: keep a copy of
+    M_inf^-1 (for `resistance_change`)."""
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     matrix = spd_inverse(far_field_mobility(pos, radii, plan=plan.far))
+    far_inverse = matrix.copy() if keep_far_inverse else None
     if plan.near_images is not None:
         lubrication_matrix(pos, radii, pairs, out=matrix)
-    return GrandResistance(matrix, pairs, plan, pos)
+    return GrandResistance(matrix, pairs, plan, pos, radii, far_inverse)
+
+
+def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
+    """[R(moved) - R(base)] v (N, 11) for one vector v (N, 11), to first order in the
+    displacement moved - base.positions (small, e.g. a random finite difference), with the
+    pair sets of base (its plan) and without assembling or inverting anything at moved:
+
+        Delta R v = -M^-1 [Delta M_inf (M^-1 v)] + L(moved) v - L(base) v,
+
+    M^-1 = base.far_inverse (kept by `grand_resistance(keep_far_inverse=True)`), Delta M_inf
+    w by `farfield.far_field_change` (on its own plan, `plan_far_field_change` for a
+    mobility of tolerance ewald_tol, in the lattice of base's strain), L(moved) v pair by
+    pair (`lubrication.lubrication_product`, separations floored at min_gap as in
+    `close_pairs`) and L(base) v = R v - M^-1 v. The dropped term, M^-1 Delta M M^-1 Delta M
+    M^-1 v, is second order in the displacement."""
+    if base.far_inverse is None:
+        raise ValueError("resistance_change: the base resistance was assembled without keep_far_inverse")
+    n = base.n_particles
+    flat = np.ascontiguousarray(vector, dtype=float).ravel()
+    far_v = base.far_inverse @ flat
+    if base.plan.change is None:
+        base.plan.change = plan_far_field_change(base.positions, base.radii, lattice, ewald_tol)
+    delta_m = far_field_change(base.positions, moved, base.radii, base.plan.change, far_v.reshape(n, NDOF))
+    out = -(base.far_inverse @ delta_m.ravel())
+    if base.plan.near_images is not None:
+        pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
+        out += lubrication_product(base.radii, pairs, vector).ravel() - (base.matrix @ flat - far_v)
+    return out.reshape(n, NDOF)
 
 
 def mobility_divergence(resistance_at, base, h=1e-5):
