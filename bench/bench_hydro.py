@@ -1,7 +1,7 @@
 """Benchmark: assemble R and solve one mobility problem at phi = 0.45 (one rank, BLAS
 threads pinned to 1 by the Makefile). Writes a JSON file and prints a table of where the
-time goes: Ewald real space, Ewald reciprocal space, Cholesky inverse of M_inf,
-lubrication, factorisation of R_FU and solve. Median of `repeat` runs after a warm-up
+time goes: Ewald real space, Ewald reciprocal space, the inverse of M_inf (its block form,
+`hydro.resistance`), lubrication, factorisation of R_FU and solve. Median of `repeat` runs after a warm-up
 (numba compilation excluded)."""
 
 import argparse
@@ -34,12 +34,12 @@ def one_solve(pos, side, timings):
         s = slice(farfield.NDOF * i, farfield.NDOF * (i + 1))
         mob[s, s] += plan.self_blocks[1.0]
     t2 = time.perf_counter()
-    rmat = resistance.spd_inverse(mob)
+    far = resistance.far_field_blocks(mob)
     t3 = time.perf_counter()
     pairs = lubrication.close_pairs(pos, radii, lattice)
-    lubrication.lubrication_matrix(pos, radii, pairs, out=rmat)
+    res = resistance.from_blocks(far, resistance.lubrication_blocks(radii, pairs), pairs, None, pos, radii)
     t4 = time.perf_counter()
-    solver = solvers.DenseSolver(resistance.GrandResistance(rmat, pairs, None, pos, radii))
+    solver = solvers.DenseSolver(res)
     e5 = np.broadcast_to(to_five(np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])), (n, 5))
     vel = solver.velocities(np.zeros((n, 6)), e5)
     solver.stresslets(vel, e5)

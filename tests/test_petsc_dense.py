@@ -102,7 +102,7 @@ def test_not_positive_definite_is_a_linalg_error():
     from sdmpi.hydro.solvers import make_solver
 
     res = grand_resistance(np.array([[0.0, 0, 0], [3.0, 0, 0]]), np.ones(2))
-    res.matrix[0, 0] = -1.0
+    res.r_fu[0, 0] = -1.0
     with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
         make_solver("petsc-dense", res)
 

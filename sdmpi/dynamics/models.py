@@ -266,12 +266,9 @@ class ResistanceModel:
         self._on_error = on_error  # LinAlgError -> exception to raise
 
     def _assemble(self, positions, strain, plan=None):
-        # the rfd's resistance change needs M_inf^-1 of the start (direct backends only)
-        keep = {"keep_far_inverse": True} if plan is None and self.scheme == "rfd" and \
-            self.backend not in MATRIX_FREE else {}
         try:
             return assemble(self.backend, positions, self.radii, self.box, strain, plan=plan,
-                            comm=self.comm, **self._hydro, **keep)
+                            comm=self.comm, **self._hydro)
         except np.linalg.LinAlgError as err:
             if self._on_error is None:
                 raise

@@ -149,7 +149,7 @@ def lubrication_matrix_exact(positions, radii, pairs):
     if len(pairs.i) == 0:
         return out
     res = pair_corrections_exact(pairs.dx, radii[pairs.i], radii[pairs.j])
-    _scatter_pairs(pairs.i, pairs.j, res, out)
+    scatter_pair_blocks(pairs.i, pairs.j, res, out)
     return out
 
 
@@ -164,7 +164,7 @@ def lubrication_matrix(positions, radii, pairs, out=None):
     elif out.shape != (NDOF * n, NDOF * n) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ValueError("lubrication_matrix: out must be a C-contiguous float64 (11N, 11N) array")
     for pi, pj, res in pair_blocks(radii, pairs):
-        _scatter_pairs(pi, pj, res, out)
+        scatter_pair_blocks(pi, pj, res, out)
     return out
 
 
@@ -174,12 +174,12 @@ def lubrication_product(radii, pairs, vector):
     vector = np.ascontiguousarray(vector, dtype=float)
     out = np.zeros_like(vector)
     for pi, pj, res in pair_blocks(radii, pairs):
-        _pair_products(pi, pj, res, vector, out)
+        pair_products(pi, pj, res, vector, out)
     return out
 
 
 @numba.njit(cache=True)
-def _pair_products(pi, pj, res, v, out):
+def pair_products(pi, pj, res, v, out):
     """out[(i, j)] += res[p] (v_i, v_j) for every pair p = (i, j) (22x22 blocks res)."""
     for p in range(pi.shape[0]):
         idx = (pi[p], pj[p])
@@ -512,7 +512,7 @@ def _add_pair(i, j, pair, out):
 
 
 @numba.njit(cache=True)
-def _scatter_pairs(pi, pj, res, out):
+def scatter_pair_blocks(pi, pj, res, out):
     """Adds each pair's 22x22 matrix res[p] into out (see _add_pair)."""
     for p in range(pi.shape[0]):
         _add_pair(pi[p], pj[p], res[p], out)

@@ -7,7 +7,7 @@ Same interface and equations as `solvers.DenseSolver` (see `sdmpi.hydro.solvers`
 What is distributed, and what is not:
 
 - R_FU (6N x 6N) is a PETSc MATMPIDENSE over the communicator (each rank copies only
-  its own block of rows out of the replicated numpy R), converted to MATSCALAPACK (2-D
+  its own block of rows out of the replicated numpy R_FU), converted to MATSCALAPACK (2-D
   block-cyclic) and factorised in place by ScaLAPACK's pdpotrf (R_FU = L L^T). Each solve
   is pdpotrs on a distributed vector; the solution is gathered to every rank.
 - The Brownian factor is the Cholesky factor itself: after the factorisation, L is
@@ -19,8 +19,8 @@ What is distributed, and what is not:
   converts it and marks it factored again (MatSetFactorType through ctypes, as petsc4py
   3.18 does not wrap it; if that fails, R_FU is factorised a second time for the copy).
 - R_FE, R_SU, R_SE products stay replicated numpy on every rank, and so does the
-  assembly of R (`grand_resistance`, including the O((11N)^3) inverse of M_inf): every
-  rank of the communicator holds the whole (11N)^2 matrix.
+  assembly of R (`grand_resistance`, including the O((11N)^3) block inverse of M_inf):
+  every rank of the communicator holds the whole of it.
 
 Inputs and outputs are replicated numpy arrays; every method is collective over the
 communicator (all its ranks must build the same solver and call the same methods in the
@@ -44,7 +44,6 @@ import sys
 
 import numpy as np
 
-from .farfield import NDOF
 
 #: options PETSc is initialised with (when sdmpi is the first to import it)
 PETSC_OPTIONS = ["-no_signal_handler"]
@@ -177,18 +176,11 @@ class PetscDenseSolver:
         _keepalive(PETSc, self.comm)
         self.n = n = resistance.n_particles
         m = 6 * n
-        # the blocks of resistance.blocks(), but R_FU only in this rank's rows
-        idx = np.arange(NDOF * n).reshape(n, NDOF)
-        rigid, strain = idx[:, :6].ravel(), idx[:, 6:].ravel()
-        mat = resistance.matrix
-        self.r_fe = mat[np.ix_(rigid, strain)]
-        self.r_su = mat[np.ix_(strain, rigid)]
-        self.r_se = mat[np.ix_(strain, strain)]
-
+        self.resistance = resistance  # R_FE, R_SU, R_SE act through its block form
         dense = PETSc.Mat().createDense([m, m], comm=self.comm)
         dense.setUp()
         r0, r1 = dense.getOwnershipRange()
-        rows = mat[np.ix_(rigid[r0:r1], rigid)]
+        rows = resistance.r_fu[r0:r1]  # R_FU in this rank's rows
         dense.getDenseArray()[:] = rows
         dense.assemble()
         factor = dense.convert("scalapack")  # in place (petsc4py: no `out`)
@@ -255,12 +247,12 @@ class PetscDenseSolver:
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
-        rhs = forces.ravel() + self.r_fe @ einf.ravel()
+        rhs = forces.ravel() + self.resistance.strain_forces(einf)
         return self._solve(rhs).reshape(self.n, 6)
 
     def stresslets(self, velocities, einf):
         """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
-        return (self.r_se @ einf.ravel() - self.r_su @ velocities.ravel()).reshape(self.n, 5)
+        return self.resistance.stresslets(velocities, einf)
 
     def brownian_forces(self, noise):
         """L z for z (N, 6), R_FU = L L^T: a force sample with covariance R_FU."""

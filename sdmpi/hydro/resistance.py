@@ -2,9 +2,19 @@
 
 Durlofsky, Brady & Bossis (1987) unbounded; Brady, Phillips, Lester & Bossis (1988)
 periodic. Generalized vectors per particle (11 components, see `farfield`):
-F = (F, L, -S) = R (U - U_inf, Omega - Omega_inf, -E_inf), viscosity 1. M_inf is
-inverted through its Cholesky factorisation (LAPACK potrf/potri): R needs the inverse
-itself, not only its action.
+F = (F, L, -S) = R (U - U_inf, Omega - Omega_inf, -E_inf), viscosity 1.
+
+M_inf^-1 is kept in block form (`GrandResistance`): with the rigid-body dofs a (U, Omega: 6
+per particle) and the strain dofs b (E: 5 per particle), M_bb = U_b^T U_b (Cholesky) and
+Y = U_b^-T M_ba, the Schur complement S = M_aa - Y^T Y gives (block inversion; e.g. Golub &
+Van Loan, Matrix Computations, sec. 3.2)
+
+    [M^-1]_aa = S^-1,   [M^-1]_ab = -S^-1 M_ab M_bb^-1,
+    [M^-1]_bb = M_bb^-1 + M_bb^-1 M_ba S^-1 M_ab M_bb^-1.
+
+Only S^-1 (6N x 6N) is formed, by Cholesky (LAPACK potrf/potri): R_FU = S^-1 + L_aa must be
+a matrix (it is factorised), while R_FE, R_SU and R_SE only act on vectors, through solves
+with U_b. This costs about half the flops of inverting the whole (11N)^2 M_inf.
 """
 
 from dataclasses import dataclass
@@ -12,14 +22,14 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 import scipy.sparse
-from scipy.linalg import lapack
+from scipy.linalg import blas, lapack
 
 from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, far_field_mobility, plan_far_field,
                        plan_far_field_change)
 from .geometry import Lattice, find_pairs
 from .krylov import DenseFarField, far_field_operator
-from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_matrix,
-                          lubrication_product, lubrication_sparse)
+from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_product,
+                          lubrication_sparse, pair_blocks, pair_products, scatter_pair_blocks)
 
 
 @dataclass
@@ -33,29 +43,113 @@ class HydroPlan:
 
 @dataclass
 class GrandResistance:
-    """R (11N x 11N, dofs ordered per particle: 3 U, 3 Omega, 5 E), its close pairs,
-    the plan it was built with, the (wrapped) positions it was built at, the radii, and
-    M_inf^-1 alone where kept (for `resistance_change`)."""
+    """R = M_inf^-1 + L at one configuration, in the block form of the module docstring:
+    R_FU = S^-1 + L_aa (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, M_ab (6N x 5N)
+    and the upper Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b); the lubrication as
+    its pair blocks (pair_i, pair_j, blocks (P, 22, 22)); its close pairs, the plan it was
+    built with, the (wrapped) positions it was built at and the radii."""
 
-    matrix: np.ndarray
+    r_fu: np.ndarray
+    s_inverse: np.ndarray
+    m_ab: np.ndarray
+    chol_bb: np.ndarray
+    lubrication: tuple | None
     pairs: PairList
     plan: HydroPlan
     positions: np.ndarray
     radii: np.ndarray
-    far_inverse: np.ndarray | None = None
 
     @property
     def n_particles(self):
-        return self.matrix.shape[0] // NDOF
+        return self.positions.shape[0]
+
+    def far_inverse_product(self, v):
+        """M_inf^-1 v (N, 11) for v (N, 11): t = M_bb^-1 v_b, y_a = S^-1 (v_a - M_ab t),
+        y_b = t - M_bb^-1 M_ba y_a."""
+        n = self.n_particles
+        t = _chol_solve(self.chol_bb, np.ascontiguousarray(v[:, 6:]).ravel())
+        y_a = self.s_inverse @ (np.ascontiguousarray(v[:, :6]).ravel() - self.m_ab @ t)
+        out = np.empty((n, NDOF))
+        out[:, :6] = y_a.reshape(n, 6)
+        out[:, 6:] = (t - _chol_solve(self.chol_bb, self.m_ab.T @ y_a)).reshape(n, 5)
+        return out
+
+    def lubrication_product(self, v):
+        """L v (N, 11) for v (N, 11), pair by pair."""
+        out = np.zeros((self.n_particles, NDOF))
+        if self.lubrication is not None:
+            pair_products(*self.lubrication, np.ascontiguousarray(v, dtype=float), out)
+        return out
+
+    def product(self, v):
+        """R v (N, 11) for v (N, 11)."""
+        return self.far_inverse_product(v) + self.lubrication_product(v)
+
+    def apply(self, rigid, strain):
+        """The rigid (N, 6) and strain (N, 5) rows of R (rigid, strain): R_FU u + R_FE e and
+        R_SU u + R_SE e for u = rigid, e = strain."""
+        out = self.product(np.hstack([rigid, strain]))
+        return out[:, :6], out[:, 6:]
+
+    def strain_forces(self, einf):
+        """R_FE e_inf (6N,) for einf (N, 5) (zero without a strain)."""
+        if not np.any(einf):
+            return np.zeros(6 * self.n_particles)
+        return self.apply(np.zeros((self.n_particles, 6)), einf)[0].ravel()
+
+    def stresslets(self, velocities, einf):
+        """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5)."""
+        return self.apply(-np.asarray(velocities, dtype=float), np.asarray(einf, dtype=float))[1]
 
     def blocks(self):
-        """(R_FU, R_FE, R_SU, R_SE): the 6N rigid-body and 5N strain partitions, dofs
-        ordered particle by particle within each (fresh C-contiguous copies; R_SU is the
-        view R_FE^T, R is symmetric)."""
+        """(R_FU, R_FE, R_SU, R_SE) as fresh dense matrices (dofs particle by particle within
+        each; R_SU = R_FE^T): formed explicitly from the block form, for reference and
+        tests (a step uses `apply`)."""
         n = self.n_particles
-        r_fu, r_fe, r_se = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
-        _partition(self.matrix, r_fu, r_fe, r_se)
-        return r_fu, r_fe, r_fe.T, r_se
+        x = _chol_solve(self.chol_bb, np.ascontiguousarray(self.m_ab.T))  # M_bb^-1 M_ba (5N x 6N)
+        inv_ab = -self.s_inverse @ x.T
+        inv_bb = _chol_solve(self.chol_bb, np.eye(5 * n)) + x @ self.s_inverse @ x.T
+        lub = np.zeros((NDOF * n, NDOF * n))
+        if self.lubrication is not None:
+            scatter_pair_blocks(*self.lubrication, lub)
+        l_fu, l_fe, l_se = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
+        _partition(lub, l_fu, l_fe, l_se)
+        r_fe = inv_ab + l_fe
+        return self.r_fu.copy(), r_fe, r_fe.T, inv_bb + l_se
+
+    @property
+    def matrix(self):
+        """The whole R (11N x 11N, dofs particle by particle), formed from `blocks` (for
+        reference and tests)."""
+        n = self.n_particles
+        r_fu, r_fe, r_su, r_se = self.blocks()
+        idx = np.arange(NDOF * n).reshape(n, NDOF)
+        rigid, strain = idx[:, :6].ravel(), idx[:, 6:].ravel()
+        out = np.empty((NDOF * n, NDOF * n))
+        out[np.ix_(rigid, rigid)], out[np.ix_(rigid, strain)] = r_fu, r_fe
+        out[np.ix_(strain, rigid)], out[np.ix_(strain, strain)] = r_su, r_se
+        return out
+
+
+def _chol_solve(upper, rhs):
+    """A^-1 rhs for A = U^T U (upper factor U, LAPACK potrs)."""
+    sol, info = lapack.dpotrs(upper, rhs, lower=False)
+    if info != 0:
+        raise ValueError(f"potrs: illegal argument {-info}")
+    return sol
+
+
+@numba.njit(cache=True)
+def _scatter_rigid(pi, pj, blocks, r_fu):
+    """Adds the rigid-body rows and columns (U, Omega of either sphere) of each pair's 22x22
+    block into the (6N, 6N) matrix r_fu."""
+    for p in range(pi.shape[0]):
+        idx = (pi[p], pj[p])
+        for u in range(2):
+            for v in range(2):
+                for a in range(6):
+                    for b in range(6):
+                        r_fu[6 * idx[u] + a, 6 * idx[v] + b] += blocks[p, NDOF * u + a, NDOF * v + b]
 
 
 @numba.njit(cache=True)
@@ -82,14 +176,20 @@ def spd_inverse(matrix):
     """Inverse of a symmetric positive definite C-ordered matrix by Cholesky (potrf +
     potri), computed in its memory (the matrix is overwritten). matrix.T is the same
     matrix in Fortran order, so LAPACK works on it without a copy."""
-    chol, info = lapack.dpotrf(matrix.T, lower=False, clean=False, overwrite_a=True)
+    return _upper_spd_inverse(matrix.T).T  # symmetric: its C-ordered view
+
+
+def _upper_spd_inverse(upper):
+    """The inverse (Fortran-ordered, both triangles) of the symmetric positive definite
+    matrix held in the upper triangle of the Fortran-ordered array upper, in its memory."""
+    chol, info = lapack.dpotrf(upper, lower=False, clean=False, overwrite_a=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info})")
     inv, info = lapack.dpotri(chol, lower=False, overwrite_c=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed (info {info})")
     _mirror_upper(inv)
-    return inv.T  # symmetric: its C-ordered view
+    return inv
 
 
 @numba.njit(cache=True)
@@ -131,22 +231,51 @@ def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap,
 
 def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
                      ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
-                     max_overlap=None, plan=None, keep_far_inverse=False):
-    """Assemble R. Positions are wrapped into the sheared cell, unless a plan from an
-    earlier call is given: then they are used as given with the plan's pair sets (for
-    displaced configurations about that one). max_overlap (mean radii): raise ValueError
-    for deeper overlaps before the expensive work. keep_far_inverse: keep a copy of
-    M_inf^-1 (for `resistance_change`)."""
+                     max_overlap=None, plan=None):
+    """Assemble R (`GrandResistance`). Positions are wrapped into the sheared cell, unless a
+    plan from an earlier call is given: then they are used as given with the plan's pair
+    sets (for displaced configurations about that one). max_overlap (mean radii): raise
+    ValueError for deeper overlaps before the expensive work."""
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
-    matrix = spd_inverse(far_field_mobility(pos, radii, plan=plan.far))
-    far_inverse = matrix.copy() if keep_far_inverse else None
-    if plan.near_images is not None:
-        lubrication_matrix(pos, radii, pairs, out=matrix)
-    return GrandResistance(matrix, pairs, plan, pos, radii, far_inverse)
+    far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
+    lub = lubrication_blocks(radii, pairs) if plan.near_images is not None else None
+    return from_blocks(far, lub, pairs, plan, pos, radii)
+
+
+def lubrication_blocks(radii, pairs):
+    """(pair_i, pair_j, blocks (P, 22, 22)) of the lubrication pairs (`lubrication.pair_blocks`
+    gathered), or None without pairs."""
+    if len(pairs.i) == 0:
+        return None
+    chunks = [(pi.copy(), pj.copy(), res.copy()) for pi, pj, res in pair_blocks(radii, pairs)]
+    return tuple(np.concatenate(part) for part in zip(*chunks))
+
+
+def from_blocks(far, lub, pairs, plan, positions, radii):
+    """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
+    lubrication blocks lub (`lubrication_blocks`, None: none): R_FU = S^-1 + L_aa."""
+    s_inverse, m_ab, chol_bb = far
+    r_fu = s_inverse.copy()
+    if lub is not None:
+        _scatter_rigid(*lub, r_fu)
+    return GrandResistance(r_fu, s_inverse, m_ab, chol_bb, lub, pairs, plan, positions, radii)
+
+
+def far_field_blocks(mob):
+    """(S^-1, M_ab, U_b) of the far-field mobility mob (11N x 11N) (module docstring)."""
+    n = mob.shape[0] // NDOF
+    m_aa, m_ab, m_bb = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
+    _partition(mob, m_aa, m_ab, m_bb)
+    chol_bb, info = lapack.dpotrf(m_bb.T, lower=False, clean=True, overwrite_a=True)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info}, strain block)")
+    y = blas.dtrsm(1.0, chol_bb, m_ab.T, trans_a=1)  # U_b^-T M_ba (5N x 6N)
+    schur = blas.dsyrk(-1.0, y, beta=1.0, c=m_aa.T, trans=1, lower=0, overwrite_c=1)  # upper triangle
+    return _upper_spd_inverse(schur).T, m_ab, chol_bb
 
 
 def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
@@ -156,25 +285,20 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
 
         Delta R v = -M^-1 [Delta M_inf (M^-1 v)] + L(moved) v - L(base) v,
 
-    M^-1 = base.far_inverse (kept by `grand_resistance(keep_far_inverse=True)`), Delta M_inf
-    w by `farfield.far_field_change` (on its own plan, `plan_far_field_change` for a
-    mobility of tolerance ewald_tol, in the lattice of base's strain), L(moved) v pair by
-    pair (`lubrication.lubrication_product`, separations floored at min_gap as in
-    `close_pairs`) and L(base) v = R v - M^-1 v. The dropped term, M^-1 Delta M M^-1 Delta M
+    M^-1 from base's block form, Delta M_inf w by `farfield.far_field_change` (on its own
+    plan, `plan_far_field_change` for a mobility of tolerance ewald_tol, in the lattice of
+    base's strain), L(moved) v pair by pair (`lubrication.lubrication_product`, separations
+    floored at min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M
     M^-1 v, is second order in the displacement."""
-    if base.far_inverse is None:
-        raise ValueError("resistance_change: the base resistance was assembled without keep_far_inverse")
-    n = base.n_particles
-    flat = np.ascontiguousarray(vector, dtype=float).ravel()
-    far_v = base.far_inverse @ flat
+    vector = np.ascontiguousarray(vector, dtype=float)
+    far_v = base.far_inverse_product(vector)
     if base.plan.change is None:
         base.plan.change = plan_far_field_change(base.positions, base.radii, lattice, ewald_tol)
-    delta_m = far_field_change(base.positions, moved, base.radii, base.plan.change, far_v.reshape(n, NDOF))
-    out = -(base.far_inverse @ delta_m.ravel())
+    out = -base.far_inverse_product(far_field_change(base.positions, moved, base.radii, base.plan.change, far_v))
     if base.plan.near_images is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
-        out += lubrication_product(base.radii, pairs, vector).ravel() - (base.matrix @ flat - far_v)
-    return out.reshape(n, NDOF)
+        out += lubrication_product(base.radii, pairs, vector) - base.lubrication_product(vector)
+    return out
 
 
 def mobility_divergence(resistance_at, base, h=1e-5):

@@ -34,24 +34,25 @@ AUTO_KRYLOV_MIN_N = 300
 
 
 class DenseSolver:
-    """Cholesky factorisation of R_FU (LAPACK potrf/potrs via scipy, in place: R_FU comes
-    as a fresh copy from `GrandResistance.blocks` and is finite by construction)."""
+    """Cholesky factorisation of R_FU (LAPACK potrf/potrs via scipy, on a copy of the
+    resistance's R_FU, finite by construction); R_FE, R_SU, R_SE act through the
+    resistance's block form (`resistance.GrandResistance`)."""
 
     name = "dense"
 
     def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
-        r_fu, self.r_fe, self.r_su, self.r_se = resistance.blocks()
+        self.resistance = resistance
         self.n = resistance.n_particles
-        # r_fu.T is the same symmetric matrix in Fortran order: its upper factor U
-        # (R_FU = U^T U) overwrites it, and U.T is the lower factor C in C order
-        upper, info = lapack.dpotrf(r_fu.T, lower=False, clean=True, overwrite_a=True)
+        # R_FU is symmetric: the transpose of a C-ordered copy is it in Fortran order; its
+        # upper factor U (R_FU = U^T U) overwrites it, and U.T is the lower factor C
+        upper, info = lapack.dpotrf(resistance.r_fu.copy().T, lower=False, clean=True, overwrite_a=True)
         if info != 0:
             raise np.linalg.LinAlgError(f"R_FU is not positive definite (potrf info {info})")
         self._upper = upper
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
-        rhs = forces.ravel() + self.r_fe @ einf.ravel()
+        rhs = forces.ravel() + self.resistance.strain_forces(einf)
         sol, info = lapack.dpotrs(self._upper, rhs, lower=False)
         if info != 0:
             raise ValueError(f"potrs: illegal argument {-info}")
@@ -59,7 +60,7 @@ class DenseSolver:
 
     def stresslets(self, velocities, einf):
         """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
-        return (self.r_se @ einf.ravel() - self.r_su @ velocities.ravel()).reshape(self.n, 5)
+        return self.resistance.stresslets(velocities, einf)
 
     def brownian_forces(self, noise):
         """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
