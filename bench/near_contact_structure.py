@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
 from sdmpi.config.loader import parse_job
 from sdmpi.dynamics import models
 from sdmpi.dynamics.initial import hard_sphere_fluid
@@ -54,15 +55,12 @@ model = "{model}"
 
 def shell_counts(pos, box):
     """Pairs per gap shell (EDGES) of one configuration (nearest images, unit radii)."""
-    a, b = np.triu_indices(len(pos), k=1)
-    gap = np.linalg.norm(Lattice(box, 0.0).nearest_image(pos[b] - pos[a]), axis=1) - 2.0
-    return np.histogram(gap, EDGES)[0]
+    return pair_counts(pos, Lattice(box, 0.0), 2.0 + EDGES)
 
 
 def ideal_counts(n, box):
     """Pairs per shell of an ideal gas (g = 1) in the box."""
-    shells = 4 * math.pi / 3 * ((2 + EDGES[1:]) ** 3 - (2 + EDGES[:-1]) ** 3)
-    return n * (n - 1) / 2 * shells / np.prod(box)
+    return ideal_pair_counts(n, np.prod(box), 2.0 + EDGES)
 
 
 def monte_carlo(n, phi, configs, eta_every):

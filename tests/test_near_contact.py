@@ -228,6 +228,7 @@ def test_free_draining_and_far_field_models_at_a_configuration():
 def _layer_g(steps=2000):
     """g in the gap shell [2.5e-4, 3e-3) a of N = 27 spheres at phi = 0.45 at rest (full SD,
     dt = 5e-4, from the Monte Carlo start), counted at each step's start."""
+    from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
     from sdmpi.config.loader import parse_job
     from sdmpi.config.tasks import enumerate_tasks
     from sdmpi.dynamics.realisation import Realisation
@@ -235,15 +236,12 @@ def _layer_g(steps=2000):
                     '[shear]\nprotocol = "none"\n[brownian]\nenabled = true\n[integration]\ndt = 5e-4\n'
                     f'n_steps = {steps}\ndiscard_steps = 0\n[ensemble]\nrealisations = 1\n')
     real = Realisation(job, enumerate_tasks(job)[0])
-    lo, hi, count = 2.5e-4, 3e-3, 0
-    a, b = np.triu_indices(27, k=1)
+    edges, count, lattice = 2 + np.array([2.5e-4, 3e-3]), 0, Lattice(real.box, 0.0)
     for _ in range(steps):
         real.advance(1)
         pos, _ = real._separate(real.positions, 0.0)
-        gap = np.linalg.norm(Lattice(real.box, 0.0).nearest_image(pos[b] - pos[a]), axis=1) - 2
-        count += np.count_nonzero((gap >= lo) & (gap < hi))
-    ideal = len(a) * 4 * math.pi / 3 * ((2 + hi) ** 3 - (2 + lo) ** 3) / np.prod(real.box)
-    return count / steps / ideal
+        count += pair_counts(pos, lattice, edges)[0]
+    return count / steps / ideal_pair_counts(27, lattice.volume, edges)[0]
 
 
 def test_many_body_layer_near_contact_is_filled():

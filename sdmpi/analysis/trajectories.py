@@ -126,19 +126,28 @@ def pair_distribution(traj: Trajectory, r_max: float, bins: int = 100):
         raise ValueError(f"r_max = {r_max:g} exceeds half the smallest cell width "
                          f"({largest:.4g}, over all frames)")
     edges = np.linspace(0.0, r_max, bins + 1)
-    counts = np.zeros(bins)
+    counts, ideal = np.zeros(bins), np.zeros(bins)
     n = traj.positions.shape[1]
-    i, j = np.triu_indices(n, k=1)
-    volume = 0.0
     for frame, x in enumerate(traj.positions):
         lattice = traj.lattice(frame)
-        r = np.linalg.norm(lattice.nearest_image(x[j] - x[i]), axis=1)
-        counts += np.histogram(r, edges)[0]
-        volume += lattice.volume
-    frames = len(traj.positions)
-    shells = 4.0 * math.pi / 3.0 * (edges[1:] ** 3 - edges[:-1] ** 3)
-    g = counts / frames / (n * (n - 1) / 2) * (volume / frames) / shells
-    return 0.5 * (edges[1:] + edges[:-1]), g
+        counts += pair_counts(x, lattice, edges)
+        ideal += ideal_pair_counts(n, lattice.volume, edges)
+    return 0.5 * (edges[1:] + edges[:-1]), counts / ideal
+
+
+def pair_counts(positions, lattice, edges):
+    """Pairs of one configuration (N, 3) per centre-separation shell [edges[k], edges[k+1]),
+    nearest images in the lattice (`hydro.geometry.Lattice`)."""
+    i, j = np.triu_indices(len(positions), k=1)
+    r = np.linalg.norm(lattice.nearest_image(positions[j] - positions[i]), axis=1)
+    return np.histogram(r, edges)[0]
+
+
+def ideal_pair_counts(n, volume, edges):
+    """Pairs per shell of `pair_counts` of n uncorrelated particles (g = 1) in a volume:
+    n (n - 1)/2 (4 pi/3)(r_(k+1)^3 - r_k^3) / V; pair_counts over this is g."""
+    edges = np.asarray(edges, dtype=float)
+    return n * (n - 1) / 2 * 4.0 * math.pi / 3.0 * (edges[1:] ** 3 - edges[:-1] ** 3) / volume
 
 
 # --------------------------------------------------------------------------- MSD

@@ -227,8 +227,7 @@ class ResistanceEvaluation:
         i, j = pairs.i[close], pairs.j[close]
         e = pairs.dx[close] / np.linalg.norm(pairs.dx[close], axis=1)[:, None]
         m_indep = self.solver.velocities(self.solver.brownian_forces(z_near), zero)
-        m_h = np.einsum("pc,pc->p", e, m[j, :3] - m[i, :3])
-        m_indep_h = np.einsum("pc,pc->p", e, m_indep[j, :3] - m_indep[i, :3])
+        m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
         gap = np.maximum(pairs.gap[close], self.model.min_gap * mean_radius[close])  # the lubrication's floor
         forces = unit_pair_forces(i, j, e, n)
         weight = 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility_forms(self.solver, forces) * gap)
