@@ -133,3 +133,30 @@ def test_bad_input_raises_value_error_naming_argument(kwargs, match):
     positions, box = args.pop("positions"), args.pop("box")
     with pytest.raises(ValueError, match=match):
         solve_mobility(positions, box, **args)
+
+
+@pytest.mark.parametrize("lubrication", [False, True])
+def test_block_form_equals_the_inverse_of_the_whole_far_field(lubrication):
+    """R in block form (Schur complement of the strain block) against R = inv(M_inf) + L
+    with the whole 11N x 11N M_inf inverted by numpy, for 8 spheres at phi = 0.3 in a sheared
+    box, with products (`apply`) and matrices (`blocks`): both are the same inverse, rounded
+    differently (cond(M_inf) ~ 1e2: tolerance 1e-10 of the largest entry)."""
+    from sdmpi.dynamics.initial import hard_sphere_fluid
+    from sdmpi.hydro.farfield import far_field_mobility
+    from sdmpi.hydro.geometry import Lattice
+    from sdmpi.hydro.lubrication import close_pairs, lubrication_matrix
+
+    pos, side = hard_sphere_fluid(8, 0.3, np.random.default_rng(5), strain=0.2)
+    box = np.full(3, side)
+    res = grand_resistance(pos, np.ones(8), box, 0.2, lubrication=lubrication)
+    lattice = Lattice(box, 0.2)
+    ref = np.linalg.inv(far_field_mobility(res.positions, np.ones(8), box, 0.2))
+    if lubrication:
+        ref += lubrication_matrix(res.positions, np.ones(8), close_pairs(res.positions, np.ones(8), lattice))
+    scale = np.abs(ref).max()
+    assert np.abs(res.matrix - ref).max() < 1e-10 * scale
+    v = np.random.default_rng(6).standard_normal((8, 11))
+    rigid, strain = res.apply(v[:, :6], v[:, 6:])
+    full = (ref @ v.ravel()).reshape(8, 11)
+    assert np.abs(rigid - full[:, :6]).max() < 1e-10 * np.abs(full).max()
+    assert np.abs(strain - full[:, 6:]).max() < 1e-10 * np.abs(full).max()

@@ -642,6 +642,7 @@ def _self_diagonal(a, xi):
 # ---------------------------------------------------------------------------------
 
 
+@functools.lru_cache(maxsize=64)
 def _truncation_parameter(tol, power=6):
     """s with exp(-s^2) s^power = tol. With power 6: the reach, in units of 1/xi (real
     space) and 2 xi (reciprocal space), at which the slowest-decaying kernel (the 4th

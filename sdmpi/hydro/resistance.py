@@ -67,11 +67,13 @@ class GrandResistance:
         """M_inf^-1 v (N, 11) for v (N, 11): t = M_bb^-1 v_b, y_a = S^-1 (v_a - M_ab t),
         y_b = t - M_bb^-1 M_ba y_a."""
         n = self.n_particles
-        t = _chol_solve(self.chol_bb, np.ascontiguousarray(v[:, 6:]).ravel())
-        y_a = self.s_inverse @ (np.ascontiguousarray(v[:, :6]).ravel() - self.m_ab @ t)
+        v_a, v_b = np.ascontiguousarray(v[:, :6]).ravel(), np.ascontiguousarray(v[:, 6:]).ravel()
+        t = _chol_solve(self.chol_bb, v_b) if v_b.any() else None  # none for rigid-body v
+        y_a = self.s_inverse @ (v_a if t is None else v_a - self.m_ab @ t)
+        y_b = -_chol_solve(self.chol_bb, self.m_ab.T @ y_a)
         out = np.empty((n, NDOF))
         out[:, :6] = y_a.reshape(n, 6)
-        out[:, 6:] = (t - _chol_solve(self.chol_bb, self.m_ab.T @ y_a)).reshape(n, 5)
+        out[:, 6:] = (y_b if t is None else y_b + t).reshape(n, 5)
         return out
 
     def lubrication_product(self, v):
