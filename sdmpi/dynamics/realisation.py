@@ -238,6 +238,7 @@ class Realisation:
         k = self.step
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
+        step_rate = self.protocol.mean_rate(t0, t1)
         pos, collisions = self._start(k, strain, Lattice(self.box, strain))
         if self.monolayer is not None and self.monolayer.stops(k, collisions.deepest, self.task.task_id):
             self.step += 1
@@ -249,7 +250,7 @@ class Realisation:
 
         u_flow = at.velocities(np.zeros((n, 6)), e5)
         s_h = at.stresslets(u_flow, e5)
-        velocity = u_flow
+        velocity = _at_step_rate(at, u_flow, rate, step_rate)
         forces, virial = pair_forces(self.force_law, at.pairs, n, self.radii)
         forces = np.hstack([forces, np.zeros((n, 3))])
         contact_sample = {}
@@ -291,7 +292,7 @@ class Realisation:
             sample["stresslets"] = s_h
 
         if self.contacts is not None:
-            self.contacts.advance(velocity, rate, self.dt)
+            self.contacts.advance(velocity, step_rate, self.dt)
         if self.monolayer is not None:
             velocity = self.monolayer.in_plane(velocity)
         strain1 = self.protocol.strain(t1)
@@ -306,6 +307,20 @@ class Realisation:
         n = self.n_particles
         return bulk_stress(at.stresslets(velocities, np.zeros((n, 5))), self.volume) \
             - symmetric_six(virial) / self.volume
+
+
+def _at_step_rate(at, u_flow, rate, step_rate):
+    """The disturbance velocities R_FU^-1 R_FE e_inf of the step's mean rate
+    <gamma_dot> = (gamma(t1) - gamma(t0))/dt (`shear`) from those of the start's rate
+    gamma_dot(t0): they are linear in e_inf, so u(<gamma_dot>) = (<gamma_dot>/gamma_dot(t0))
+    u(gamma_dot(t0)); one more solve only where gamma_dot(t0) = 0 exactly. Unchanged (the
+    same array) where the two rates are equal (steady shear, no shear)."""
+    if step_rate == rate:
+        return u_flow
+    if rate != 0.0:
+        return (step_rate / rate) * u_flow
+    n = len(u_flow)
+    return at.velocities(np.zeros((n, 6)), np.broadcast_to(to_five(rate_of_strain(step_rate)), (n, 5)))
 
 
 def _encode_rng(rng):
