@@ -7,12 +7,21 @@ Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 
 
 integrated explicitly (Euler-Maruyama) with the hydrodynamics of a model
 (`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated once per step
-at the step's start: a Brownian force F_B = sqrt(2 kT/dt) C z with R_FU = C C^T and
-z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation), and the drift
-kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et al. eq. 16)
-estimated by the model's drift scheme (`models`: a random finite difference along the
-noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys. 118, 10323
-(2003)).
+at the step's start,
+
+    x_{k+1} = x_k + (gamma(t_{k+1}) - gamma(t_k)) y e_x + dt U(x_k),
+
+with the imposed flow's part of U, R_FU^-1 R_FE e_inf, taken at the step's mean rate
+<gamma_dot> = (gamma(t_{k+1}) - gamma(t_k))/dt (`shear`), of which the affine displacement
+is the exact integral. Both parts then belong to one flow: a pair whose relative velocity
+along its line of centres is (1 - A) times the affine one (A -> 1 near contact) closes with
+the step's own strain (with the start's rate gamma_dot(t_k) in the disturbance, it would be
+driven like the rate of A/(2(1 - A)) steps later). A Brownian force F_B = sqrt(2 kT/dt) C z
+with R_FU = C C^T and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation),
+and the drift kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et
+al. eq. 16) estimated by the model's drift scheme (`models`: a random finite difference
+along the noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys.
+118, 10323 (2003)).
 
 Stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz, units eta_m/t_D = kT/(6 pi a^3);
 the registry `config.stresses`): hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1
@@ -108,7 +117,10 @@ def sample_fields(job):
 class Realisation:
     """One task's SD realisation, a deterministic function of (job, task): its random
     stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
-    (taken at the start of the step, t_k = k dt); exposes its full state."""
+    at the start of the step, t_k = k dt: the stresses of the configuration x_k at the
+    rate gamma_dot(t_k), and the collision stress of the overlap correction that x_k
+    needed, which represents t_k - dt/2 (`config.stresses`, sample_offset); exposes its
+    full state."""
 
     def __init__(self, job, task, comm=None):
         # comm: the MPI communicator of the ranks that step this realisation together
