@@ -210,8 +210,9 @@ def plot_viscosities(red, path, phi) -> Path:
 def plot_lissajous(red, path, task_id=None, file_index=0) -> Path:
     """Stress-strain (Lissajous) figure of one task. Per contribution, the ellipse of
     its first harmonic, gamma0 (G' sin + G'' cos) with this task's G', G'' (the
-    projection of the phase-averaged signal at its sample times, eq. 18); the total stress phase-averaged
-    over the task's analysed periods, and its last period unaveraged, as thin lines.
+    projection of the phase-averaged signal at its sample times, eq. 18); the total stress
+    phase-averaged over the task's analysed periods, and its last period unaveraged, as
+    thin lines.
     Axes gamma/gamma0 and sigma_xy/gamma0, so that an ellipse crosses gamma = 0 at
     +-G'' and reaches gamma/gamma0 = 1 at G'."""
     from .projection import project_periods

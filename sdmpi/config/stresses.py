@@ -15,15 +15,16 @@ and the reducer projects each stream on sin and cos at its own times
 the ``sample_offset`` attribute of each stress dataset; files without it take the values
 here (`sample_offset`).
 
-* hydrodynamic, 0: S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf(t_k) is the configuration x_k
+* hydrodynamic, 0: S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf(t_k), that of the configuration x_k
   at the rate gamma_dot(t_k);
-* Brownian and interparticle, 0: functions of the configuration x_k. The step then moves
-  x_k with the step's mean rate (`sdmpi.dynamics.shear`), so x_k is the configuration at
-  t_k to the explicit step's own O(dt) error. (That error acts on a stream of complex
-  modulus G*(w) like a shift of (dt/2) d ln G*/d ln w: none where the stream is elastic,
-  half a step where it is viscous; there its relative size in G' is dt/(2 tau), tau the
-  stream's relaxation time, the accuracy of the explicit step itself, so the samples are
-  not moved by it.)
+* Brownian and interparticle, 0: functions of the configuration x_k, which the step moves
+  with the flow of its own strain (the mean rate, `sdmpi.dynamics.shear`). The explicit
+  step's O(dt) error acts on such a stream of modulus G*(w) like a shift of
+  (dt/2) d ln G*/d ln w (a linear toy in tests/test_sampling_time.py): none where the
+  stream is elastic (w tau >> 1, tau its relaxation time), half a step where it is viscous
+  (w tau << 1), where it changes G' by dt/(2 tau) G', the step's own accuracy. A fixed
+  shift of half a step would add (pi/n) |G*| where the stream is elastic, which is where
+  few steps per period occur (w dt large, dt << tau); so these stay at t_k.
 * collision, -1/2: the impulses of the overlap correction at the start of step k,
   f = s/(G dt), undo the overlaps that the motion over [t_{k-1}, t_k] made: they are that
   step's mean collision force, at its midpoint t_k - dt/2.
