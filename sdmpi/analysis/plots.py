@@ -210,14 +210,16 @@ def plot_viscosities(red, path, phi) -> Path:
 def plot_lissajous(red, path, task_id=None, file_index=0) -> Path:
     """Stress-strain (Lissajous) figure of one task. Per contribution, the ellipse of
     its first harmonic, gamma0 (G' sin + G'' cos) with this task's G', G'' (the
-    projection of the phase-averaged signal, eq. 18); the total stress phase-averaged
-    over the task's analysed periods, and its last period unaveraged, as thin lines.
+    projection of the phase-averaged signal at its sample times, eq. 18); the total stress
+    phase-averaged over the task's analysed periods, and its last period unaveraged, as
+    thin lines.
     Axes gamma/gamma0 and sigma_xy/gamma0, so that an ellipse crosses gamma = 0 at
     +-G'' and reaches gamma/gamma0 = 1 at G'."""
     from .projection import project_periods
     d = lissajous_data(red, task_id, file_index)
     n = d["strain"].size
-    g1, g2 = project_periods(d["stress"], d["gamma0"], d["omega"], n)
+    dt = 2.0 * np.pi / (d["omega"] * n)
+    g1, g2 = project_periods(d["stress"], d["gamma0"], d["omega"], n, t0=d["sample_offset"] * dt)
     g1[0, 0], g2[0, 0] = medium_moduli(red.job, d["omega"])  # exact, not round-off
     amplitude = np.hypot(g1, g2).max()
     fig, (ax,) = _figure(1, width=6.6, height=6.2)

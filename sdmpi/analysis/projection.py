@@ -24,6 +24,15 @@ unless n divides m, so with n >= 3 the projection returns G', G'' exactly for an
 signal that is a constant plus harmonics of order <= n - 2 (no leakage from the mean
 or from higher harmonics). If a store records the stress at the END of each time step
 (t_k = (k + 1) dt), pass t0 = dt: the result is then exact over (t_p, t_p + T].
+
+Sample times: a stream whose sample k represents t_k + c dt (the registry's
+``sample_offset`` c, `sdmpi.config.stresses`) is projected with t0 = c dt; t0 may differ
+from one signal to the next (an array over the leading axes). Projected at t_k instead,
+a first harmonic gamma0 (G' sin + G'' cos) gives, with phi = w c dt = 2 pi c/n,
+
+    G' cos phi - G'' sin phi,   G'' cos phi + G' sin phi,
+
+so G' is off by -phi G'' to first order (c = -1/2: +(pi/n) G'').
 """
 
 import numpy as np
@@ -33,7 +42,9 @@ def project_periods(stress, gamma0, omega, samples_per_period, discard_periods=0
     """Per-period G'(w), G''(w) of sampled stress signals (Schaink et al. eq. 18, rectangle rule).
 
     stress: (..., n_samples) sigma_xy at t_k = t0 + k 2 pi/(w n), k = 0, 1, ...
-    (leading axes: realisations, contributions, ... are projected independently).
+    (leading axes: realisations, contributions, ... are projected independently);
+    t0: the time of sample 0, a number or an array broadcast against the leading axes
+    (each signal its own sample times).
     gamma0: strain amplitude; omega: angular frequency w (1/t_D);
     samples_per_period: n >= 3 (integer); discard_periods: whole start-up periods
     dropped from the front. A trailing partial period is ignored.
@@ -54,10 +65,14 @@ def project_periods(stress, gamma0, omega, samples_per_period, discard_periods=0
     n_periods = max(stress.shape[-1] // n - first, 0)
     periods = stress[..., first * n:(first + n_periods) * n]
     periods = periods.reshape(stress.shape[:-1] + (n_periods, n))
-    # w t_k within any period: w t0 + 2 pi j/n (w T = 2 pi), so one template serves all.
-    phase = omega * t0 + 2.0 * np.pi * np.arange(n) / n
+    # w t_k within any period: w t0 + 2 pi j/n (w T = 2 pi), so one template per signal
+    # serves all its periods.
+    phase = omega * np.asarray(t0, dtype=float)[..., None] + 2.0 * np.pi * np.arange(n) / n
     scale = 2.0 / (n * gamma0)
-    return scale * (periods @ np.sin(phase)), scale * (periods @ np.cos(phase))
+    if phase.ndim == 1:
+        return scale * (periods @ np.sin(phase)), scale * (periods @ np.cos(phase))
+    sin, cos = np.sin(phase)[..., None], np.cos(phase)[..., None]       # (..., n, 1)
+    return scale * (periods @ sin)[..., 0], scale * (periods @ cos)[..., 0]
 
 
 def viscosities(g_prime, g_dprime, omega):

@@ -10,13 +10,16 @@ Pipeline (Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
    the same seed are refused too: task streams are keyed by (seed, task id), so they
    would hold copies of the same realisations and shrink the error bars falsely.
 2. Per task, read only the committed samples (``/progress``, the "valid up to") of the
-   xy stress of each stored contribution, sampled at t_k = k dt (so t0 = 0):
-   hydrodynamic (``stress_hydrodynamic_maxwell`` for Maxwell media: the hydrodynamic
+   xy stress of each stored contribution, stored at t_k = k dt: hydrodynamic
+   (``stress_hydrodynamic_maxwell`` for Maxwell media: the hydrodynamic
    stresslets filtered by the medium's modes, eqs. 33-35, 42; the unfiltered
    ``stress_hydrodynamic`` is the viscous-medium signal and is not used), Brownian
-   (eq. 16) and interparticle.
+   (eq. 16), interparticle and collision; and the time each stream's sample k represents,
+   t_k + c dt, c the dataset's ``sample_offset`` attribute (files without it: the
+   registry's, `sdmpi.config.stresses`; 0 except the collision stream's -1/2).
 3. Oscillatory jobs: project every whole period after the ``discard_periods`` start-up
-   periods on sin(w t) and cos(w t) (:func:`.projection.project_periods`, eq. 18):
+   periods on sin(w t) and cos(w t) at the stream's own sample times t_k + c dt
+   (:func:`.projection.project_periods` with t0 = c dt, eq. 18):
 
        G'  = w/(pi gamma0) int_period sigma_xy sin(w t) dt,
        G'' = w/(pi gamma0) int_period sigma_xy cos(w t) dt,
@@ -92,7 +95,7 @@ import numpy as np
 
 from ..config import Job, units
 from ..config.schema import toml_name
-from ..config.stresses import CONTRIBUTIONS
+from ..config.stresses import CONTRIBUTIONS, sample_offset
 from .errors import SOURCES, Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
 from .projection import project_periods, viscosities
@@ -319,6 +322,18 @@ def stress_datasets(job: Job) -> tuple:
     return VISCOUS_DATASETS
 
 
+def sample_offsets(f, job: Job, task, viewed=False):
+    """(C,) the time each contribution's sample k represents, t_k + c dt, as c (units of
+    dt): the ``sample_offset`` attribute of the stress datasets that :func:`read_stress`
+    reads, or the registry's value (`sdmpi.config.stresses`) for a file written without it
+    or a dataset it lacks."""
+    from ..ensemble.store import task_key
+    group = f[f"tasks/{task_key(task.task_id)}/samples"]
+    names = VISCOUS_DATASETS if viewed else stress_datasets(job)
+    return np.array([float(group[n].attrs.get("sample_offset", sample_offset(n))) if n in group
+                     else sample_offset(n) for n in names])
+
+
 def read_stress(f, job: Job, task, committed, viewed=False, columns=XY):
     """(C, committed) xy stress of one task per contribution (``columns = slice(None)``:
     (C, committed, 6)), C = len(CONTRIBUTIONS): as stored for the run's own medium,
@@ -402,7 +417,8 @@ def _open_h5(path):
 def _read_xy(f, task, committed, names, columns=XY):
     """(len(names), committed) xy stress of one task, committed samples only (with
     ``columns = slice(None)``: (len(names), committed, 6), all components); checks
-    that the samples are taken at t_k = k dt (the projection assumes t0 = 0)."""
+    that the samples are stored at t_k = k dt (the projection's times are t_k + c dt,
+    `sample_offsets`)."""
     from ..ensemble.store import task_key
     group = f[f"tasks/{task_key(task.task_id)}/samples"]
     missing = [n for n in names if n not in group and n not in ABSENT_IS_ZERO]
@@ -420,16 +436,19 @@ def _read_xy(f, task, committed, names, columns=XY):
                      for n in names])
 
 
-def task_series(job: Job, task, stress):
+def task_series(job: Job, task, stress, offsets=0.0):
     """Per-value series of one task, (C, Q, n): per whole period (G', G'') after the
     start-up for oscillatory jobs, per sample (eta, N1, N2, Pi) after discard_steps for
     steady ones (module docstring). ``stress``: the contributions' stress of the committed
     samples (`read_stress`), (C, committed) xy for oscillatory jobs and (C, committed, 6)
-    6-vectors for steady ones. Rows follow COMPONENTS; the medium row is its exact value
-    repeated and the total row is medium + the contributions, value by value."""
+    6-vectors for steady ones; ``offsets``: (C,) or one number, sample k of contribution c
+    represents t_k + offsets[c] dt (`sample_offsets`; the projection's sample times).
+    Rows follow COMPONENTS; the medium row is its exact value repeated and the total row
+    is medium + the contributions, value by value."""
     if job.shear.protocol == "oscillatory":
         n = job.steps_per_period(task.omega)
-        g1, g2 = project_periods(stress, job.shear.gamma0, task.omega, n, task.discard_steps // n)
+        g1, g2 = project_periods(stress, job.shear.gamma0, task.omega, n, task.discard_steps // n,
+                                 t0=np.asarray(offsets, float) * task.dt)
         parts = np.stack([g1, g2], axis=1)                         # (C, 2, P)
         medium = np.array(medium_moduli(job, task.omega))
     else:
@@ -535,7 +554,7 @@ def reduce_runs(paths, medium=None) -> Reduction:
                     stress = read_stress(f, job, task, done, viewed, columns_read)
                     stress, stop_note = _until_stop(stress, s.path, task)
                     notes += [stop_note] if stop_note else []
-                    x = task_series(job, task, stress)
+                    x = task_series(job, task, stress, sample_offsets(f, job, task, viewed))
                     if running is not None and done:
                         _running_into(running["values"][g, :, :, col], job, stress, keep)
                     series[g][col] = x
@@ -658,8 +677,10 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     task_id: a task of file ``file_index``; default, in the first group that has analysed
     periods, the task with the most of them. Returns dict with ``task_id, file, phi, omega,
     gamma0, n_periods``, ``strain`` (n,) = gamma(t_j), ``stress`` (C, n) per COMPONENTS
-    in eta_m/t_D (medium analytic: gamma0 (G'_m sin + G''_m cos)), and ``last`` (n,) the
-    total stress of the last analysed period, unaveraged."""
+    in eta_m/t_D (medium analytic: gamma0 (G'_m sin + G''_m cos)), ``sample_offset`` (C,)
+    the time stress[c, j] represents, (j + sample_offset[c]) dt (`sample_offsets`; 0 for
+    the medium and the total), and ``last`` (n,) the total stress of the last analysed
+    period, unaveraged."""
     if red.kind != "oscillatory":
         raise ReduceError("a Lissajous figure needs an oscillatory job")
     job = red.job
@@ -679,6 +700,7 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     done = int(red.committed[:, cols][red.task_id[:, cols] == task_id][0])
     with _open_h5(path) as f:
         xy = read_stress(f, job, task, done, red.viewed)
+        offsets = np.concatenate([[0.0], sample_offsets(f, job, task, red.viewed), [0.0]])
     n_periods = max(done // n - first, 0)
     if n_periods == 0:
         raise ReduceError(f"task {task_id} has no whole period after the start-up yet")
@@ -691,5 +713,5 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     stress = np.concatenate([medium[None], parts, (medium + parts.sum(axis=0))[None]])
     return {"task_id": task_id, "file": path, "phi": task.phi, "omega": task.omega,
             "realisation": task.realisation, "gamma0": gamma0, "n_periods": n_periods,
-            "strain": gamma0 * np.sin(phase), "stress": stress,
+            "strain": gamma0 * np.sin(phase), "stress": stress, "sample_offset": offsets,
             "last": medium + cycles[:, -1].sum(axis=0)}

@@ -7,6 +7,31 @@ A new contribution is added here, sampled by the realisation, and reduced with n
 change. Run files written before a contribution existed lack its dataset; the reducer reads
 it as zero where ``absent_is_zero`` says that is what it was (e.g. no collision stress was
 recorded, the overlap correction's stress was simply not sampled), and says so.
+
+Sample time. Sample k of every stream is stored at row k, t_k = k dt, but a stream may
+represent another instant: ``sample_offset`` (in units of dt) says which, t_k + offset dt,
+and the reducer projects each stream on sin and cos at its own times
+(`sdmpi.analysis.projection.project_periods`, ``t0 = offset dt``). The store writes it as
+the ``sample_offset`` attribute of each stress dataset; files without it take the values
+here (`sample_offset`).
+
+* hydrodynamic, 0: S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf(t_k), that of the configuration x_k
+  at the rate gamma_dot(t_k);
+* Brownian and interparticle, 0: functions of the configuration x_k, which the step moves
+  with the flow of its own strain (the mean rate, `sdmpi.dynamics.shear`). The explicit
+  step's O(dt) error acts on such a stream of modulus G*(w) like a shift of
+  (dt/2) d ln G*/d ln w (a linear toy in tests/test_sampling_time.py): none where the
+  stream is elastic (w tau >> 1, tau its relaxation time), half a step where it is viscous
+  (w tau << 1), where it changes G' by dt/(2 tau) G', the step's own accuracy. A fixed
+  shift of half a step would add (pi/n) |G*| where the stream is elastic, which is where
+  few steps per period occur (w dt large, dt << tau); so these stay at t_k.
+* collision, -1/2: the impulses of the overlap correction at the start of step k,
+  f = s/(G dt), undo the overlaps that the motion over [t_{k-1}, t_k] made: they are that
+  step's mean collision force, at its midpoint t_k - dt/2.
+
+Projected at t_k instead of t_k + offset dt, a stream sigma = gamma0 (G' sin + G'' cos)
+gives G' - (2 pi offset/n) G'' and G'' + (2 pi offset/n) G' to first order (n samples
+per period): the collision stream's G' too large by (pi/n) G''.
 """
 
 from dataclasses import dataclass
@@ -15,12 +40,15 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class StressContribution:
     """component: its row in the reduced tables; dataset: its sample dataset (a 6-vector
-    xx yy zz xy xz yz per step, in the job's stress unit); description: what it is."""
+    xx yy zz xy xz yz per step, in the job's stress unit); description: what it is;
+    absent_is_zero: files without the dataset reduce it as zero; sample_offset: sample k
+    represents t_k + sample_offset dt (module docstring)."""
 
     component: str
     dataset: str
     description: str
     absent_is_zero: bool = False
+    sample_offset: float = 0.0
 
 
 #: the sampled contributions in table order; the hydrodynamic one comes first (a Maxwell
@@ -32,5 +60,17 @@ CONTRIBUTIONS = (
                        "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
     StressContribution("collision", "stress_collision",
                        "-(1/V) sum (r f e + R_SU R_FU^-1 F_C): the hard-sphere collisions implied "
-                       "by the overlap correction", absent_is_zero=True),
+                       "by the overlap correction", absent_is_zero=True, sample_offset=-0.5),
 )
+
+#: stress datasets that are parts or filtered forms of a contribution's, sampled with it
+DERIVED = {"stress_hydrodynamic_maxwell": "stress_hydrodynamic",
+           "stresslets": "stress_hydrodynamic",
+           "stress_contact": "stress_interparticle"}
+
+
+def sample_offset(dataset):
+    """The sample_offset (units of dt) of a stress dataset of the registry or derived from
+    one (`DERIVED`); None for datasets that are not stresses."""
+    dataset = DERIVED.get(dataset, dataset)
+    return next((c.sample_offset for c in CONTRIBUTIONS if c.dataset == dataset), None)

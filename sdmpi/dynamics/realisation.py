@@ -7,12 +7,21 @@ Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 
 
 integrated explicitly (Euler-Maruyama) with the hydrodynamics of a model
 (`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated once per step
-at the step's start: a Brownian force F_B = sqrt(2 kT/dt) C z with R_FU = C C^T and
-z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation), and the drift
-kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et al. eq. 16)
-estimated by the model's drift scheme (`models`: a random finite difference along the
-noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys. 118, 10323
-(2003)).
+at the step's start,
+
+    x_{k+1} = x_k + (gamma(t_{k+1}) - gamma(t_k)) y e_x + dt U(x_k),
+
+with the imposed flow's part of U, R_FU^-1 R_FE e_inf, taken at the step's mean rate
+<gamma_dot> = (gamma(t_{k+1}) - gamma(t_k))/dt (`shear`), of which the affine displacement
+is the exact integral. Both parts then belong to one flow: a pair whose relative velocity
+along its line of centres is (1 - A) times the affine one (A -> 1 near contact) closes with
+the step's own strain (with the start's rate gamma_dot(t_k) in the disturbance, it would be
+driven like the rate of A/(2(1 - A)) steps later). A Brownian force F_B = sqrt(2 kT/dt) C z
+with R_FU = C C^T and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation),
+and the drift kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et
+al. eq. 16) estimated by the model's drift scheme (`models`: a random finite difference
+along the noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys.
+118, 10323 (2003)).
 
 Stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz, units eta_m/t_D = kT/(6 pi a^3);
 the registry `config.stresses`): hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1
@@ -108,7 +117,10 @@ def sample_fields(job):
 class Realisation:
     """One task's SD realisation, a deterministic function of (job, task): its random
     stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
-    (taken at the start of the step, t_k = k dt); exposes its full state."""
+    at the start of the step, t_k = k dt: the stresses of the configuration x_k at the
+    rate gamma_dot(t_k), and the collision stress of the overlap correction that x_k
+    needed, which represents t_k - dt/2 (`config.stresses`, sample_offset); exposes its
+    full state."""
 
     def __init__(self, job, task, comm=None):
         # comm: the MPI communicator of the ranks that step this realisation together
@@ -238,6 +250,7 @@ class Realisation:
         k = self.step
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
+        step_rate = self.protocol.mean_rate(t0, t1)
         pos, collisions = self._start(k, strain, Lattice(self.box, strain))
         if self.monolayer is not None and self.monolayer.stops(k, collisions.deepest, self.task.task_id):
             self.step += 1
@@ -249,7 +262,7 @@ class Realisation:
 
         u_flow = at.velocities(np.zeros((n, 6)), e5)
         s_h = at.stresslets(u_flow, e5)
-        velocity = u_flow
+        velocity = _at_step_rate(at, u_flow, rate, step_rate)
         forces, virial = pair_forces(self.force_law, at.pairs, n, self.radii)
         forces = np.hstack([forces, np.zeros((n, 3))])
         contact_sample = {}
@@ -291,7 +304,7 @@ class Realisation:
             sample["stresslets"] = s_h
 
         if self.contacts is not None:
-            self.contacts.advance(velocity, rate, self.dt)
+            self.contacts.advance(velocity, step_rate, self.dt)
         if self.monolayer is not None:
             velocity = self.monolayer.in_plane(velocity)
         strain1 = self.protocol.strain(t1)
@@ -306,6 +319,20 @@ class Realisation:
         n = self.n_particles
         return bulk_stress(at.stresslets(velocities, np.zeros((n, 5))), self.volume) \
             - symmetric_six(virial) / self.volume
+
+
+def _at_step_rate(at, u_flow, rate, step_rate):
+    """The disturbance velocities R_FU^-1 R_FE e_inf of the step's mean rate
+    <gamma_dot> = (gamma(t1) - gamma(t0))/dt (`shear`) from those of the start's rate
+    gamma_dot(t0): they are linear in e_inf, so u(<gamma_dot>) = (<gamma_dot>/gamma_dot(t0))
+    u(gamma_dot(t0)); one more solve only where gamma_dot(t0) = 0 exactly. Unchanged (the
+    same array) where the two rates are equal (steady shear, no shear)."""
+    if step_rate == rate:
+        return u_flow
+    if rate != 0.0:
+        return (step_rate / rate) * u_flow
+    n = len(u_flow)
+    return at.velocities(np.zeros((n, 6)), np.broadcast_to(to_five(rate_of_strain(step_rate)), (n, 5)))
 
 
 def _encode_rng(rng):

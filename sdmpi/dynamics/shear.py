@@ -1,7 +1,15 @@
 """Imposed shear protocols: strain gamma(t) and rate gamma_dot(t) of simple shear
 u_inf = gamma_dot(t) y e_x (flow x, gradient y, vorticity z). The box strain follows
 gamma(t) exactly (Lees-Edwards), so positions are advected affinely and wrapped with the
-lattice of the current strain."""
+lattice of the current strain.
+
+A step from t0 to t1 moves the particles with the step's mean rate
+
+    <gamma_dot>_[t0, t1] = (gamma(t1) - gamma(t0)) / (t1 - t0),
+
+the rate of which the exact affine displacement (gamma(t1) - gamma(t0)) y is the
+integral, so that the affine and the disturbance parts of a velocity belong to the same
+imposed flow (`mean_rate`)."""
 
 import math
 from dataclasses import dataclass
@@ -22,6 +30,11 @@ class Oscillatory:
     def rate(self, t):
         return self.gamma0 * self.omega * math.cos(self.omega * t)
 
+    def mean_rate(self, t0, t1):
+        """(gamma(t1) - gamma(t0)) / (t1 - t0) = gamma0 omega cos(omega t_m) sinc(omega dt/2)
+        with t_m = (t0 + t1)/2, dt = t1 - t0, sinc x = sin x / x."""
+        return (self.strain(t1) - self.strain(t0)) / (t1 - t0)
+
 
 @dataclass(frozen=True)
 class Steady:
@@ -35,6 +48,10 @@ class Steady:
     def rate(self, t):
         return self.shear_rate
 
+    def mean_rate(self, t0, t1):
+        """The rate itself (exactly: not the rounded difference of two strains)."""
+        return self.shear_rate
+
 
 @dataclass(frozen=True)
 class NoShear:
@@ -44,6 +61,9 @@ class NoShear:
         return 0.0
 
     def rate(self, t):
+        return 0.0
+
+    def mean_rate(self, t0, t1):
         return 0.0
 
 

@@ -35,7 +35,7 @@ import h5py
 import numpy as np
 
 from ..config import JobError, Task, enumerate_tasks, job_hash, parse_job, resume_hash
-from ..config import units
+from ..config import stresses, units
 from . import trajectory
 from .faults import fault
 
@@ -161,6 +161,9 @@ def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
     for name, (shape, dtype, unit, description) in layout.sample_fields.items():
         ds = samples.create_dataset(name, (task.n_steps, *shape), dtype, track_times=False)
         ds.attrs.update({"unit": unit, "description": description})
+        offset = stresses.sample_offset(name)
+        if offset is not None:  # the time sample k represents, t_k + offset dt
+            ds.attrs["sample_offset"] = offset
     ckpt = f.create_group(f"checkpoints/{key}")
     ckpt.create_dataset("slot_step", (2,), "i8", fillvalue=-1, track_times=False)
     block = checksum_block(job, task)
