@@ -44,6 +44,13 @@ def test_dense_job_too_big_for_memory(job_file, tmp_path, capsys):
     assert sorted(os.listdir(tmp_path)) == ["job.toml"]
 
 
+def test_free_draining_needs_no_dense_matrices(job_file):
+    """Free draining solves nothing: a 125000-sphere job needs the base memory and its
+    start's cell list, not the 41 TiB of a dense one."""
+    job = load_job(job_file, overrides=["system.n_particles=125000", 'hydrodynamics.model="free-draining"'])
+    assert resources.memory_per_rank(job, "dense") < 2 ** 30
+
+
 def test_absurdly_dilute_job_refused(job_file, tmp_path, capsys):
     dilute = ["--set", "system.phi=[1e-9]"]
     assert main(["validate", str(job_file), *dilute]) == 2

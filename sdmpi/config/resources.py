@@ -7,7 +7,8 @@ Memory per rank, in bytes (estimates, documented in docs/cli.md):
 * the dense solvers hold about ``DENSE_MATRICES`` matrices of the 11N x 11N FTS grand
   mobility / resistance problem (6 force/torque and 5 stresslet unknowns per sphere),
   8 bytes per entry; ``petsc-dense`` distributes them over the task's ranks; the
-  matrix-free ``petsc-krylov`` backend needs O(N) and is not estimated;
+  matrix-free ``petsc-krylov`` backend needs O(N) and is not estimated, nor is the
+  ``free-draining`` model (no hydrodynamic matrices);
 * the hard-sphere start's cell list: one 8-byte head per cell of side >= the contact
   distance 2 a_max, (L / 2 a_max)^3 cells for a cubic box of side L; a very dilute job
   (phi -> 0) makes L, and this list, explode: more than ``MAX_CELL_BYTES`` is refused on
@@ -41,8 +42,9 @@ def gib(n_bytes: float) -> str:
 
 
 def dense_bytes(job, backend: str) -> float:
-    """Bytes per rank of the dense solver matrices (0 for the matrix-free petsc-krylov)."""
-    if backend == "petsc-krylov":
+    """Bytes per rank of the dense solver matrices (0 for the matrix-free petsc-krylov and
+    for free draining, which solves nothing)."""
+    if backend == "petsc-krylov" or job.hydrodynamics.model == "free-draining":
         return 0.0
     size = DENSE_MATRICES * (11 * job.system.n_particles) ** 2 * 8.0
     return size / job.ensemble.ranks_per_task if backend == "petsc-dense" else size
