@@ -174,14 +174,7 @@ def _partition(matrix, r_fu, r_fe, r_se):
                         r_se[5 * i + a - 6, 5 * j + b - 6] = v
 
 
-def spd_inverse(matrix):
-    """Inverse of a symmetric positive definite C-ordered matrix by Cholesky (potrf +
-    potri), computed in its memory (the matrix is overwritten). matrix.T is the same
-    matrix in Fortran order, so LAPACK works on it without a copy."""
-    return _upper_spd_inverse(matrix.T).T  # symmetric: its C-ordered view
-
-
-def _upper_spd_inverse(upper):
+def _spd_inverse_of_upper(upper):
     """The inverse (Fortran-ordered, both triangles) of the symmetric positive definite
     matrix held in the upper triangle of the Fortran-ordered array upper, in its memory."""
     chol, info = lapack.dpotrf(upper, lower=False, clean=False, overwrite_a=True)
@@ -277,7 +270,7 @@ def far_field_blocks(mob):
         raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info}, strain block)")
     y = blas.dtrsm(1.0, chol_bb, m_ab.T, trans_a=1)  # U_b^-T M_ba (5N x 6N)
     schur = blas.dsyrk(-1.0, y, beta=1.0, c=m_aa.T, trans=1, lower=0, overwrite_c=1)  # upper triangle
-    return _upper_spd_inverse(schur).T, m_ab, chol_bb
+    return _spd_inverse_of_upper(schur).T, m_ab, chol_bb
 
 
 def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
