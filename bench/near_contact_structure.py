@@ -6,9 +6,11 @@ high-frequency viscosity eta_H (`sdmpi.hydro.bulk.hydrodynamic_viscosity`) of th
 configurations. Errors: one standard error (SD: blocks of the run; MC: over configurations).
 
     python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
+        [--collisions separate|reflect] [--dt 5e-4]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
-the near-contact correction of `sdmpi.dynamics.models` off (for comparison). Prints one JSON
+the near-contact correction of `sdmpi.dynamics.models` off (for comparison); --collisions
+chooses the overlap correction's rule (`sdmpi.dynamics.collisions`; absent: the model's). Prints one JSON
 line, appended to bench/near_contact_structure.json (docs/physics.md quotes it).
 """
 
@@ -23,6 +25,7 @@ import numpy as np
 from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
 from sdmpi.config.loader import parse_job
 from sdmpi.dynamics import models
+from sdmpi.dynamics.collisions import RULES, default_rule
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.dynamics.realisation import Realisation
 from sdmpi.config.tasks import enumerate_tasks
@@ -30,7 +33,7 @@ from sdmpi.hydro.bulk import hydrodynamic_viscosity
 from sdmpi.hydro.geometry import Lattice
 
 #: shells of surface gap (in a) where g is counted
-EDGES = np.array([1e-4, 1e-3, 1e-2, 1e-1])
+EDGES = np.array([1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1])
 JOB = """
 [job]
 name = "near-contact-structure"
@@ -43,13 +46,14 @@ protocol = "none"
 [brownian]
 enabled = true
 [integration]
-dt = 5e-4
+dt = {dt}
 n_steps = {steps}
 discard_steps = 0
 [ensemble]
 realisations = 1
 [hydrodynamics]
 model = "{model}"
+{collisions}
 """
 
 
@@ -75,16 +79,17 @@ def monte_carlo(n, phi, configs, eta_every):
     return np.array(counts), np.array(etas)
 
 
-def dynamics(model, n, phi, steps, eta_every, seed=11):
+def dynamics(model, n, phi, steps, eta_every, dt, collisions, seed=11):
     """g per shell (one row per step) and eta_H every eta_every steps of one run at rest, of
     the configurations the model is evaluated at (each step's start, overlaps corrected)."""
-    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model))
+    rule = f'collisions = "{collisions}"' if collisions else ""
+    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule))
     real = Realisation(job, enumerate_tasks(job)[0])
     ideal = ideal_counts(n, real.box)
     counts, etas = np.empty((steps, len(EDGES) - 1)), []
     for k in range(steps):
         real.advance(1)
-        pos, _ = real._separate(real.positions, 0.0)
+        pos = real.positions  # the next step's start, overlaps corrected
         counts[k] = shell_counts(pos, real.box) / ideal
         if k % eta_every == 0:
             etas.append(hydrodynamic_viscosity(pos, real.box))
@@ -106,17 +111,20 @@ def main():
     parser.add_argument("--steps", type=int, default=10000)
     parser.add_argument("--mc-configs", type=int, default=2000)
     parser.add_argument("--uncorrected", action="store_true")
+    parser.add_argument("--collisions", choices=RULES)
+    parser.add_argument("--dt", type=float, default=5e-4)
     parser.add_argument("--out", default=str(Path(__file__).with_name("near_contact_structure.json")))
     args = parser.parse_args()
     if args.uncorrected:
         models.NEAR_CONTACT_GAP = 0.0
     start = time.perf_counter()
-    g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, eta_every=100)
+    g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions)
     g_mc, eta_mc = monte_carlo(args.n, args.phi, args.mc_configs, eta_every=20)
     (g1, e1), (g2, e2) = summary(g_sd, blocks=20), summary(g_mc)
     (h1, f1), (h2, f2) = summary(eta_sd, blocks=20), summary(eta_mc)
     row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
-           "phi": args.phi, "dt": 5e-4, "steps": args.steps, "mc_configs": args.mc_configs,
+           "phi": args.phi, "dt": args.dt, "steps": args.steps,
+           "collisions": args.collisions or default_rule(args.model), "mc_configs": args.mc_configs,
            "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
            "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [h1, f1], "eta_h_mc": [h2, f2],
            "seconds": round(time.perf_counter() - start)}

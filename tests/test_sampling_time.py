@@ -54,7 +54,8 @@ def _sinusoid_run(path, attribute):
 
 @pytest.mark.parametrize("attribute", [None, -0.5])
 def test_a_stream_sampled_half_a_step_early_reduces_exactly_at_its_own_times(tmp_path, attribute):
-    """Files without the attribute take the registry's -1/2 for the collision stream; files
+    """Files without the attribute take the registry's -1/2 for the collision stream (they
+    were written when the correction began the next step: `unrecorded_offset`); files
     with it, its value. The projection is exact for a sampled first harmonic (rectangle
     rule over whole periods, n = 50 and 16 >= 3), so G', G'' are the toy's to round-off
     (1e-12)."""
@@ -105,7 +106,7 @@ def test_projection_takes_one_sample_time_per_signal():
 def test_the_run_file_records_each_stress_streams_sample_time(tmp_path):
     """`sdmpi run` (with the test double, tests/ensemble_double.py: the real sample stream's
     datasets) writes sample_offset on every stress dataset, the registry's value (the
-    collision -1/2, the rest 0; Maxwell-filtered and per-particle stresses those of the
+    collision +1/2, the rest 0; Maxwell-filtered and per-particle stresses those of the
     hydrodynamic stream), and on no other dataset; the reducer reads them back."""
     job_path = tmp_path / "job.toml"
     job_path.write_text(JOB)
@@ -120,9 +121,9 @@ def test_the_run_file_records_each_stress_streams_sample_time(tmp_path):
                     assert ds.attrs["sample_offset"] == sample_offset(name), (key, name)
                 else:
                     assert "sample_offset" not in ds.attrs, (key, name)
-            assert task["samples/stress_collision"].attrs["sample_offset"] == -0.5
+            assert task["samples/stress_collision"].attrs["sample_offset"] == 0.5
         tasks = enumerate_tasks(job)
-        np.testing.assert_array_equal(sample_offsets(f, job, tasks[0]), [0.0, 0.0, 0.0, -0.5])
+        np.testing.assert_array_equal(sample_offsets(f, job, tasks[0]), [0.0, 0.0, 0.0, 0.5])
     reduce_runs([out])
 
 
@@ -192,17 +193,18 @@ def test_steady_and_no_shear_steps_are_unchanged():
 # ------------------------------------------------------------------ which time a stream represents
 
 
-def test_collision_impulses_represent_the_middle_of_the_previous_step():
+def test_collision_impulses_represent_the_middle_of_their_step():
     """Real code, free draining, non-Brownian: two hard spheres in contact along a
     compressional axis (omega = 1, gamma0 = 0.5; min_gap 1e-9, so that every step of the
     contact overlaps and is corrected). Over the first quarter period the shear holds them
     in contact; the collision stream at n = 32 steps per period is compared with a
     reference at 2048 (its own offset error 64 times smaller) at t_k + c dt. Measured rms
-    differences, relative to the peak: 0.049 at c = 0, 0.025 at c = -1/2, 0.116 at +1/2
-    (0.025, 0.012, 0.058 at n = 64: first order in dt). The best single c of this toy is
-    -0.35 (0.015), between the step's mean rate (-1/2) and the lines of centres, which the
-    correction takes after the step (0). Tolerance: -1/2 must reduce the error of 0 to
-    below 0.7 of it (measured 0.5) and beat +1/2."""
+    differences, relative to the peak: 0.089 at c = 0 (the step's start), 0.022 at +1/2,
+    0.055 at +1 (the step's end), 0.127 at +3/2 (0.042, 0.010, 0.028, 0.062 at n = 64:
+    first order in dt). The best single c of this toy is ~0.65 (0.013), between the step's
+    mean rate (+1/2) and the lines of centres, which the correction takes after the step
+    (+1). Tolerance: +1/2 must reduce the error of +1 to below 0.7 of it (measured 0.4)
+    and beat the step's start."""
     def collision_stream(n):
         real, state = _pair(["shear.omega=[1.0]", "shear.gamma0=0.5", f"integration.steps_per_period={n}",
                              "integration.periods=1", "integration.discard_periods=0",
@@ -219,8 +221,8 @@ def test_collision_impulses_represent_the_middle_of_the_previous_step():
     def error(c):
         diff = xy[inside] - np.interp(t[inside] + c * dt, t_ref, ref)
         return np.sqrt(np.mean(diff ** 2)) / np.abs(ref).max()
-    assert error(-0.5) < 0.7 * error(0.0)
-    assert error(-0.5) < error(0.5)
+    assert error(0.5) < 0.7 * error(1.0)
+    assert error(0.5) < error(0.0)
 
 
 def test_explicit_state_streams_are_best_taken_at_the_step_start():

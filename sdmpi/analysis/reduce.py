@@ -16,7 +16,8 @@ Pipeline (Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
    ``stress_hydrodynamic`` is the viscous-medium signal and is not used), Brownian
    (eq. 16), interparticle and collision; and the time each stream's sample k represents,
    t_k + c dt, c the dataset's ``sample_offset`` attribute (files without it: the
-   registry's, `sdmpi.config.stresses`; 0 except the collision stream's -1/2).
+   registry's, `sdmpi.config.stresses`; 0 except the collision stream's +1/2, -1/2 in
+   files written without the attribute).
 3. Oscillatory jobs: project every whole period after the ``discard_periods`` start-up
    periods on sin(w t) and cos(w t) at the stream's own sample times t_k + c dt
    (:func:`.projection.project_periods` with t0 = c dt, eq. 18):
@@ -95,7 +96,7 @@ import numpy as np
 
 from ..config import Job, units
 from ..config.schema import toml_name
-from ..config.stresses import CONTRIBUTIONS, sample_offset
+from ..config.stresses import CONTRIBUTIONS, sample_offset, unrecorded_offset
 from .errors import SOURCES, Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
 from .projection import project_periods, viscosities
@@ -326,11 +327,11 @@ def sample_offsets(f, job: Job, task, viewed=False):
     """(C,) the time each contribution's sample k represents, t_k + c dt, as c (units of
     dt): the ``sample_offset`` attribute of the stress datasets that :func:`read_stress`
     reads, or the registry's value (`sdmpi.config.stresses`) for a file written without it
-    or a dataset it lacks."""
+    (`unrecorded_offset`) or a dataset it lacks (`sample_offset`)."""
     from ..ensemble.store import task_key
     group = f[f"tasks/{task_key(task.task_id)}/samples"]
     names = VISCOUS_DATASETS if viewed else stress_datasets(job)
-    return np.array([float(group[n].attrs.get("sample_offset", sample_offset(n))) if n in group
+    return np.array([float(group[n].attrs.get("sample_offset", unrecorded_offset(n))) if n in group
                      else sample_offset(n) for n in names])
 
 

@@ -514,6 +514,13 @@ class Hydrodynamics:
     min_gap: float = key(1e-4, "float", "gaps are clamped to at least this in lubrication; "
                          "< lubrication_cutoff", unit="mean radii",
                          allowed=Range(0.0, 0.1, lo_open=True))
+    collisions: str | None = key(None, "str", "how pairs in contact (gap below min_gap) after a "
+                                 "step are corrected: separate = moved apart to 2 min_gap; "
+                                 "reflect = the Brownian part of the step reflected at the gap "
+                                 "min_gap (the deterministic part separated); absent: separate "
+                                 "for the stokesian model, reflect for far-field and "
+                                 "free-draining (see docs/physics.md)",
+                                 allowed=Choice(("separate", "reflect")), optional=True)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ represent another instant: ``sample_offset`` (in units of dt) says which, t_k + 
 and the reducer projects each stream on sin and cos at its own times
 (`sdmpi.analysis.projection.project_periods`, ``t0 = offset dt``). The store writes it as
 the ``sample_offset`` attribute of each stress dataset; files without it take the values
-here (`sample_offset`).
+here (`unrecorded_offset`).
 
 * hydrodynamic, 0: S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf(t_k), that of the configuration x_k
   at the rate gamma_dot(t_k);
@@ -25,9 +25,10 @@ here (`sample_offset`).
   (w tau << 1), where it changes G' by dt/(2 tau) G', the step's own accuracy. A fixed
   shift of half a step would add (pi/n) |G*| where the stream is elastic, which is where
   few steps per period occur (w dt large, dt << tau); so these stay at t_k.
-* collision, -1/2: the impulses of the overlap correction at the start of step k,
-  f = s/(G dt), undo the overlaps that the motion over [t_{k-1}, t_k] made: they are that
-  step's mean collision force, at its midpoint t_k - dt/2.
+* collision, +1/2: the impulses of the overlap correction at the end of step k,
+  f = s/(G dt), undo the overlaps that the motion over [t_k, t_{k+1}] made: they are that
+  step's mean collision force, at its midpoint t_k + dt/2. Files without the attribute
+  were written when the correction began the next step (-1/2, ``unrecorded_offset``).
 
 Projected at t_k instead of t_k + offset dt, a stream sigma = gamma0 (G' sin + G'' cos)
 gives G' - (2 pi offset/n) G'' and G'' + (2 pi offset/n) G' to first order (n samples
@@ -42,13 +43,15 @@ class StressContribution:
     """component: its row in the reduced tables; dataset: its sample dataset (a 6-vector
     xx yy zz xy xz yz per step, in the job's stress unit); description: what it is;
     absent_is_zero: files without the dataset reduce it as zero; sample_offset: sample k
-    represents t_k + sample_offset dt (module docstring)."""
+    represents t_k + sample_offset dt (module docstring); unrecorded_offset: that of files
+    without the attribute (None: sample_offset)."""
 
     component: str
     dataset: str
     description: str
     absent_is_zero: bool = False
     sample_offset: float = 0.0
+    unrecorded_offset: float | None = None
 
 
 #: the sampled contributions in table order; the hydrodynamic one comes first (a Maxwell
@@ -60,7 +63,8 @@ CONTRIBUTIONS = (
                        "-(1/V) sum (x F_P + R_SU R_FU^-1 F_P)"),
     StressContribution("collision", "stress_collision",
                        "-(1/V) sum (r f e + R_SU R_FU^-1 F_C): the hard-sphere collisions implied "
-                       "by the overlap correction", absent_is_zero=True, sample_offset=-0.5),
+                       "by the overlap correction", absent_is_zero=True, sample_offset=0.5,
+                       unrecorded_offset=-0.5),
 )
 
 #: stress datasets that are parts or filtered forms of a contribution's, sampled with it
@@ -74,3 +78,10 @@ def sample_offset(dataset):
     one (`DERIVED`); None for datasets that are not stresses."""
     dataset = DERIVED.get(dataset, dataset)
     return next((c.sample_offset for c in CONTRIBUTIONS if c.dataset == dataset), None)
+
+
+def unrecorded_offset(dataset):
+    """The sample offset of a stress dataset in files written without the attribute."""
+    dataset = DERIVED.get(dataset, dataset)
+    return next((c.sample_offset if c.unrecorded_offset is None else c.unrecorded_offset
+                 for c in CONTRIBUTIONS if c.dataset == dataset), None)

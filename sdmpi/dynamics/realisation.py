@@ -35,8 +35,10 @@ of the largest, a = 1); the hydrodynamics, the overlap correction and the pair f
 them, and a, kT = 6 pi and t_D keep their meaning (those of the largest spheres).
 
 Hard spheres: lubrication keeps overlaps rare; pairs brought into contact by a finite step
-are counted and separated by the potential-free correction of `collisions.separate` before
-the step's hydrodynamics (Schaink et al. 2000, sec. III, Bossis & Brady 1984). An optional pair
+are counted and corrected at the end of the step by the potential-free correction of
+`collisions` (Schaink et al. 2000, sec. III, Bossis & Brady 1984): separated, or, with the
+rule ``reflect``, separated after the step's deterministic part and reflected after its
+Brownian part (``hydrodynamics.collisions``, `collisions.default_rule`). An optional pair
 repulsion (`forces.Repulsion`, Dratler & Schowalter 1996) adds F_P.
 
 Frictional contacts (`contacts`, interparticle.kind = "frictional", non-Brownian): overlaps
@@ -51,7 +53,7 @@ import numpy as np
 from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import from_five, to_five
 from ..hydro.geometry import Lattice
-from .collisions import Collisions, separate
+from .collisions import Collisions, default_rule, separate
 from .contacts import contact_model
 from .forces import force_law, pair_forces
 from .initial import hard_sphere_fluid
@@ -118,9 +120,9 @@ class Realisation:
     """One task's SD realisation, a deterministic function of (job, task): its random
     stream is SeedSequence(job seed, spawn_key=(task_id,)). Produces one sample per step
     at the start of the step, t_k = k dt: the stresses of the configuration x_k at the
-    rate gamma_dot(t_k), and the collision stress of the overlap correction that x_k
-    needed, which represents t_k - dt/2 (`config.stresses`, sample_offset); exposes its
-    full state."""
+    rate gamma_dot(t_k), and the collision stress of the overlap correction that ends the
+    step, which represents t_k + dt/2 (`config.stresses`, sample_offset); exposes its
+    full state. Its positions are those of the step's start, corrected."""
 
     def __init__(self, job, task, comm=None):
         # comm: the MPI communicator of the ranks that step this realisation together
@@ -151,6 +153,9 @@ class Realisation:
         self.dt = task.dt
         self.n_steps = task.n_steps
         self.step = 0
+        hyd = job.hydrodynamics
+        self.collision_rule = hyd.collisions or default_rule(hyd.model)
+        self._unchecked = True  # a start or a restored state: its overlaps not yet corrected
         self.model = hydrodynamic_model(job, self.radii, self.box, comm, separate=self._separate_midpoint,
                                         on_error=self._lost_definiteness)
         self.maxwell = None
@@ -198,6 +203,7 @@ class Realisation:
         """Restore a state from get_state()."""
         self.positions = np.array(state["positions"], dtype=float)
         self.step = int(state["step"][0])
+        self._unchecked = True
         _decode_rng(self.rng, state["rng"])
         if self.maxwell is not None:
             self.modes = np.array(state["modes"], dtype=float)
@@ -227,32 +233,55 @@ class Realisation:
             f"~{math.sqrt(2 * self.dt):.2g} radii per step (Brownian) - use a smaller "
             "time step (Schaink et al. 2000 used 5e-5 <= dt <= 5e-4 t_D)")
 
-    def _separate(self, positions, strain):
-        """Overlapping pairs separated (`collisions.separate`): (positions, Collisions)."""
-        return separate(positions, self.radii, Lattice(self.box, strain), self.job.hydrodynamics.min_gap)
+    def _separate(self, positions, strain, reflect=False):
+        """Pairs in contact separated, or reflected (`collisions.separate`): (positions,
+        Collisions)."""
+        return separate(positions, self.radii, Lattice(self.box, strain), self.job.hydrodynamics.min_gap,
+                        reflect)
 
     def _separate_midpoint(self, positions, strain):
         positions, collisions = self._separate(positions, strain)
         return positions, collisions.n_overlaps
 
+    def _corrects_overlaps(self):
+        """Whether overlaps are corrected: not in monolayers (counted and kept, Dratler &
+        Schowalter 1996) nor with frictional contacts (the springs' compression)."""
+        return self.monolayer is None and self.contacts is None
+
     def _start(self, k, strain, lattice):
-        """The step's start configuration: (positions, Collisions, or a stopped sample)."""
+        """The step's start configuration and the Collisions of a start or restored state
+        that needed a correction (steps leave theirs corrected)."""
         pos = lattice.wrap(self.positions)
         # Dratler & Schowalter 1996: overlaps counted and kept; a deep one stops the run
         if self.monolayer is not None:
             n_overlaps, overlap_gap = self.monolayer.overlaps(pos, self.radii, lattice)
             return pos, Collisions.none(n_overlaps, overlap_gap)
-        if self.contacts is not None:  # frictional contacts: overlaps are the springs' compression
-            return pos, Collisions.none(0, np.inf)
+        if not self._corrects_overlaps() or not self._unchecked:
+            return pos, Collisions.none()
+        self._unchecked = False
         return self._separate(pos, strain)
+
+    def _move(self, pos, drift, noise, strain, strain1):
+        """The step's end positions from its start's, the deterministic velocities (N, 6)
+        and the Brownian ones, and the Collisions of their correction (module docstring,
+        `collisions`)."""
+        affine = affine_displacement(pos, strain, strain1)
+        lattice = Lattice(self.box, strain1)
+        if not self._corrects_overlaps():
+            return lattice.wrap(pos + self.dt * (drift + noise)[:, :3] + affine), Collisions.none()
+        if self.collision_rule == "separate":
+            return self._separate(lattice.wrap(pos + self.dt * (drift + noise)[:, :3] + affine), strain1)
+        moved, first = self._separate(lattice.wrap(pos + self.dt * drift[:, :3] + affine), strain1)
+        moved, second = self._separate(lattice.wrap(moved + self.dt * noise[:, :3]), strain1, reflect=True)
+        return moved, Collisions.joined(first, second)
 
     def _one_step(self):
         k = self.step
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
         step_rate = self.protocol.mean_rate(t0, t1)
-        pos, collisions = self._start(k, strain, Lattice(self.box, strain))
-        if self.monolayer is not None and self.monolayer.stops(k, collisions.deepest, self.task.task_id):
+        pos, started = self._start(k, strain, Lattice(self.box, strain))
+        if self.monolayer is not None and self.monolayer.stops(k, started.deepest, self.task.task_id):
             self.step += 1
             return self.monolayer.stopped_sample(self.sample_fields(), t0, strain, rate)
         at = self.model.at(pos, strain)
@@ -278,16 +307,24 @@ class Realisation:
             u_force = at.velocities(forces, zero)
             velocity = velocity + u_force
             stress_p = self._force_stress(at, u_force, virial)
+        stress_b, midpoint_overlaps, noise = np.zeros(6), 0, np.zeros((n, 6))
+        if self.kT > 0:
+            brownian = at.brownian(self.rng, self.kT, self.dt)
+            noise = brownian.velocities
+            stress_b = bulk_stress(brownian.stresslets, self.volume)
+            midpoint_overlaps = brownian.midpoint_overlaps
+
+        if self.contacts is not None:
+            self.contacts.advance(velocity + noise, step_rate, self.dt)
+        if self.monolayer is not None:
+            velocity, noise = self.monolayer.in_plane(velocity), self.monolayer.in_plane(noise)
+        strain1 = self.protocol.strain(t1)
+        self.positions, moved = self._move(pos, velocity, noise, strain, strain1)
+        collisions = Collisions.joined(started, moved)
         stress_c = np.zeros(6)
         if len(collisions.i):
             f_c, virial_c = collisions.forces(at.relative_mobility, self.dt, n)
             stress_c = self._force_stress(at, at.velocities(f_c, zero), virial_c)
-        stress_b, midpoint_overlaps = np.zeros(6), 0
-        if self.kT > 0:
-            brownian = at.brownian(self.rng, self.kT, self.dt)
-            velocity = velocity + brownian.velocities
-            stress_b = bulk_stress(brownian.stresslets, self.volume)
-            midpoint_overlaps = brownian.midpoint_overlaps
 
         sample = {"time": t0, "strain": strain, "rate": rate,
                   "stress_hydrodynamic": bulk_stress(s_h, self.volume),
@@ -302,14 +339,6 @@ class Realisation:
             sample["stress_hydrodynamic_maxwell"] = bulk_stress(self.modes.sum(axis=0), self.volume)
         if self.job.output.per_particle:
             sample["stresslets"] = s_h
-
-        if self.contacts is not None:
-            self.contacts.advance(velocity, step_rate, self.dt)
-        if self.monolayer is not None:
-            velocity = self.monolayer.in_plane(velocity)
-        strain1 = self.protocol.strain(t1)
-        new = pos + self.dt * velocity[:, :3] + affine_displacement(pos, strain, strain1)
-        self.positions = Lattice(self.box, strain1).wrap(new)
         self.step += 1
         return sample
 
