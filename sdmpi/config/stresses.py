@@ -73,15 +73,21 @@ DERIVED = {"stress_hydrodynamic_maxwell": "stress_hydrodynamic",
            "stress_contact": "stress_interparticle"}
 
 
+def _contribution(dataset):
+    """The registry entry of a stress dataset or of the one it derives from (`DERIVED`);
+    None for datasets that are not stresses."""
+    dataset = DERIVED.get(dataset, dataset)
+    return next((c for c in CONTRIBUTIONS if c.dataset == dataset), None)
+
+
 def sample_offset(dataset):
     """The sample_offset (units of dt) of a stress dataset of the registry or derived from
     one (`DERIVED`); None for datasets that are not stresses."""
-    dataset = DERIVED.get(dataset, dataset)
-    return next((c.sample_offset for c in CONTRIBUTIONS if c.dataset == dataset), None)
+    c = _contribution(dataset)
+    return None if c is None else c.sample_offset
 
 
 def unrecorded_offset(dataset):
     """The sample offset of a stress dataset in files written without the attribute."""
-    dataset = DERIVED.get(dataset, dataset)
-    return next((c.sample_offset if c.unrecorded_offset is None else c.unrecorded_offset
-                 for c in CONTRIBUTIONS if c.dataset == dataset), None)
+    c = _contribution(dataset)
+    return None if c is None else (c.sample_offset if c.unrecorded_offset is None else c.unrecorded_offset)

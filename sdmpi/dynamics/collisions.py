@@ -85,8 +85,8 @@ class Collisions:
 
     @classmethod
     def joined(cls, first, second):
-        """The pairs of two corrections of one step, first's count and deepest gap (the
-        contacts found before any correction)."""
+        """The pairs of two corrections of one step, their contacts counted together and
+        the deeper of their smallest gaps."""
         arrays = (np.concatenate([getattr(first, k), getattr(second, k)]) for k in "ijers")
         return cls(*arrays, first.n_overlaps + second.n_overlaps, min(first.deepest, second.deepest))
 
