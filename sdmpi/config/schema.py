@@ -27,6 +27,9 @@ TWO_PI = 2.0 * math.pi
 #: volume fractions of the initial configurations: below the lattice limit a lattice
 #: start, above it a compressed one (sdmpi.dynamics.initial), up to this
 START_PHI_LIMIT = 0.6
+#: Monte Carlo sweeps of a generated start: enough to melt the simple cubic lattice start
+#: (its Bragg peak decays to the fluid's structure factor) up to phi = 0.5 with margin
+START_SWEEPS = 5000
 
 
 def lattice_sites_per_axis(n: int) -> int:
@@ -162,6 +165,7 @@ FRICTIONAL = ("interparticle", "kind", ("frictional",))
 BULK = ("system", "geometry", ("bulk",))
 MONOLAYER = ("system", "geometry", ("monolayer",))
 START_FILE = ("system", "start", ("file",))
+GENERATED = ("system", "start", ("generated",))
 
 
 @dataclass(frozen=True)
@@ -219,6 +223,11 @@ class System:
                             "file (positions read from start_file; docs/trajectories.md)",
                             allowed=Choice(("generated", "file")), only_if=BULK,
                             controls="system.start")
+    start_sweeps: int | None = key(
+        START_SWEEPS, "int", "hard-sphere Monte Carlo sweeps (N trial moves each) that "
+        "equilibrate the generated start; the default melts the lattice start at every "
+        "volume fraction the start reaches (docs/physics.md, Initial configurations)",
+        allowed=Range(0, 10 ** 7), only_if=GENERATED)
     start_file: str | None = key(
         None, "str", "HDF5 file (datasets positions (N, 3) or (M, N, 3), box (3,), optional "
         "radii (N,)), extended XYZ file (Lattice in the comment line, optional 5th column "

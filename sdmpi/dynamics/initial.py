@@ -8,7 +8,11 @@ spheres, or N < m^3, take randomly drawn sites) and are randomised by hard-spher
 Metropolis Monte Carlo (trial displacements uniform in a cube, rejected on overlap,
 |x_i - x_j| < a_i + a_j; Metropolis et al. 1953), which samples the equilibrium
 hard-sphere distribution for the given volume fraction; the overlap checks use a cell
-list, O(N) per sweep, and give the same moves as checking every pair. Denser random
+list, O(N) per sweep, and give the same moves as checking every pair. The lattice's
+memory decays slowly: at N = 27 its Bragg peak S(k_L), k_L = 2 pi m / L along each axis,
+is still 5 (phi = 0.45) and 24 (phi = 0.5) after 200 sweeps, against the fluid's ~2 after
+3000, and the high-frequency viscosity of such starts is 13% (phi = 0.45) and 45% (0.5)
+below that of equilibrated ones; the default, START_SWEEPS, melts it. Denser random
 packings (up to phi ~ 0.62) come from `compress`: alternating MC sweeps with affine box
 shrinks limited by the closest pair, a slow Lubachevsky-Stillinger-like compression
 (Lubachevsky & Stillinger 1990). `hard_sphere_fluid` uses it for volume fractions the
@@ -23,7 +27,7 @@ import math
 import numba
 import numpy as np
 
-from ..config.schema import START_PHI_LIMIT, lattice_sites_per_axis
+from ..config.schema import START_PHI_LIMIT, START_SWEEPS, lattice_sites_per_axis
 from ..hydro.geometry import Lattice, find_pairs
 
 #: dense starts: the lattice is filled to this share of its limit before compressing
@@ -190,7 +194,7 @@ def _neighbours(cell, cells, head, nxt, out):
     return count
 
 
-def hard_sphere_fluid(n_particles, phi, rng, sweeps=200, radius=1.0, strain=0.0, radii=None):
+def hard_sphere_fluid(n_particles, phi, rng, sweeps=START_SWEEPS, radius=1.0, strain=0.0, radii=None):
     """Equilibrium hard-sphere configuration in a cube of side L with Lees-Edwards
     images at the given strain: positions (N, 3) (not wrapped) and L.
 
@@ -200,7 +204,8 @@ def hard_sphere_fluid(n_particles, phi, rng, sweeps=200, radius=1.0, strain=0.0,
     overlap at any strain), which holds phi < (pi/6) sum_i a_i^3 / (m^3 a_max^3) (pi/6 for
     N = m^3 equal spheres). When N < m^3, or the spheres are unequal, they take N of the
     sites in an order drawn from ``rng`` (rng.permutation(m^3)[:N]); N = m^3 equal spheres
-    fill the lattice in raster order, drawing nothing. The MC step is tuned to ~40% acceptance. At or above the
+    fill the lattice in raster order, drawing nothing. ``sweeps`` MC sweeps (N trial
+    moves each) follow, the step tuned to ~40% acceptance. At or above the
     lattice limit (phi < START_PHI_LIMIT) the lattice is filled to LATTICE_FILL x the
     limit, equilibrated, compressed (:func:`compress`) and equilibrated again at phi by
     ``sweeps`` more sweeps; :class:`Jammed` if the compression jams COMPRESS_ATTEMPTS times."""

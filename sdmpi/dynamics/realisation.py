@@ -142,7 +142,7 @@ class Realisation:
         self.monolayer = Monolayer(job, task.phi) if job.system.geometry == "monolayer" else None
         if self.monolayer is None:
             pos, side = hard_sphere_fluid(n, task.phi, self.rng, strain=self.protocol.strain(0.0),
-                                          radii=self.radii)
+                                          radii=self.radii, sweeps=job.system.start_sweeps or 0)
             self.box = np.full(3, side)
         else:
             pos, self.box = self.monolayer.start(self.rng), self.monolayer.box
