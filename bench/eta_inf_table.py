@@ -3,12 +3,13 @@
 (far field + lubrication, Ewald tolerance 1e-6), one standard error over the configurations;
 writes bench/eta_inf.json (docs/validation.md compares it with Schaink et al. 2000 eq. 38).
 
-    python bench/eta_inf_table.py [--configs 10] [--sizes 27 125]
+    python bench/eta_inf_table.py [--configs 30] [--sizes 27 64 125]
 """
 
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -32,8 +33,8 @@ def measure(n, phi, configs, seed=2026):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--configs", type=int, default=10)
-    parser.add_argument("--sizes", type=int, nargs="+", default=[27, 125])
+    parser.add_argument("--configs", type=int, default=30)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[27, 64, 125])
     parser.add_argument("--out", default=str(Path(__file__).with_name("eta_inf.json")))
     args = parser.parse_args()
     rows = []
@@ -44,7 +45,7 @@ def main():
             rows.append({"n_particles": n, "phi": phi, "eta_inf": mean, "err": err, "configs": args.configs})
             print(f"N = {n:4d} phi = {phi:.2f}: eta'_inf = {mean:.3f} +- {err:.3f} "
                   f"({time.perf_counter() - t:.0f} s)", flush=True)
-    Path(args.out).write_text(json.dumps({"command": "python bench/eta_inf_table.py", "rows": rows}, indent=1))
+    Path(args.out).write_text(json.dumps({"command": "python bench/eta_inf_table.py " + " ".join(sys.argv[1:]), "rows": rows}, indent=1))
 
 
 if __name__ == "__main__":
