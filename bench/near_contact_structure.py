@@ -1,12 +1,14 @@
 """The equilibrium structure kept at rest: N spheres at volume fraction phi, no shear, Brownian,
-stepped by one hydrodynamic model at the default time step, against Monte Carlo
-configurations of the same N and phi (`sdmpi.dynamics.initial.hard_sphere_fluid`, independent
-seeds): the pair distribution g in shells of surface gap near contact, and the
-high-frequency viscosity eta_H (`sdmpi.hydro.bulk.hydrodynamic_viscosity`) of the evolved
-configurations. Errors: one standard error (SD: blocks of the run; MC: over configurations).
+stepped by one hydrodynamic model at the default time step, against a Monte Carlo chain of
+the same N and phi (`sdmpi.dynamics.initial`: a start equilibrated by --mc-sweeps sweeps,
+then --mc-configs samples --mc-every sweeps apart): the pair distribution g in shells of
+surface gap near contact, and the high-frequency viscosity eta_H
+(`sdmpi.hydro.bulk.hydrodynamic_viscosity`) of the evolved configurations. The first
+--discard of the run's steps (the relaxation from its Monte Carlo start) are left out.
+Errors: one standard error over 20 blocks (of the run; of the chain).
 
     python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
-        [--collisions separate|reflect] [--dt 5e-4]
+        [--collisions separate|reflect] [--dt 5e-4] [--seed 11]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
 the near-contact correction of `sdmpi.dynamics.models` off (for comparison); --collisions
@@ -26,7 +28,7 @@ from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
 from sdmpi.config.loader import parse_job
 from sdmpi.dynamics import models
 from sdmpi.dynamics.collisions import RULES, default_rule
-from sdmpi.dynamics.initial import hard_sphere_fluid
+from sdmpi.dynamics.initial import _mc_sweeps, hard_sphere_fluid
 from sdmpi.dynamics.realisation import Realisation
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
@@ -67,13 +69,18 @@ def ideal_counts(n, box):
     return ideal_pair_counts(n, np.prod(box), 2.0 + EDGES)
 
 
-def monte_carlo(n, phi, configs, eta_every):
-    """g per shell and eta_H of independent Monte Carlo configurations."""
+def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
+    """g per shell and eta_H of a Monte Carlo chain: hard_sphere_fluid equilibrated by
+    `sweeps` sweeps, then `configs` samples `every` sweeps apart (trial step `step`, ~50%
+    acceptance at phi = 0.45)."""
+    rng = np.random.default_rng([7, n, int(1000 * phi)])
+    pos, side = hard_sphere_fluid(n, phi, rng, sweeps=sweeps)
+    box, radii = np.full(3, side), np.ones(n)
+    ideal = ideal_counts(n, box)
     counts, etas = [], []
     for k in range(configs):
-        pos, side = hard_sphere_fluid(n, phi, np.random.default_rng([7, n, int(1000 * phi), k]))
-        box = np.full(3, side)
-        counts.append(shell_counts(pos, box) / ideal_counts(n, box))
+        _mc_sweeps(pos, side, radii, step, every, int(rng.integers(2 ** 31)), 0.0)
+        counts.append(shell_counts(pos, box) / ideal)
         if k % eta_every == 0:
             etas.append(hydrodynamic_viscosity(pos, box))
     return np.array(counts), np.array(etas)
@@ -109,7 +116,11 @@ def main():
     parser.add_argument("--n", type=int, default=27)
     parser.add_argument("--phi", type=float, default=0.45)
     parser.add_argument("--steps", type=int, default=10000)
-    parser.add_argument("--mc-configs", type=int, default=2000)
+    parser.add_argument("--mc-configs", type=int, default=100000)
+    parser.add_argument("--mc-sweeps", type=int, default=5000)
+    parser.add_argument("--mc-every", type=int, default=5)
+    parser.add_argument("--discard", type=float, default=0.2)
+    parser.add_argument("--seed", type=int, default=11)
     parser.add_argument("--uncorrected", action="store_true")
     parser.add_argument("--collisions", choices=RULES)
     parser.add_argument("--dt", type=float, default=5e-4)
@@ -118,13 +129,16 @@ def main():
     if args.uncorrected:
         models.NEAR_CONTACT_GAP = 0.0
     start = time.perf_counter()
-    g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions)
-    g_mc, eta_mc = monte_carlo(args.n, args.phi, args.mc_configs, eta_every=20)
-    (g1, e1), (g2, e2) = summary(g_sd, blocks=20), summary(g_mc)
-    (h1, f1), (h2, f2) = summary(eta_sd, blocks=20), summary(eta_mc)
+    g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions, args.seed)
+    skip = int(args.discard * args.steps)
+    g_mc, eta_mc = monte_carlo(args.n, args.phi, args.mc_configs, max(args.mc_configs // 100, 1),
+                               args.mc_sweeps, args.mc_every)
+    (g1, e1), (g2, e2) = summary(g_sd[skip:], blocks=20), summary(g_mc, blocks=20)
+    (h1, f1), (h2, f2) = summary(eta_sd[skip // 100:], blocks=16), summary(eta_mc, blocks=20)
     row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
-           "phi": args.phi, "dt": args.dt, "steps": args.steps,
+           "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip, "seed": args.seed,
            "collisions": args.collisions or default_rule(args.model), "mc_configs": args.mc_configs,
+           "mc_start_sweeps": args.mc_sweeps, "mc_every_sweeps": args.mc_every,
            "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
            "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [h1, f1], "eta_h_mc": [h2, f2],
            "seconds": round(time.perf_counter() - start)}

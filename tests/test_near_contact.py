@@ -281,3 +281,50 @@ def test_free_draining_reflection_keeps_the_contact_density():
         count += pair_counts(real.positions, lattice, edges)[0]
     g = count / steps / ideal_pair_counts(27, lattice.volume, edges)[0]
     assert g == pytest.approx((1 - phi / 2) / (1 - phi) ** 3, rel=0.15)
+
+
+def test_reflection_through_the_mobility_is_a_contact_impulse():
+    """Far field, four spheres, one pair (0, 1) pushed 3e-3 below the floor: the reflection
+    of `collisions.through_mobility` restores its gap to 2 min_gap - gap (to the second
+    order of the displacement), and R_FU times the displacement is a pair force along its
+    line of centres alone (equal and opposite, no torques, nothing on the other spheres):
+    the contact impulse acting through the mobility, which moves the other spheres too
+    (hydrodynamic coupling). The recorded impulse is that force. The symmetric move (both
+    spheres by s/2, nothing else), the rule's form before, fails the force check: it puts
+    forces on the other spheres (the oblique reflection of the module docstring)."""
+    from sdmpi.dynamics.collisions import through_mobility
+    from sdmpi.dynamics.models import ResistanceModel
+    box, radii = np.full(3, 6.0), np.ones(4)
+    pos = np.array([[1.0, 1.0, 1.0], [3.0 - 3e-3, 1.3, 1.1], [2.0, 3.05, 1.0], [1.5, 1.8, 3.04]])
+    pos[1] = pos[0] + (pos[1] - pos[0]) * (2 + MIN_GAP - 3e-3) / np.linalg.norm(pos[1] - pos[0])
+    model = ResistanceModel(radii, box, lubrication=False, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP)
+    at = model.at(pos, 0.0)
+    lattice = Lattice(box, 0.0)
+    pairs = close_pairs(at.positions, radii, lattice, cutoff=MIN_GAP)
+    assert list(zip(pairs.i, pairs.j)) == [(0, 1)]
+
+    def mobility(f):
+        return at.velocities(f, np.zeros((4, 5)))
+
+    moved, s, impulse = through_mobility(at.positions, radii, pairs, MIN_GAP, mobility, reflect=True)
+    gap = np.linalg.norm(moved[1] - moved[0]) - 2
+    assert s[0] == pytest.approx(2 * 3e-3, rel=1e-9)
+    assert gap == pytest.approx(MIN_GAP + 3e-3, abs=1e-6)
+    r_fu = at.resistance.blocks()[0]
+
+    def force_of(displacement):
+        """R_FU times a displacement with the rotations of the mobility's response."""
+        return r_fu @ displacement.ravel()
+
+    e = (at.positions[1] - at.positions[0]) / np.linalg.norm(at.positions[1] - at.positions[0])
+    response = mobility(impulse[0] * (np.outer([-1, 1, 0, 0], np.r_[e, 0, 0, 0])))
+    assert np.allclose(response[:, :3], moved - at.positions, atol=1e-15)
+    force = force_of(response).reshape(4, 6)
+    assert np.allclose(force[1, :3], impulse[0] * e) and np.allclose(force[0, :3], -impulse[0] * e)
+    assert np.abs(force[2:]).max() < 1e-9 * impulse[0] and np.abs(force[:, 3:]).max() < 1e-9 * impulse[0]
+    assert np.abs(moved[2:] - at.positions[2:]).max() > 1e-2 * 3e-3  # the others move with the pair
+    symmetric, _ = remove_overlaps(at.positions, radii, pairs, MIN_GAP, reflect=True)
+    sym = np.zeros((4, 6))
+    sym[:, :3] = symmetric - at.positions
+    sym[:, 3:] = response[:, 3:]  # even with the rotations of the contact force
+    assert np.abs(force_of(sym).reshape(4, 6)[2:, :3]).max() > 1e-2 * impulse[0]

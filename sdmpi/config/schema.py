@@ -526,7 +526,8 @@ class Hydrodynamics:
     collisions: str | None = key(None, "str", "how pairs in contact (gap below min_gap) after a "
                                  "step are corrected: separate = moved apart to 2 min_gap; "
                                  "reflect = the Brownian part of the step reflected at the gap "
-                                 "min_gap (the deterministic part separated); absent: separate "
+                                 "min_gap (the deterministic part separated), both by contact "
+                                 "impulses acting through the mobility; absent: separate "
                                  "for the stokesian model, reflect for far-field and "
                                  "free-draining (see docs/physics.md)",
                                  allowed=Choice(("separate", "reflect")), optional=True)

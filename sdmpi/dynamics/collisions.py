@@ -4,27 +4,51 @@ A pair is in contact when its surface gap is below the lubrication's floor ``min
 (mean radii; below it the lubrication is that of the floor, so the model cannot tell such
 a pair from touching spheres): the hard-sphere surface of the correction is the gap
 min_gap. After each time step the pairs in contact, overlapping pairs included, are moved
-apart symmetrically along their lines of centres, by one of two rules
-(``hydrodynamics.collisions``), and the sweep is repeated while a correction brings other
-pairs into contact:
+apart along their lines of centres, by one of two rules (``hydrodynamics.collisions``), and
+the correction is repeated while it brings other pairs into contact:
 
 * ``separate`` (Bossis & Brady, J. Chem. Phys. 80, 5141 (1984); Heyes & Melrose, J.
-  Non-Newtonian Fluid Mech. 46, 1 (1993)): the pair is placed at a gap of SEPARATION x
-  min_gap, twice the floor, so that a pair just separated still sees the gradient of its
-  lubrication (`models`, the rfd drift). The default of the stokesian model, whose
-  lubrication keeps pairs from contact in continuous time.
+  Non-Newtonian Fluid Mech. 46, 1 (1993)): the two spheres are moved apart symmetrically
+  to a gap of SEPARATION x min_gap, twice the floor, so that a pair just separated still
+  sees the gradient of its lubrication (`models`, the rfd drift). The default of the
+  stokesian model, whose lubrication keeps pairs from contact in continuous time.
 * ``reflect``: the step is split into its deterministic part (imposed flow, interparticle
-  forces), after which pairs in contact are separated as above, and its Brownian part,
-  after which they are reflected at the hard-sphere surface, gap -> 2 min_gap - gap. For a
-  deterministic approach the contact force is the one that stops the normal motion, which
-  the placement realises; for diffusion of a pair's separation x >= 0 against a hard wall
-  the reflected Gaussian p(y) = G(y - x) + G(y + x) is the exact transition density (the
-  method of images; Smoluchowski 1917; Strating, Phys. Rev. E 59, 2175 (1999), treats the
-  Brownian displacement as a path and resolves its collisions elastically), so the pair
-  density stays flat up to contact. Placing diffusing pairs at contact instead deposits
-  them there and depletes the gaps beyond (Heyes & Melrose's algorithm converges only like
-  dt^1/2). The default of the far-field and free-draining models, whose relative mobility
-  stays finite at contact.
+  forces), after which pairs in contact are separated to SEPARATION x min_gap, and its
+  Brownian part, after which they are reflected at the hard-sphere surface, gap ->
+  2 min_gap - gap. Both corrections are the displacement of a contact impulse acting
+  through the model's mobility M = R_FU^-1 of the step (`through_mobility`): impulses
+  lambda_p along the pairs' unit pair forces f_p (e_p on j, -e_p on i) move the particles
+  by M sum_p lambda_p f_p, with the lambda solving sum_q (f_p.M.f_q) lambda_q = s_p for
+  the pairs' separation changes s_p. The default of the far-field and free-draining
+  models, whose relative mobility stays finite at contact.
+
+Why reflect, and why through M. For diffusion of a pair's gap x >= 0 against a hard wall,
+the reflected Gaussian p(y) = G(y - x) + G(y + x) is the exact transition density (the
+method of images; Smoluchowski 1917; Strating, Phys. Rev. E 59, 2175 (1999), resolves the
+Brownian displacement's collisions elastically), so the pair density stays flat up to
+contact; placing diffusing pairs at contact instead deposits them there and depletes the
+gaps beyond (Heyes & Melrose's algorithm converges only like dt^1/2). The direction of the
+reflection matters as soon as the mobility is not a multiple of the identity. The
+Fokker-Planck flux of dx = kT div M dt + (2 kT)^1/2 M^1/2 dW is J = -kT M grad p, so the
+hard-sphere wall (normal n in configuration space) asks for n.M grad p = 0: the conormal
+condition, which the equilibrium (uniform) density satisfies. A diffusion reflected along a
+direction g has the generator's boundary condition g.grad f = 0, and the uniform density is
+stationary only if the boundary term of int p L f, the surface integral of n.M grad f,
+vanishes for every such f, i.e. g parallel to M n (oblique reflection: Lions & Sznitman,
+Comm. Pure Appl. Math. 37, 511 (1984)). Over one step M is frozen, and in the coordinates
+y = M^-1/2 x the noise is isotropic and the displacement along M n is the mirror reflection
+at the wall, so the method of images is again exact; for one pair it is the impulse
+lambda = s/G with G = f.M.f, which changes the gap by s. Moving only the two spheres, by
+s/2 each along e, is that reflection only where M f is parallel to f: free draining of
+equal spheres, or two equal spheres alone in a box (by symmetry). In a suspension with
+hydrodynamic interactions M f also moves the pair's neighbours and turns the pair (far
+field, N = 27, phi = 0.45: the part of M f off f is ~0.8 of the part along it), and the
+symmetric move is an oblique reflection that does not keep the equilibrium: pairs gathered
+near contact (g 1.5-1.8 times its equilibrium value below gaps of 1e-2, as much at
+dt = 1e-4 as at 5e-4, so not a time-step error; docs/physics.md). The deterministic part
+is separated through M for the same reason: a contact force acts on the suspension through
+its mobility. With several pairs corrected at once the impulses solve the pairs' joint
+constraint (the Gauss principle of least constraint in the metric of M^-1).
 
 Collision stress (Heyes & Melrose 1993; Strating 1999; Foss & Brady, J. Fluid Mech. 407,
 167 (2000)). A correction that changes a pair's separation by s along its unit line of
@@ -35,7 +59,8 @@ G = e.(M_jj + M_ii - M_ij - M_ji).e:
     f = s / (G dt),
 
 (free draining: G = 1/(6 pi a_i) + 1/(6 pi a_j), the hard-sphere impulse of Brownian
-dynamics). Its stress is that of any interparticle force (Batchelor 1977; `realisation`):
+dynamics); a correction through the mobility records its impulses, f = lambda/dt (the
+same for a pair corrected alone). Its stress is that of any interparticle force (Batchelor 1977; `realisation`):
 
     Sigma_C = -(1/V) [sum_pairs r f e + sum_i R_SU R_FU^-1 F_C],
 
@@ -56,6 +81,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..hydro.lubrication import close_pairs
+from .models import unit_pair_forces
 
 #: separated pairs are left at this many times hydrodynamics.min_gap
 SEPARATION = 2.0
@@ -72,8 +98,10 @@ def default_rule(model):
 @dataclass
 class Collisions:
     """The pairs a correction moved: indices i, j (N_c,), unit lines of centres e (N_c, 3),
-    separations r after the correction (N_c,), separation changes s (N_c,), and the number
-    of pairs in contact and the smallest gap found before any correction."""
+    separations r after the correction (N_c,), separation changes s (N_c,), the number
+    of pairs in contact and the smallest gap found before any correction, and the impulses
+    lambda (N_c,) of a correction through the mobility (NaN where the pairs were moved
+    apart symmetrically: the impulse is then s/G, `forces`)."""
 
     i: np.ndarray
     j: np.ndarray
@@ -82,13 +110,19 @@ class Collisions:
     s: np.ndarray
     n_overlaps: int
     deepest: float
+    impulse: np.ndarray = None
+
+    def __post_init__(self):
+        if self.impulse is None:
+            self.impulse = np.full(len(self.i), np.nan)
 
     @classmethod
     def joined(cls, first, second):
         """The pairs of two corrections of one step, their contacts counted together and
         the deeper of their smallest gaps."""
-        arrays = (np.concatenate([getattr(first, k), getattr(second, k)]) for k in "ijers")
-        return cls(*arrays, first.n_overlaps + second.n_overlaps, min(first.deepest, second.deepest))
+        arrays = [np.concatenate([getattr(first, k), getattr(second, k)]) for k in "ijers"]
+        return cls(*arrays, first.n_overlaps + second.n_overlaps, min(first.deepest, second.deepest),
+                   np.concatenate([first.impulse, second.impulse]))
 
     @classmethod
     def none(cls, n_overlaps=0, deepest=np.inf):
@@ -98,12 +132,18 @@ class Collisions:
                    n_overlaps, deepest)
 
     def forces(self, mobility, dt, n):
-        """Collision forces (N, 6) on the particles and their virial sum r f e e^T (3, 3);
-        mobility(i, j, e) -> each pair's relative mobility G."""
+        """Collision forces (N, 6) on the particles and their virial sum r f e e^T (3, 3):
+        f = lambda/dt, or s/(G dt) where no impulse was recorded; mobility(i, j, e) -> each
+        pair's relative mobility G."""
         forces, virial = np.zeros((n, 6)), np.zeros((3, 3))
         if len(self.i) == 0:
             return forces, virial
-        f = self.s / (mobility(self.i, self.j, self.e) * dt)
+        impulse = self.impulse.copy()
+        symmetric = np.isnan(impulse)
+        if symmetric.any():
+            impulse[symmetric] = self.s[symmetric] / mobility(self.i[symmetric], self.j[symmetric],
+                                                              self.e[symmetric])
+        f = impulse / dt
         on_j = f[:, None] * self.e
         np.add.at(forces[:, :3], self.j, on_j)
         np.add.at(forces[:, :3], self.i, -on_j)
@@ -135,11 +175,40 @@ def remove_overlaps(positions, radii, pairs, min_gap, reflect=False, sweeps=100)
     return pos, moved
 
 
-def separate(positions, radii, lattice, min_gap, reflect=False, rounds=10):
+def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False):
+    """One correction of the pairs in contact of a pair list through the mobility (module
+    docstring): each is moved apart by s_p along its line of centres, to SEPARATION x
+    min_gap (mean radii), or reflected at the gap min_gap (reflect: s_p twice its depth
+    below it), by impulses lambda along the unit pair forces f_p with
+    sum_q (f_p.M.f_q) lambda_q = s_p, which move the particles by M sum_p lambda_p f_p.
+    mobility(forces (N, 6)) -> velocities (N, 6), M = R_FU^-1 of the step. Returns the new
+    positions and, per listed pair, its separation change (0 for pairs not in contact)
+    and impulse."""
+    n = len(positions)
+    dx = positions[pairs.j] + pairs.shift - positions[pairs.i]
+    dist = np.linalg.norm(dx, axis=1)
+    asum = radii[pairs.i] + radii[pairs.j]
+    surface = asum * (1 + 0.5 * min_gap)
+    bad = dist < surface
+    moved, impulse = np.zeros(len(dist)), np.zeros(len(dist))
+    if not bad.any():
+        return positions, moved, impulse
+    target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
+    moved[bad] = (target - dist)[bad]
+    unit = unit_pair_forces(pairs.i[bad], pairs.j[bad], (dx / dist[:, None])[bad], n)
+    velocities = np.array([mobility(f) for f in unit])
+    coupling = np.einsum("pkc,qkc->pq", unit, velocities)  # f_p.M.f_q, symmetric positive definite
+    impulse[bad] = np.linalg.solve(coupling, moved[bad])
+    return positions + np.einsum("p,pkc->kc", impulse[bad], velocities)[:, :3], moved, impulse
+
+
+def separate(positions, radii, lattice, min_gap, reflect=False, rounds=10, mobility=None):
     """Pairs in contact (closer than min_gap mean radii; periodic images included) found
-    and corrected (placed, or reflected: `remove_overlaps`), with a new pair search after
-    each correction while it creates new contacts. Returns the corrected positions and
-    their `Collisions`."""
+    and corrected (placed, or reflected), with a new pair search after each correction
+    while it creates new contacts; mobility(forces (N, 6)) -> velocities (N, 6): the
+    correction acts through it (`through_mobility`), else the two spheres of a pair are
+    moved symmetrically (`remove_overlaps`). Returns the corrected positions and their
+    `Collisions`."""
     parts, found, deepest = [], 0, np.inf
     for _ in range(rounds):
         pairs = close_pairs(positions, radii, lattice, cutoff=min_gap)
@@ -147,12 +216,16 @@ def separate(positions, radii, lattice, min_gap, reflect=False, rounds=10):
             break
         if found == 0:
             found, deepest = len(pairs.i), pairs.min_gap
-        positions, moved = remove_overlaps(positions, radii, pairs, min_gap, reflect)
+        if mobility is None:
+            positions, moved = remove_overlaps(positions, radii, pairs, min_gap, reflect)
+            impulse = np.full(len(moved), np.nan)
+        else:
+            positions, moved, impulse = through_mobility(positions, radii, pairs, min_gap, mobility, reflect)
         hit = moved > 0
         dx = positions[pairs.j[hit]] + pairs.shift[hit] - positions[pairs.i[hit]]
         r = np.linalg.norm(dx, axis=1)
-        parts.append((pairs.i[hit], pairs.j[hit], dx / r[:, None], r, moved[hit]))
+        parts.append((pairs.i[hit], pairs.j[hit], dx / r[:, None], r, moved[hit], impulse[hit]))
     if not parts:
         return positions, Collisions.none()
-    i, j, e, r, s = (np.concatenate(c) for c in zip(*parts))
-    return positions, Collisions(i, j, e, r, s, found, deepest)
+    i, j, e, r, s, impulse = (np.concatenate(c) for c in zip(*parts))
+    return positions, Collisions(i, j, e, r, s, found, deepest, impulse)

@@ -38,7 +38,8 @@ Hard spheres: lubrication keeps overlaps rare; pairs brought into contact by a f
 are counted and corrected at the end of the step by the potential-free correction of
 `collisions` (Schaink et al. 2000, sec. III, Bossis & Brady 1984): separated, or, with the
 rule ``reflect``, separated after the step's deterministic part and reflected after its
-Brownian part (``hydrodynamics.collisions``, `collisions.default_rule`). An optional pair
+Brownian part, both by contact impulses acting through the step's mobility R_FU^-1
+(``hydrodynamics.collisions``, `collisions.default_rule`). An optional pair
 repulsion (`forces.Repulsion`, Dratler & Schowalter 1996) adds F_P.
 
 Frictional contacts (`contacts`, interparticle.kind = "frictional", non-Brownian): overlaps
@@ -233,11 +234,11 @@ class Realisation:
             f"~{math.sqrt(2 * self.dt):.2g} radii per step (Brownian) - use a smaller "
             "time step (Schaink et al. 2000 used 5e-5 <= dt <= 5e-4 t_D)")
 
-    def _separate(self, positions, strain, reflect=False):
-        """Pairs in contact separated, or reflected (`collisions.separate`): (positions,
-        Collisions)."""
+    def _separate(self, positions, strain, reflect=False, mobility=None):
+        """Pairs in contact separated, or reflected, symmetrically or through the mobility
+        (`collisions.separate`): (positions, Collisions)."""
         return separate(positions, self.radii, Lattice(self.box, strain), self.job.hydrodynamics.min_gap,
-                        reflect)
+                        reflect, mobility=mobility)
 
     def _separate_midpoint(self, positions, strain):
         positions, collisions = self._separate(positions, strain)
@@ -261,18 +262,26 @@ class Realisation:
         self._unchecked = False
         return self._separate(pos, strain)
 
-    def _move(self, pos, drift, noise, strain, strain1):
+    def _move(self, pos, drift, noise, strain, strain1, at):
         """The step's end positions from its start's, the deterministic velocities (N, 6)
         and the Brownian ones, and the Collisions of their correction (module docstring,
-        `collisions`)."""
+        `collisions`; the rule reflect acts through the mobility of the step's model
+        evaluation `at`)."""
         affine = affine_displacement(pos, strain, strain1)
         lattice = Lattice(self.box, strain1)
         if not self._corrects_overlaps():
             return lattice.wrap(pos + self.dt * (drift + noise)[:, :3] + affine), Collisions.none()
         if self.collision_rule == "separate":
             return self._separate(lattice.wrap(pos + self.dt * (drift + noise)[:, :3] + affine), strain1)
-        moved, first = self._separate(lattice.wrap(pos + self.dt * drift[:, :3] + affine), strain1)
-        moved, second = self._separate(lattice.wrap(moved + self.dt * noise[:, :3]), strain1, reflect=True)
+        zero = np.zeros((self.n_particles, 5))
+
+        def mobility(forces):
+            return at.velocities(forces, zero)
+
+        moved, first = self._separate(lattice.wrap(pos + self.dt * drift[:, :3] + affine), strain1,
+                                      mobility=mobility)
+        moved, second = self._separate(lattice.wrap(moved + self.dt * noise[:, :3]), strain1, reflect=True,
+                                       mobility=mobility)
         return moved, Collisions.joined(first, second)
 
     def _one_step(self):
@@ -319,7 +328,7 @@ class Realisation:
         if self.monolayer is not None:
             velocity, noise = self.monolayer.in_plane(velocity), self.monolayer.in_plane(noise)
         strain1 = self.protocol.strain(t1)
-        self.positions, moved = self._move(pos, velocity, noise, strain, strain1)
+        self.positions, moved = self._move(pos, velocity, noise, strain, strain1, at)
         collisions = Collisions.joined(started, moved)
         stress_c = np.zeros(6)
         if len(collisions.i):
