@@ -8,11 +8,13 @@ surface gap near contact, and the high-frequency viscosity eta_H
 Errors: one standard error over 20 blocks (of the run; of the chain).
 
     python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
-        [--collisions separate|reflect] [--dt 5e-4] [--seed 11]
+        [--collisions separate|reflect] [--symmetric] [--dt 5e-4] [--seed 11]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
 the near-contact correction of `sdmpi.dynamics.models` off (for comparison); --collisions
-chooses the overlap correction's rule (`sdmpi.dynamics.collisions`; absent: the model's). Prints one JSON
+chooses the overlap correction's rule (`sdmpi.dynamics.collisions`; absent: the model's);
+--symmetric moves only the two spheres of a pair in contact, by half the separation change
+each, instead of acting through the mobility (the oblique reflection, for comparison). Prints one JSON
 line, appended to bench/near_contact_structure.json (docs/physics.md quotes it).
 """
 
@@ -123,11 +125,16 @@ def main():
     parser.add_argument("--seed", type=int, default=11)
     parser.add_argument("--uncorrected", action="store_true")
     parser.add_argument("--collisions", choices=RULES)
+    parser.add_argument("--symmetric", action="store_true")
     parser.add_argument("--dt", type=float, default=5e-4)
     parser.add_argument("--out", default=str(Path(__file__).with_name("near_contact_structure.json")))
     args = parser.parse_args()
     if args.uncorrected:
         models.NEAR_CONTACT_GAP = 0.0
+    if args.symmetric:
+        symmetric = Realisation._separate
+        Realisation._separate = lambda self, pos, strain, reflect=False, mobility=None: symmetric(
+            self, pos, strain, reflect)
     start = time.perf_counter()
     g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions, args.seed)
     skip = int(args.discard * args.steps)
@@ -137,7 +144,8 @@ def main():
     (h1, f1), (h2, f2) = summary(eta_sd[skip // 100:], blocks=16), summary(eta_mc, blocks=20)
     row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
            "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip, "seed": args.seed,
-           "collisions": args.collisions or default_rule(args.model), "mc_configs": args.mc_configs,
+           "collisions": args.collisions or default_rule(args.model),
+           "collision_moves": "symmetric" if args.symmetric else "through the mobility", "mc_configs": args.mc_configs,
            "mc_start_sweeps": args.mc_sweeps, "mc_every_sweeps": args.mc_every,
            "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
            "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [h1, f1], "eta_h_mc": [h2, f2],
