@@ -43,12 +43,14 @@ s/2 each along e, is that reflection only where M f is parallel to f: free drain
 equal spheres, or two equal spheres alone in a box (by symmetry). In a suspension with
 hydrodynamic interactions M f also moves the pair's neighbours and turns the pair (far
 field, N = 27, phi = 0.45: the part of M f off f is ~0.8 of the part along it), and the
-symmetric move is an oblique reflection that does not keep the equilibrium: pairs gathered
-near contact (g 1.5-1.8 times its equilibrium value below gaps of 1e-2, as much at
-dt = 1e-4 as at 5e-4, so not a time-step error; docs/physics.md). The deterministic part
-is separated through M for the same reason: a contact force acts on the suspension through
-its mobility. With several pairs corrected at once the impulses solve the pairs' joint
-constraint (the Gauss principle of least constraint in the metric of M^-1).
+symmetric move is an oblique reflection that does not keep the equilibrium: pairs gather
+near contact (far field, N = 27, phi = 0.45: g 1.4-1.8 times its equilibrium value below
+gaps of 1e-2 at dt = 5e-4, still 1.3-1.4 times at dt = 1e-4, so not a time-step error;
+through the mobility it is the equilibrium value within errors; docs/physics.md). The
+deterministic part is separated through M for the same reason: a contact force acts on the
+suspension through its mobility. With several pairs corrected at once the impulses solve
+the pairs' joint constraint: the displacement of least M^-1 norm that changes each pair's
+separation by its s_p (to first order; Gauss's principle of least constraint).
 
 Collision stress (Heyes & Melrose 1993; Strating 1999; Foss & Brady, J. Fluid Mech. 407,
 167 (2000)). A correction that changes a pair's separation by s along its unit line of
