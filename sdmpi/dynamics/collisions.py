@@ -83,7 +83,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..hydro.lubrication import close_pairs
-from .models import unit_pair_forces
 
 #: separated pairs are left at this many times hydrodynamics.min_gap
 SEPARATION = 2.0
@@ -197,11 +196,17 @@ def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False):
         return positions, moved, impulse
     target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
     moved[bad] = (target - dist)[bad]
-    unit = unit_pair_forces(pairs.i[bad], pairs.j[bad], (dx / dist[:, None])[bad], n)
-    velocities = np.array([mobility(f) for f in unit])
-    coupling = np.einsum("pkc,qkc->pq", unit, velocities)  # f_p.M.f_q, symmetric positive definite
+    i, j, e = pairs.i[bad], pairs.j[bad], (dx / dist[:, None])[bad]
+    velocities = np.empty((len(i), n, 6))  # M f_q
+    force = np.zeros((n, 6))
+    for q in range(len(i)):
+        force[i[q], :3], force[j[q], :3] = -e[q], e[q]
+        velocities[q] = mobility(force)
+        force[i[q], :3] = force[j[q], :3] = 0.0
+    # f_p.M.f_q = e_p.((M f_q)_j_p - (M f_q)_i_p): symmetric positive definite
+    coupling = np.einsum("pc,qpc->pq", e, velocities[:, j, :3] - velocities[:, i, :3])
     impulse[bad] = np.linalg.solve(coupling, moved[bad])
-    return positions + np.einsum("p,pkc->kc", impulse[bad], velocities)[:, :3], moved, impulse
+    return positions + np.tensordot(impulse[bad], velocities[:, :, :3], axes=1), moved, impulse
 
 
 def separate(positions, radii, lattice, min_gap, reflect=False, rounds=10, mobility=None):
