@@ -205,7 +205,10 @@ def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False):
         force[i[q], :3] = force[j[q], :3] = 0.0
     # f_p.M.f_q = e_p.((M f_q)_j_p - (M f_q)_i_p): symmetric positive definite
     coupling = np.einsum("pc,qpc->pq", e, velocities[:, j, :3] - velocities[:, i, :3])
-    impulse[bad] = np.linalg.solve(coupling, moved[bad])
+    try:
+        impulse[bad] = np.linalg.solve(coupling, moved[bad])
+    except np.linalg.LinAlgError:  # pair forces that balance (a closed chain of contacts): least squares
+        impulse[bad] = np.linalg.lstsq(coupling, moved[bad], rcond=None)[0]
     return positions + np.tensordot(impulse[bad], velocities[:, :, :3], axes=1), moved, impulse
 
 
