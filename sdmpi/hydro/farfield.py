@@ -368,47 +368,109 @@ def _real_space_change(pos, moved, radii, pi, pj, shift, table, grid, grid_r0, g
         old[:, :] = 0.0
 
 
+# Elementwise loops over the (t, k) pairs of `_reciprocal_change`, one output and at most
+# four inputs each: LLVM vectorises a loop only when its runtime check that the arrays do
+# not overlap stays small.
+
+
+@numba.njit(cache=True, inline="never")
+def _faxen_row(a2, kc, out):
+    """out[m] = 1 - a2 kc[m] (a Faxen factor 1 - c a^2 k^2 per wave vector)."""
+    for m in range(out.shape[0]):
+        out[m] = 1.0 - a2 * kc[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _product_row(x, y, out):
+    """out = x y elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = x[m] * y[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _add_product_row(x, y, z, out):
+    """out = x + y z elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = x[m] + y[m] * z[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _accumulate_row(acc, x, y):
+    """acc += x y elementwise."""
+    for m in range(acc.shape[0]):
+        acc[m] += x[m] * y[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _combine_row(x, sx, y, out):
+    """out = x + sx y elementwise (sx = +-1)."""
+    for m in range(out.shape[0]):
+        out[m] = x[m] + sx * y[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _bracket_row(c, g, s, h, out):
+    """out = c g + s h elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = c[m] * g[m] + s[m] * h[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _scaled_difference_row(scale, f, x, y, out):
+    """out = scale f (x - y) elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = scale * f[m] * (x[m] - y[m])
+
+
 @numba.njit(cache=True)
-def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, kvec, row_c, scale, w, out):
-    """Adds [M_k(moved) - M_k(pos)] w into out (N, 11): the reciprocal sum of the pair form
-    above applied to w, from the cosines and sines (N, nk) of k.x at both configurations.
-    With c_j, s_j those of k.x_j and f_a(a_j) = 1 - row_c[a] a_j^2 k^2, per wave vector and
-    normal direction t the sums P_c,s = sum_j (c_j, s_j) sum_{a in U} f b_at w_ja and
-    Q_c,s (a in Omega, E) give (M w)_ia = scale f_a(a_i) b_at [c_i (P_c - Q_s) + s_i (P_s +
-    Q_c)] on the U rows and scale f_a(a_i) b_at [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the
-    others, scale = 2/V: O(N n_k) operations, no pair loop."""
-    n = w.shape[0]
-    proj = np.empty((n, 2))
-    fb = np.empty((n, NDOF))
-    for kk in range(kvec.shape[0]):
-        ksq = kvec[kk, 0] ** 2 + kvec[kk, 1] ** 2 + kvec[kk, 2] ** 2
-        for t in range(2):
-            for j in range(n):  # f b(k) per particle, its U and (Omega, E) parts of (f b)^T w_j
-                a2k2 = radii[j] ** 2 * ksq
-                even, odd = 0.0, 0.0
-                for a in range(NDOF):
-                    fb[j, a] = (1.0 - row_c[a] * a2k2) * b[kk, a, t]
-                    if a < 3:
-                        even += fb[j, a] * w[j, a]
-                    else:
-                        odd += fb[j, a] * w[j, a]
-                proj[j, 0], proj[j, 1] = even, odd
-            for side in range(2):
-                c, s = (cos_new, sin_new) if side == 0 else (cos_old, sin_old)
-                sign = scale if side == 0 else -scale
-                pc, ps, qc, qs = 0.0, 0.0, 0.0, 0.0
-                for j in range(n):
-                    pc += c[j, kk] * proj[j, 0]
-                    ps += s[j, kk] * proj[j, 0]
-                    qc += c[j, kk] * proj[j, 1]
-                    qs += s[j, kk] * proj[j, 1]
-                for i in range(n):
-                    u_part = sign * (c[i, kk] * (pc - qs) + s[i, kk] * (ps + qc))
-                    o_part = sign * (c[i, kk] * (qc + ps) + s[i, kk] * (qs - pc))
-                    for a in range(3):
-                        out[i, a] += fb[i, a] * u_part
-                    for a in range(3, NDOF):
-                        out[i, a] += fb[i, a] * o_part
+def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, raw, k6, k10, scale, d):
+    """The reciprocal part of [M_k(moved) - M_k(pos)] w, in factored form (all arrays over
+    the M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector k, m = t n_k + k).
+    With c_j, s_j the cosine and sine of k.x_j (cos_old, ... (N, M)), b(k) the wave
+    amplitudes (`_wave_amplitudes`) and raw (3, N, M) = sum over the U, Omega and E rows a
+    of b_at w_ja for each particle j, f_a(a_j) = 1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows
+    (k6 = k^2/6), 0 on Omega, 1/10 on E (k10 = k^2/10)): the sums P_c,s = sum_j (c_j, s_j)
+    f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E) give
+    (M w)_ia = scale f_a(a_i) b_at [c_i (P_c - Q_s) + s_i (P_s + Q_c)] on the U rows and
+    scale f_a(a_i) b_at [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the others, scale = 2/V.
+    Fills d (3, N, M) with the brackets' change between the two configurations times
+    scale f_U (U rows), scale (Omega rows) and scale f_E (E rows), so that the change is
+    sum_m b_a(m) d[., i, m] (`far_field_change` does these products by BLAS). O(N n_k)
+    operations, no pair loop; every loop over m is contiguous (vectorised)."""
+    n, nm = cos_old.shape
+    f_u, f_e = np.empty((n, nm)), np.empty((n, nm))
+    proj_u, proj_o = np.empty(nm), np.empty(nm)
+    sums = np.zeros((8, nm))  # P_c, P_s, Q_c, Q_s at the moved configuration, then at the start
+    for j in range(n):
+        a2 = radii[j] * radii[j]
+        _faxen_row(a2, k6, f_u[j])
+        _faxen_row(a2, k10, f_e[j])
+        _product_row(f_u[j], raw[0, j], proj_u)
+        _add_product_row(raw[1, j], f_e[j], raw[2, j], proj_o)
+        for side in range(2):
+            c, s = (cos_new[j], sin_new[j]) if side == 0 else (cos_old[j], sin_old[j])
+            _accumulate_row(sums[4 * side + 0], c, proj_u)
+            _accumulate_row(sums[4 * side + 1], s, proj_u)
+            _accumulate_row(sums[4 * side + 2], c, proj_o)
+            _accumulate_row(sums[4 * side + 3], s, proj_o)
+    # per side: P_c - Q_s, P_s + Q_c (U rows), Q_c + P_s, Q_s - P_c (Omega, E rows)
+    g = np.empty((8, nm))
+    for side in range(2):
+        pc, ps, qc, qs = sums[4 * side], sums[4 * side + 1], sums[4 * side + 2], sums[4 * side + 3]
+        _combine_row(pc, -1.0, qs, g[4 * side])
+        _combine_row(ps, 1.0, qc, g[4 * side + 1])
+        _combine_row(qc, 1.0, ps, g[4 * side + 2])
+        _combine_row(qs, -1.0, pc, g[4 * side + 3])
+    u_new, u_old, o_new, o_old = np.empty(nm), np.empty(nm), np.empty(nm), np.empty(nm)
+    for i in range(n):
+        _bracket_row(cos_new[i], g[0], sin_new[i], g[1], u_new)
+        _bracket_row(cos_old[i], g[4], sin_old[i], g[5], u_old)
+        _bracket_row(cos_new[i], g[2], sin_new[i], g[3], o_new)
+        _bracket_row(cos_old[i], g[6], sin_old[i], g[7], o_old)
+        _scaled_difference_row(scale, f_u[i], u_new, u_old, d[0, i])
+        _scaled_difference_row(scale, f_e[i], o_new, o_old, d[2, i])
+        for m in range(nm):
+            d[1, i, m] = scale * (o_new[m] - o_old[m])
 
 
 def far_field_change(positions, moved, radii, plan, w):
@@ -427,9 +489,20 @@ def far_field_change(positions, moved, radii, plan, w):
     grid = plan.grid
     _real_space_change(pos, moved, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
     if plan.params is not None:
-        old, new = pos @ plan.kvec.T, moved @ plan.kvec.T
-        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii,
-                           wave_amplitudes(plan.kvec, xi), plan.kvec, _ROW_C, 2.0 / plan.volume, w, out)
+        # the pairs m = (normal direction t, wave vector k), t-major
+        kvec2 = np.concatenate([plan.kvec, plan.kvec])
+        amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
+        b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
+        ksq = np.einsum("ij,ij->i", kvec2, kvec2)
+        old, new = pos @ kvec2.T, moved @ kvec2.T
+        raw = np.empty((3, len(pos), b.shape[1]))
+        for part, rows in enumerate((slice(0, 3), slice(3, 6), slice(6, NDOF))):
+            np.matmul(w[:, rows], b[rows], out=raw[part])
+        d = np.empty_like(raw)
+        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii, raw, ksq / 6.0,
+                           ksq / 10.0, 2.0 / plan.volume, d)
+        for part, rows in enumerate((slice(0, 3), slice(3, 6), slice(6, NDOF))):
+            out[:, rows] += d[part] @ b[rows].T
     return out
 
 
