@@ -260,13 +260,11 @@ def _rigid_cholesky(res, out):
 _CHUNK = 2048
 
 
-def pair_blocks(radii, pairs):
-    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
-    columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
-    exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
-    `workspace.work_array`, valid until the next chunk is asked for."""
-    if len(pairs.i) == 0:
-        return
+def _pair_setup(radii, pairs):
+    """What `pair_blocks` and `lubrication_change` share: the pairs ordered big sphere first
+    (pi, pj, a1, a2, dx), each pair's table (-1: exact path) and the tables' snapshot
+    (`_TableStore.lookup`), the tabulated pairs' indices (fast) and the exact ones (slow),
+    and the pairs as given (pi0, pj0, a10, a20, dx0)."""
     radii = np.asarray(radii, dtype=float)
     pi0, pj0 = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
     dx0 = np.ascontiguousarray(pairs.dx, dtype=float)
@@ -284,15 +282,57 @@ def pair_blocks(radii, pairs):
     lam = a2 / a1
     tab, tables = _STORE.lookup(lam, xi)
     fast = tab >= 0
-    sel = np.flatnonzero(fast)
+    if fast.all():
+        sel, slow = np.arange(len(fast)), np.zeros(0, dtype=np.int64)
+    else:
+        sel, slow = np.flatnonzero(fast), np.flatnonzero(~fast)
+    return (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0)
+
+
+def pair_blocks(radii, pairs):
+    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
+    columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
+    exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
+    `workspace.work_array`, valid until the next chunk is asked for."""
+    if len(pairs.i) == 0:
+        return
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
     for c in range(0, len(sel), _CHUNK):
         part = sel[c:c + _CHUNK]
         res = work_array("pair_blocks", (len(part), 2 * NDOF, 2 * NDOF))
         _tabulated_kernel(dx[part], a1[part], a2[part], tab[part], *tables, res)
         yield pi[part], pj[part], res
-    if not fast.all():
-        slow = np.flatnonzero(~fast)  # as given (not reordered): same as lubrication_matrix_exact
+    if len(slow):  # as given (not reordered): same as lubrication_matrix_exact
         yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+
+
+def lubrication_change(radii, pairs, blocks, vector):
+    """[L(pairs) - L_0] v (N, 11) for v (N, 11), pair by pair: L(pairs) the near-field
+    correction at the pairs' separations (as `lubrication_product`) and L_0 the one given
+    by its pair blocks, blocks = (pi, pj, res (P, 22, 22)) in the order of `pair_blocks`
+    for the same pair set (e.g. the blocks of a nearby configuration with the same
+    images). Each pair's block at the new separations is formed in scratch memory and
+    its difference to the old one applied to v; no (P, 22, 22) array is written. Falls back
+    to the two products when the pair order differs."""
+    vector = np.ascontiguousarray(vector, dtype=float)
+    out = np.zeros_like(vector)
+    bi, bj, old = blocks
+    if len(pairs.i) == 0:
+        pair_products(bi, bj, old, -vector, out)
+        return out
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
+    n_fast = len(sel)
+    if (len(bi) != len(pi) or not np.array_equal(bi[:n_fast], pi[sel]) or not np.array_equal(bj[:n_fast], pj[sel])
+            or not np.array_equal(bi[n_fast:], pi0[slow]) or not np.array_equal(bj[n_fast:], pj0[slow])):
+        out = lubrication_product(radii, pairs, vector)
+        pair_products(bi, bj, old, -vector, out)
+        return out
+    if n_fast:
+        _tabulated_change_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, bi, bj, old, vector, out)
+    if len(slow):
+        new = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+        pair_products(bi[n_fast:], bj[n_fast:], new - old[n_fast:], vector, out)
+    return out
 
 
 def pair_corrections(dx, a1, a2):
@@ -458,45 +498,79 @@ _STORE = _TableStore()
 
 @numba.njit(cache=True)
 def _tabulated_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, res):
-    """res[p] = R_2B - R_2B,inf of every pair (interpolated scalars, `_fill_pair_work`
-    tensors)."""
-    npt = _TAB_NPT
-    half = npt // 2
-    denom = _TAB_DENOM
-    inv_h = 1.0 / _TAB_H
+    """res[p] = R_2B - R_2B,inf of every pair (`_interpolated_block`)."""
     bm = _basis5()
     sc = np.empty((4, NDOF))
-    w = np.empty(npt)
+    w = np.empty(_TAB_NPT)
     d = np.empty(3)
     work = np.empty((8, 5, 5))
     for p in range(dx.shape[0]):
-        r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
-        for c in range(3):
-            d[c] = dx[p, c] / r
-        asum = a1[p] + a2[p]
-        xi = 2.0 * (r - asum) / asum
-        x = math.log(xi) * inv_h
-        k = int(math.floor(x))
-        t = tab[p]
-        # clamp (never active when the table covers the pair, see _TableStore.lookup)
-        k = min(max(k, k_lo[t] + half - 1), k_lo[t] + n_rows[t] - half - 1)
-        frac = x - k
-        for m in range(npt):
-            acc = 1.0
-            for l in range(npt):
-                if l != m:
-                    acc *= frac - (l - half + 1)
-            w[m] = acc / denom[m]
-        row = offset[t] + k - k_lo[t] - half + 1
-        unscale = (1.0 + xi) / xi
-        for b in range(4):
-            for f in range(NDOF):
-                col = NDOF * b + f
+        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res[p])
+
+
+@numba.njit(cache=True, inline="always")
+def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res):
+    """res (22, 22) = R_2B - R_2B,inf of pair p (interpolated scalars sc (4, 11) with the
+    Lagrange weights w (npt,) and unit vector d (3,) as scratch, `_fill_pair_work` tensors)."""
+    npt = _TAB_NPT
+    half = npt // 2
+    r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
+    for c in range(3):
+        d[c] = dx[p, c] / r
+    asum = a1[p] + a2[p]
+    xi = 2.0 * (r - asum) / asum
+    x = math.log(xi) * (1.0 / _TAB_H)
+    k = int(math.floor(x))
+    t = tab[p]
+    # clamp (never active when the table covers the pair, see _TableStore.lookup)
+    k = min(max(k, k_lo[t] + half - 1), k_lo[t] + n_rows[t] - half - 1)
+    frac = x - k
+    for m in range(npt):
+        acc = 1.0
+        for l in range(npt):
+            if l != m:
+                acc *= frac - (l - half + 1)
+        w[m] = acc / _TAB_DENOM[m]
+    row = offset[t] + k - k_lo[t] - half + 1
+    unscale = (1.0 + xi) / xi
+    flat = sc.ravel()  # (44,): the scalars, accumulated over the points in ascending order
+    flat[:] = 0.0
+    for m in range(npt):
+        wm = w[m]
+        for col in range(4 * NDOF):
+            flat[col] += wm * data[row + m, col]
+    for col in range(4 * NDOF):
+        flat[col] *= unscale
+    _fill_pair_work(d, a1[p], a2[p], sc, bm, res, work)
+
+
+@numba.njit(cache=True)
+def _tabulated_change_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, old, v, out):
+    """out[(i, j)] += (res_p - old[p]) (v_i, v_j) for every pair p = (pi[p], pj[p]), res_p
+    its block R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory)."""
+    bm = _basis5()
+    sc = np.empty((4, NDOF))
+    w = np.empty(_TAB_NPT)
+    d = np.empty(3)
+    work = np.empty((8, 5, 5))
+    res = np.empty((2 * NDOF, 2 * NDOF))
+    for p in range(dx.shape[0]):
+        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res)
+        old_p = old[p]
+        for a in range(2 * NDOF):
+            for b in range(2 * NDOF):
+                res[a, b] -= old_p[a, b]
+        i, j = pi[p], pj[p]
+        for u in range(2):
+            row = i if u == 0 else j
+            for a in range(NDOF):
+                ra = NDOF * u + a
                 acc = 0.0
-                for m in range(npt):
-                    acc += w[m] * data[row + m, col]
-                sc[b, f] = acc * unscale
-        _fill_pair_work(d, a1[p], a2[p], sc, bm, res[p], work)
+                for b in range(NDOF):
+                    acc += res[ra, b] * v[i, b]
+                for b in range(NDOF):
+                    acc += res[ra, NDOF + b] * v[j, b]
+                out[row, a] += acc
 
 
 @numba.njit(cache=True)

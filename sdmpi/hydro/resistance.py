@@ -28,7 +28,7 @@ from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, 
                        plan_far_field_change)
 from .geometry import Lattice, find_pairs
 from .krylov import DenseFarField, far_field_operator
-from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_product,
+from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_change,
                           lubrication_sparse, pair_blocks, pair_products, scatter_pair_blocks)
 
 
@@ -247,6 +247,8 @@ def lubrication_blocks(radii, pairs):
     if len(pairs.i) == 0:
         return None
     chunks = [(pi.copy(), pj.copy(), res.copy()) for pi, pj, res in pair_blocks(radii, pairs)]
+    if len(chunks) == 1:
+        return chunks[0]
     return tuple(np.concatenate(part) for part in zip(*chunks))
 
 
@@ -282,8 +284,8 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
 
     M^-1 from base's block form, Delta M_inf w by `farfield.far_field_change` (on its own
     plan, `plan_far_field_change` for a mobility of tolerance ewald_tol, in the lattice of
-    base's strain), L(moved) v pair by pair (`lubrication.lubrication_product`, separations
-    floored at min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M
+    base's strain), L(moved) v - L(base) v pair by pair (`lubrication.lubrication_change`,
+    separations floored at min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M
     M^-1 v, is second order in the displacement."""
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
@@ -292,7 +294,8 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
     out = -base.far_inverse_product(far_field_change(base.positions, moved, base.radii, base.plan.change, far_v))
     if base.plan.near_images is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
-        out += lubrication_product(base.radii, pairs, vector) - base.lubrication_product(vector)
+        if base.lubrication is not None:
+            out += lubrication_change(base.radii, pairs, base.lubrication, vector)
     return out
 
 
