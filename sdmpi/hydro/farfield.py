@@ -192,59 +192,85 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
     _block_from_radial(rvec, r, v, ai, aj, basis, work[0:3], work[51:66].reshape((5, 3)), work[66:71], out)
 
 
+#: 1/sqrt(2), 1/sqrt(6): the non-zero entries of the strain basis `basis.BASIS`
+_ISQ2 = 1.0 / math.sqrt(2.0)
+_ISQ6 = 1.0 / math.sqrt(6.0)
+
+
 @numba.njit(cache=True)
 def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
     (e (3,), be (5, 3), q (5,): scratch, passed in so that a loop over images makes no
-    array views per image)."""
-    for c in range(3):
-        e[c] = rvec[c] / r
+    array views per image); adds into out. The strain basis is `basis.BASIS` (its sparse
+    entries are used explicitly: B^m e and e.B^m.e below)."""
+    ir = 1.0 / r
+    e0, e1, e2 = rvec[0] / r, rvec[1] / r, rvec[2] / r
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
     be_i, be_j = ai * ai / 10.0, aj * aj / 10.0
-    ir = 1.0 / r
+    v00, v01, v02, v03, v04 = v[0, 0], v[0, 1], v[0, 2], v[0, 3], v[0, 4]
+    v10, v11, v12, v13, v14 = v[1, 0], v[1, 1], v[1, 2], v[1, 3], v[1, 4]
+    v20, v21, v22, v23, v24 = v[2, 0], v[2, 1], v[2, 2], v[2, 3], v[2, 4]
+    v30, v31, v32 = v[3, 0], v[3, 1], v[3, 2]
 
     # UF: I lap Psi0 - grad grad Psi0,  Psi0 = (1 + al_i lap)(1 + al_j lap) chi_r
     s1, s2 = al_i + al_j, al_i * al_j
-    psi1 = v[1, 0] + s1 * v[2, 0] + s2 * v[3, 0]
-    d1 = v[0, 1] + s1 * v[1, 1] + s2 * v[2, 1]
-    d2 = v[0, 2] + s1 * v[1, 2] + s2 * v[2, 2]
+    psi1 = v10 + s1 * v20 + s2 * v30
+    d1 = v01 + s1 * v11 + s2 * v21
+    d2 = v02 + s1 * v12 + s2 * v22
     a2 = d2 - d1 * ir
-    b2 = d1 * ir
-    for a in range(3):
-        for b in range(3):
-            out[a, b] += -a2 * e[a] * e[b]
-        out[a, a] += psi1 - b2
+    diag = psi1 - d1 * ir
+    e00, e01, e02, e11, e12, e22 = e0 * e0, e0 * e1, e0 * e2, e1 * e1, e1 * e2, e2 * e2
+    out[0, 0] += diag - a2 * e00
+    out[1, 1] += diag - a2 * e11
+    out[2, 2] += diag - a2 * e22
+    t = a2 * e01
+    out[0, 1] -= t
+    out[1, 0] -= t
+    t = a2 * e02
+    out[0, 2] -= t
+    out[2, 0] -= t
+    t = a2 * e12
+    out[1, 2] -= t
+    out[2, 1] -= t
 
     # UL and Omega-F: (1/2) eps grad (lap chi_r + al lap^2 chi_r) = (1/2) f' [e]x
-    f_ul = 0.5 * (v[1, 1] + al_i * v[2, 1])
-    f_of = 0.5 * (v[1, 1] + al_j * v[2, 1])
+    f_ul = 0.5 * (v11 + al_i * v21)
+    f_of = 0.5 * (v11 + al_j * v21)
     for side in range(2):
         f = f_ul if side == 0 else f_of
         r0, c0 = (0, 3) if side == 0 else (3, 0)
-        out[r0 + 0, c0 + 1] -= f * e[2]
-        out[r0 + 0, c0 + 2] += f * e[1]
-        out[r0 + 1, c0 + 0] += f * e[2]
-        out[r0 + 1, c0 + 2] -= f * e[0]
-        out[r0 + 2, c0 + 0] -= f * e[1]
-        out[r0 + 2, c0 + 1] += f * e[0]
+        out[r0 + 0, c0 + 1] -= f * e2
+        out[r0 + 0, c0 + 2] += f * e1
+        out[r0 + 1, c0 + 0] += f * e2
+        out[r0 + 1, c0 + 2] -= f * e0
+        out[r0 + 2, c0 + 0] -= f * e1
+        out[r0 + 2, c0 + 1] += f * e0
 
     # Omega-L: (1/4)(grad grad lap chi_r - I lap^2 chi_r)
-    a2 = v[1, 2] - v[1, 1] * ir
-    b2 = v[1, 1] * ir
-    for m in range(3):
-        for n in range(3):
-            out[3 + m, 3 + n] += 0.25 * a2 * e[m] * e[n]
-        out[3 + m, 3 + m] += 0.25 * (b2 - v[2, 0])
+    a2 = 0.25 * (v12 - v11 * ir)
+    diag = 0.25 * (v11 * ir - v20)
+    out[3, 3] += diag + a2 * e00
+    out[4, 4] += diag + a2 * e11
+    out[5, 5] += diag + a2 * e22
+    t = a2 * e01
+    out[3, 4] += t
+    out[4, 3] += t
+    t = a2 * e02
+    out[3, 5] += t
+    out[5, 3] += t
+    t = a2 * e12
+    out[4, 5] += t
+    out[5, 4] += t
 
-    # B^n . e and e . B^n . e
-    be[:, :] = 0.0
-    q[:] = 0.0
+    # B^n . e and e . B^n . e (basis.BASIS: B^1 = (xx - yy)/sqrt2, B^2 = (2zz - xx - yy)/sqrt6,
+    # B^3, B^4, B^5 = (xy + yx, xz + zx, yz + zy)/sqrt2)
+    be[0, 0], be[0, 1], be[0, 2] = _ISQ2 * e0, -_ISQ2 * e1, 0.0
+    be[1, 0], be[1, 1], be[1, 2] = -_ISQ6 * e0, -_ISQ6 * e1, 2.0 * _ISQ6 * e2
+    be[2, 0], be[2, 1], be[2, 2] = _ISQ2 * e1, _ISQ2 * e0, 0.0
+    be[3, 0], be[3, 1], be[3, 2] = _ISQ2 * e2, 0.0, _ISQ2 * e0
+    be[4, 0], be[4, 1], be[4, 2] = 0.0, _ISQ2 * e2, _ISQ2 * e1
     for n in range(5):
-        for k in range(3):
-            for l in range(3):
-                be[n, k] += basis[n, k, l] * e[l]
-        for k in range(3):
-            q[n] += e[k] * be[n, k]
+        q[n] = e0 * be[n, 0] + e1 * be[n, 1] + e2 * be[n, 2]
 
     # U-S:  -I.grad lap Gamma + grad^3 Gamma, Gamma = (1 + al_i lap)(1 + be_j lap) chi_r
     # E-F:  same with (be_i, al_j), transposed
@@ -253,53 +279,66 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
             t1, t2 = al_i + be_j, al_i * be_j
         else:
             t1, t2 = be_i + al_j, be_i * al_j
-        g1 = v[1, 1] + t1 * v[2, 1] + t2 * v[3, 1]
-        f1 = v[0, 1] + t1 * v[1, 1] + t2 * v[2, 1]
-        f2 = v[0, 2] + t1 * v[1, 2] + t2 * v[2, 2]
-        f3 = v[0, 3] + t1 * v[1, 3] + t2 * v[2, 3]
+        g1 = v11 + t1 * v21 + t2 * v31
+        f1 = v01 + t1 * v11 + t2 * v21
+        f2 = v02 + t1 * v12 + t2 * v22
+        f3 = v03 + t1 * v13 + t2 * v23
         c1 = f3 - 3 * f2 * ir + 3 * f1 * ir * ir
-        c2 = f2 * ir - f1 * ir * ir
+        c2 = 2 * (f2 * ir - f1 * ir * ir) - g1
         for n in range(5):
-            for a in range(3):
-                val = (2 * c2 - g1) * be[n, a] + c1 * e[a] * q[n]
-                if side == 0:
-                    out[a, 6 + n] += val
-                else:
-                    out[6 + n, a] -= val
+            cq = c1 * q[n]
+            x0 = c2 * be[n, 0] + cq * e0
+            x1 = c2 * be[n, 1] + cq * e1
+            x2 = c2 * be[n, 2] + cq * e2
+            if side == 0:
+                out[0, 6 + n] += x0
+                out[1, 6 + n] += x1
+                out[2, 6 + n] += x2
+            else:
+                out[6 + n, 0] -= x0
+                out[6 + n, 1] -= x1
+                out[6 + n, 2] -= x2
 
     # Omega-S and E-L:  -(1/2) A2 (e x B e)  and  (1/2) A2 (B e x e)
     for side in range(2):
         bb = be_j if side == 0 else be_i
-        f1 = v[1, 1] + bb * v[2, 1]
-        f2 = v[1, 2] + bb * v[2, 2]
-        a2 = f2 - f1 * ir
+        f1 = v11 + bb * v21
+        f2 = v12 + bb * v22
+        h = 0.5 * (f2 - f1 * ir)
         for n in range(5):
-            for m in range(3):
-                m1, m2 = (m + 1) % 3, (m + 2) % 3
-                cross = e[m1] * be[n, m2] - e[m2] * be[n, m1]  # (e x B e)_m
-                if side == 0:
-                    out[3 + m, 6 + n] -= 0.5 * a2 * cross
-                else:
-                    out[6 + n, 3 + m] -= 0.5 * a2 * cross
+            x0 = h * (e1 * be[n, 2] - e2 * be[n, 1])  # (1/2) A2 (e x B e)
+            x1 = h * (e2 * be[n, 0] - e0 * be[n, 2])
+            x2 = h * (e0 * be[n, 1] - e1 * be[n, 0])
+            if side == 0:
+                out[3, 6 + n] -= x0
+                out[4, 6 + n] -= x1
+                out[5, 6 + n] -= x2
+            else:
+                out[6 + n, 3] -= x0
+                out[6 + n, 4] -= x1
+                out[6 + n, 5] -= x2
 
-    # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I
+    # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I, w = (B^m e).(B^n e)
     u1, u2 = be_i + be_j, be_i * be_j
-    h1 = v[1, 1] + u1 * v[2, 1] + u2 * v[3, 1]
-    h2 = v[1, 2] + u1 * v[2, 2] + u2 * v[3, 2]
-    f1 = v[0, 1] + u1 * v[1, 1] + u2 * v[2, 1]
-    f2 = v[0, 2] + u1 * v[1, 2] + u2 * v[2, 2]
-    f3 = v[0, 3] + u1 * v[1, 3] + u2 * v[2, 3]
-    f4 = v[0, 4] + u1 * v[1, 4] + u2 * v[2, 4]
+    h1 = v11 + u1 * v21 + u2 * v31
+    h2 = v12 + u1 * v22 + u2 * v32
+    f1 = v01 + u1 * v11 + u2 * v21
+    f2 = v02 + u1 * v12 + u2 * v22
+    f3 = v03 + u1 * v13 + u2 * v23
+    f4 = v04 + u1 * v14 + u2 * v24
+    ir2 = ir * ir
+    ir3 = ir2 * ir
     a2 = h2 - h1 * ir
-    b2 = h1 * ir
-    dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir * ir - 15 * f1 * ir ** 3
-    dd2 = f3 * ir - 3 * f2 * ir * ir + 3 * f1 * ir ** 3
-    dd3 = f2 * ir * ir - f1 * ir ** 3
+    dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir2 - 15 * f1 * ir3
+    cw = 4 * (f3 * ir - 3 * f2 * ir2 + 3 * f1 * ir3) - a2
+    cd = 2 * (f2 * ir2 - f1 * ir3) - h1 * ir
     for m in range(5):
-        for n in range(5):
-            w = be[m, 0] * be[n, 0] + be[m, 1] * be[n, 1] + be[m, 2] * be[n, 2]
-            out[6 + m, 6 + n] += (4 * dd2 - a2) * w + dd1 * q[m] * q[n]
-        out[6 + m, 6 + m] += 2 * dd3 - b2
+        bm0, bm1, bm2, dq = be[m, 0], be[m, 1], be[m, 2], dd1 * q[m]
+        out[6 + m, 6 + m] += cw * (bm0 * bm0 + bm1 * bm1 + bm2 * bm2) + dq * q[m] + cd
+        for n in range(m + 1, 5):
+            x = cw * (bm0 * be[n, 0] + bm1 * be[n, 1] + bm2 * be[n, 2]) + dq * q[n]
+            out[6 + m, 6 + n] += x
+            out[6 + n, 6 + m] += x
 
 
 @numba.njit(cache=True)
