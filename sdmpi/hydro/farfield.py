@@ -613,16 +613,20 @@ def _wave_amplitudes(kvec, xi, basis, b):
 
 
 @numba.njit(cache=True)
-def _wave_tensors(b, cos_entries, sin_entries, tcos, tsin):
-    """tcos[k, e], tsin[k, e] = (b b^T)[entry e] of the cosine and sine entries, for the
-    wave vectors' b (`_wave_amplitudes`)."""
+def _wave_tensors(b, cos_entries, sin_entries, ksq, scale, a2, row_c, tcos, tsin):
+    """tcos[k, e], tsin[k, e] = scale (b b^T)[entry e] of the cosine and sine entries, for
+    the wave vectors' b (`_wave_amplitudes`); with a2 >= 0 (all radii equal, a^2) times the
+    radius factors f_r(a) f_c(a), f = 1 - row_c a^2 |k|^2 (ksq), of the entry's row and
+    column."""
     for kk in range(b.shape[0]):
-        for e in range(cos_entries.shape[0]):
-            r, c = cos_entries[e, 0], cos_entries[e, 1]
-            tcos[kk, e] = b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]
-        for e in range(sin_entries.shape[0]):
-            r, c = sin_entries[e, 0], sin_entries[e, 1]
-            tsin[kk, e] = b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]
+        for half in range(2):
+            entries, out = (cos_entries, tcos) if half == 0 else (sin_entries, tsin)
+            for e in range(entries.shape[0]):
+                r, c = entries[e, 0], entries[e, 1]
+                val = (b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]) * scale
+                if a2 >= 0.0:
+                    val *= (1 - row_c[r] * a2 * ksq[kk]) * (1 - row_c[c] * a2 * ksq[kk])
+                out[kk, e] = val
 
 
 @numba.njit(cache=True)
@@ -670,18 +674,14 @@ def _wave_terms(radii, kvec, xi, volume):
     whether the radii are equal."""
     nk = len(kvec)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
-    _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
-    tcos *= 2.0 / volume
-    tsin *= 2.0 / volume
-    ksq = np.einsum("ij,ij->i", kvec, kvec)[:, None]
+    ksq = np.einsum("ij,ij->i", kvec, kvec)
+    equal = bool(np.all(radii == radii[0]))
+    # all radii equal: f_a(a) f_b(a) folded into the tensors (one product per part)
+    a2 = float(radii[0]) ** 2 if equal else -1.0
+    _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, ksq, 2.0 / volume, a2, _ROW_C, tcos, tsin)
     c_row = {"cos": _ROW_C[_COS_ENTRIES[:, 0]], "sin": _ROW_C[_SIN_ENTRIES[:, 0]]}
     c_col = {"cos": _ROW_C[_COS_ENTRIES[:, 1]], "sin": _ROW_C[_SIN_ENTRIES[:, 1]]}
-    equal = bool(np.all(radii == radii[0]))
-    if equal:  # fold f_a(a) f_b(a) into the tensors: one product per part
-        a2 = radii[0] ** 2
-        tcos *= (1 - c_row["cos"] * a2 * ksq) * (1 - c_col["cos"] * a2 * ksq)
-        tsin *= (1 - c_row["sin"] * a2 * ksq) * (1 - c_col["sin"] * a2 * ksq)
-    return {"cos": tcos, "sin": tsin}, ksq, c_row, c_col, equal
+    return {"cos": tcos, "sin": tsin}, ksq[:, None], c_row, c_col, equal
 
 
 def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
@@ -898,6 +898,18 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD
         if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
             plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, xi_used, plan.volume))
         _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1])
-    for i, a in enumerate(radii):
-        mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
+    if len(plan.self_blocks) == 1:  # one radius: its self block on every diagonal block
+        _add_diagonal_blocks(mob, next(iter(plan.self_blocks.values())))
+    else:
+        for i, a in enumerate(radii):
+            mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob
+
+
+@numba.njit(cache=True)
+def _add_diagonal_blocks(mob, block):
+    """Adds the 11x11 block to every diagonal 11x11 block of mob (11N x 11N)."""
+    for i in range(mob.shape[0] // NDOF):
+        for a in range(NDOF):
+            for b in range(NDOF):
+                mob[NDOF * i + a, NDOF * i + b] += block[a, b]

@@ -306,6 +306,21 @@ def pair_blocks(radii, pairs):
         yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
 
 
+def all_pair_blocks(radii, pairs):
+    """(pi, pj, res (P, 22, 22)): every pair's block as `pair_blocks` gives them, in one
+    fresh array (the tabulated pairs written into it directly), or None without pairs."""
+    if len(pairs.i) == 0:
+        return None
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
+    res = np.empty((len(sel) + len(slow), 2 * NDOF, 2 * NDOF))
+    if len(slow) == 0:
+        _tabulated_kernel(dx, a1, a2, tab, *tables, res)
+        return pi.copy(), pj.copy(), res
+    _tabulated_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, res[:len(sel)])
+    res[len(sel):] = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+    return np.concatenate([pi[sel], pi0[slow]]), np.concatenate([pj[sel], pj0[slow]]), res
+
+
 def lubrication_change(radii, pairs, blocks, vector):
     """[L(pairs) - L_0] v (N, 11) for v (N, 11), pair by pair: L(pairs) the near-field
     correction at the pairs' separations (as `lubrication_product`) and L_0 the one given

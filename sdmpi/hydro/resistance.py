@@ -28,8 +28,8 @@ from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, 
                        plan_far_field_change)
 from .geometry import Lattice, find_pairs
 from .krylov import DenseFarField, far_field_operator
-from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_change,
-                          lubrication_sparse, pair_blocks, pair_products, scatter_pair_blocks)
+from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
+                          lubrication_change, lubrication_sparse, scatter_pair_blocks)
 
 
 @dataclass
@@ -63,29 +63,38 @@ class GrandResistance:
     def n_particles(self):
         return self.positions.shape[0]
 
-    def far_inverse_product(self, v):
+    def far_inverse_product(self, v, rows=None):
         """M_inf^-1 v (N, 11) for v (N, 11): t = M_bb^-1 v_b, y_a = S^-1 (v_a - M_ab t),
-        y_b = t - M_bb^-1 M_ba y_a."""
+        y_b = t - M_bb^-1 M_ba y_a. rows "rigid": y_a alone (N, 6); "strain": y_b alone
+        (N, 5); None: both (N, 11)."""
         n = self.n_particles
         v_a, v_b = np.ascontiguousarray(v[:, :6]).ravel(), np.ascontiguousarray(v[:, 6:]).ravel()
         t = _chol_solve(self.chol_bb, v_b) if v_b.any() else None  # none for rigid-body v
         y_a = self.s_inverse @ (v_a if t is None else v_a - self.m_ab @ t)
+        if rows == "rigid":
+            return y_a.reshape(n, 6)
         y_b = -_chol_solve(self.chol_bb, self.m_ab.T @ y_a)
+        if t is not None:
+            y_b += t
+        if rows == "strain":
+            return y_b.reshape(n, 5)
         out = np.empty((n, NDOF))
         out[:, :6] = y_a.reshape(n, 6)
-        out[:, 6:] = (y_b if t is None else y_b + t).reshape(n, 5)
+        out[:, 6:] = y_b.reshape(n, 5)
         return out
 
-    def lubrication_product(self, v):
-        """L v (N, 11) for v (N, 11), pair by pair."""
-        out = np.zeros((self.n_particles, NDOF))
+    def lubrication_product(self, v, rows=None):
+        """L v (N, 11) for v (N, 11), pair by pair; rows "rigid" (N, 6) or "strain" (N, 5):
+        those rows alone."""
+        first, stop = {None: (0, NDOF), "rigid": (0, 6), "strain": (6, NDOF)}[rows]
+        out = np.zeros((self.n_particles, stop - first))
         if self.lubrication is not None:
-            pair_products(*self.lubrication, np.ascontiguousarray(v, dtype=float), out)
+            _pair_product_rows(*self.lubrication, np.ascontiguousarray(v, dtype=float), first, out)
         return out
 
-    def product(self, v):
-        """R v (N, 11) for v (N, 11)."""
-        return self.far_inverse_product(v) + self.lubrication_product(v)
+    def product(self, v, rows=None):
+        """R v (N, 11) for v (N, 11); rows "rigid" (N, 6) or "strain" (N, 5): those rows alone."""
+        return self.far_inverse_product(v, rows) + self.lubrication_product(v, rows)
 
     def apply(self, rigid, strain):
         """The rigid (N, 6) and strain (N, 5) rows of R (rigid, strain): R_FU u + R_FE e and
@@ -97,11 +106,16 @@ class GrandResistance:
         """R_FE e_inf (6N,) for einf (N, 5) (zero without a strain)."""
         if not np.any(einf):
             return np.zeros(6 * self.n_particles)
-        return self.apply(np.zeros((self.n_particles, 6)), einf)[0].ravel()
+        v = np.zeros((self.n_particles, NDOF))
+        v[:, 6:] = einf
+        return self.product(v, "rigid").ravel()
 
     def stresslets(self, velocities, einf):
         """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5)."""
-        return self.apply(-np.asarray(velocities, dtype=float), np.asarray(einf, dtype=float))[1]
+        v = np.empty((self.n_particles, NDOF))
+        np.negative(velocities, out=v[:, :6])
+        v[:, 6:] = einf
+        return self.product(v, "strain")
 
     def blocks(self):
         """(R_FU, R_FE, R_SU, R_SE) as fresh dense matrices (dofs particle by particle within
@@ -139,6 +153,21 @@ def _chol_solve(upper, rhs):
     if info != 0:
         raise ValueError(f"potrs: illegal argument {-info}")
     return sol
+
+
+@numba.njit(cache=True)
+def _pair_product_rows(pi, pj, res, v, first, out):
+    """out[(i, j), a - first] += res[p] (v_i, v_j) for the rows first <= a < first +
+    out.shape[1] of each particle's 11 (as `lubrication.pair_products` on those rows)."""
+    for p in range(pi.shape[0]):
+        idx = (pi[p], pj[p])
+        for u in range(2):
+            for a in range(first, first + out.shape[1]):
+                acc = 0.0
+                for s in range(2):
+                    for b in range(NDOF):
+                        acc += res[p, NDOF * u + a, NDOF * s + b] * v[idx[s], b]
+                out[idx[u], a - first] += acc
 
 
 @numba.njit(cache=True)
@@ -243,13 +272,8 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
 
 def lubrication_blocks(radii, pairs):
     """(pair_i, pair_j, blocks (P, 22, 22)) of the lubrication pairs (`lubrication.pair_blocks`
-    gathered), or None without pairs."""
-    if len(pairs.i) == 0:
-        return None
-    chunks = [(pi.copy(), pj.copy(), res.copy()) for pi, pj, res in pair_blocks(radii, pairs)]
-    if len(chunks) == 1:
-        return chunks[0]
-    return tuple(np.concatenate(part) for part in zip(*chunks))
+    gathered: `lubrication.all_pair_blocks`), or None without pairs."""
+    return all_pair_blocks(radii, pairs)
 
 
 def from_blocks(far, lub, pairs, plan, positions, radii):
