@@ -294,8 +294,9 @@ def far_field_blocks(mob):
     chol_bb, info = lapack.dpotrf(m_bb.T, lower=False, clean=True, overwrite_a=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info}, strain block)")
-    y = blas.dtrsm(1.0, chol_bb, m_ab.T, trans_a=1)  # U_b^-T M_ba (5N x 6N)
-    schur = blas.dsyrk(-1.0, y, beta=1.0, c=m_aa.T, trans=1, lower=0, overwrite_c=1)  # upper triangle
+    # X = M_ab U_b^-1 (6N x 5N; the right-side solve is the faster kernel), S = M_aa - X X^T
+    x = blas.dtrsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
+    schur = blas.dsyrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
     return _spd_inverse_of_upper(schur).T, m_ab, chol_bb
 
 
