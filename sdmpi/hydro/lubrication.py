@@ -95,7 +95,7 @@ def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=D
     dx = positions[j] + shift - positions[i]
     if len(i) == 0:
         return PairList(i, j, dx, shift, np.zeros(0), 0, np.zeros(0))
-    r = np.linalg.norm(dx, axis=1)
+    r = np.sqrt(np.einsum("ij,ij->i", dx, dx))
     asum = radii[i] + radii[j]
     gap = r - asum
     floor = 0.5 * min_gap * asum
@@ -488,7 +488,11 @@ class _TableStore:
         ok = (xi >= _XI_TABLE_MIN) & (xi <= _XI_TABLE_MAX)
         if not ok.any():
             return tab, None
-        ulam, inv, counts = np.unique(lam[ok], return_inverse=True, return_counts=True)
+        lam_ok = lam[ok]
+        if lam_ok.min() == lam_ok.max():  # one size ratio (monodisperse): no sort
+            ulam, inv, counts = lam_ok[:1], np.zeros(len(lam_ok), dtype=np.int64), np.array([len(lam_ok)])
+        else:
+            ulam, inv, counts = np.unique(lam_ok, return_inverse=True, return_counts=True)
         kk = np.floor(np.log(xi[ok]) / _TAB_H).astype(np.int64)
         half = _TAB_NPT // 2
         with self._lock:

@@ -83,18 +83,20 @@ class GrandResistance:
         out[:, 6:] = y_b.reshape(n, 5)
         return out
 
-    def lubrication_product(self, v, rows=None):
+    def lubrication_product(self, v, rows=None, strain_only=False):
         """L v (N, 11) for v (N, 11), pair by pair; rows "rigid" (N, 6) or "strain" (N, 5):
-        those rows alone."""
+        those rows alone; strain_only: v is zero on the rigid-body dofs (skipped)."""
         first, stop = {None: (0, NDOF), "rigid": (0, 6), "strain": (6, NDOF)}[rows]
         out = np.zeros((self.n_particles, stop - first))
         if self.lubrication is not None:
-            _pair_product_rows(*self.lubrication, np.ascontiguousarray(v, dtype=float), first, out)
+            _pair_product_rows(*self.lubrication, np.ascontiguousarray(v, dtype=float), first,
+                               6 if strain_only else 0, NDOF, out)
         return out
 
-    def product(self, v, rows=None):
-        """R v (N, 11) for v (N, 11); rows "rigid" (N, 6) or "strain" (N, 5): those rows alone."""
-        return self.far_inverse_product(v, rows) + self.lubrication_product(v, rows)
+    def product(self, v, rows=None, strain_only=False):
+        """R v (N, 11) for v (N, 11); rows "rigid" (N, 6) or "strain" (N, 5): those rows alone;
+        strain_only: v is zero on the rigid-body dofs."""
+        return self.far_inverse_product(v, rows) + self.lubrication_product(v, rows, strain_only)
 
     def apply(self, rigid, strain):
         """The rigid (N, 6) and strain (N, 5) rows of R (rigid, strain): R_FU u + R_FE e and
@@ -108,7 +110,7 @@ class GrandResistance:
             return np.zeros(6 * self.n_particles)
         v = np.zeros((self.n_particles, NDOF))
         v[:, 6:] = einf
-        return self.product(v, "rigid").ravel()
+        return self.product(v, "rigid", strain_only=True).ravel()
 
     def stresslets(self, velocities, einf):
         """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5)."""
@@ -156,16 +158,18 @@ def _chol_solve(upper, rhs):
 
 
 @numba.njit(cache=True)
-def _pair_product_rows(pi, pj, res, v, first, out):
+def _pair_product_rows(pi, pj, res, v, first, col_first, col_stop, out):
     """out[(i, j), a - first] += res[p] (v_i, v_j) for the rows first <= a < first +
-    out.shape[1] of each particle's 11 (as `lubrication.pair_products` on those rows)."""
+    out.shape[1] of each particle's 11 (as `lubrication.pair_products` on those rows),
+    summing over the columns col_first <= b < col_stop of each particle (v is zero on the
+    others)."""
     for p in range(pi.shape[0]):
         idx = (pi[p], pj[p])
         for u in range(2):
             for a in range(first, first + out.shape[1]):
                 acc = 0.0
                 for s in range(2):
-                    for b in range(NDOF):
+                    for b in range(col_first, col_stop):
                         acc += res[p, NDOF * u + a, NDOF * s + b] * v[idx[s], b]
                 out[idx[u], a - first] += acc
 
