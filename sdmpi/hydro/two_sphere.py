@@ -636,6 +636,24 @@ def _basis5():
     return bm
 
 
+def _basis_products():
+    """B^m : B^n (5, 5) of `_basis5`, summed over i then j as `_fill_pair_work` did per pair
+    (the same floating-point values)."""
+    bm = _basis5()
+    out = np.empty((5, 5))
+    for m in range(5):
+        for n in range(5):
+            acc = 0.0
+            for i in range(3):
+                for j in range(3):
+                    acc += float(bm[m, i, j]) * float(bm[n, i, j])
+            out[m, n] = acc
+    return out
+
+
+_BASIS_PRODUCTS = _basis_products()
+
+
 @nb.njit(cache=True)
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
@@ -680,10 +698,7 @@ def _fill_pair_work(d, a1, a2, sc, bm, R, pat):
             # sum_ij B^m_ij (v_i d_j + v_j d_i), v = e_k x d
             pat[3, m, k] = 2.0 * (bv[k, 0] * bd[m, 0] + bv[k, 1] * bd[m, 1] + bv[k, 2] * bd[m, 2])
         for n in range(5):
-            bb = 0.0
-            for i in range(3):
-                for j in range(3):
-                    bb += bm[m, i, j] * bm[n, i, j]
+            bb = _BASIS_PRODUCTS[m, n]  # B^m : B^n of bm = _basis5(), a constant
             cross = bd[m, 0] * bd[n, 0] + bd[m, 1] * bd[n, 1] + bd[m, 2] * bd[n, 2]
             dBdn = bd[n, 3]
             # t0 = 1.5 (d_i d_j - delta_ij/3) dBd_n
