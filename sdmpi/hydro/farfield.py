@@ -342,13 +342,15 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
 
 
 @numba.njit(cache=True)
-def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, mob):
+def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, mob, both=True):
     """Adds the real-space Ewald sum over the pair images (pi, pj, shift) (or, with
     xi = 0 and zero shifts, the unbounded pair couplings) into the (11N, 11N) matrix mob.
     Radial values come from the interpolation grid (see RadialGrid) where it covers r.
     Each image pair is stored once: M_ji = M_ij^T (reciprocity) fills the other
-    triangle, and for a self-image (i == j) adds the -n image. Consecutive images of the
-    same pair (find_pairs lists them together) are summed before being added to mob."""
+    triangle, and for a self-image (i == j) adds the -n image; with both False the blocks
+    M_ji of pairs i < j are left out (`_mirror_lower_blocks` fills them afterwards).
+    Consecutive images of the same pair (find_pairs lists them together) are summed before
+    being added to mob."""
     bounds = _power_bounds(table)
     pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
     v = np.empty((4, 5))
@@ -367,7 +369,10 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         for a in range(NDOF):
             for b in range(NDOF):
                 mob[NDOF * i + a, NDOF * j + b] += block[a, b]
-                mob[NDOF * j + b, NDOF * i + a] += block[a, b]
+        if both or i == j:
+            for a in range(NDOF):
+                for b in range(NDOF):
+                    mob[NDOF * j + b, NDOF * i + a] += block[a, b]
         block[:, :] = 0.0
 
 
@@ -654,9 +659,10 @@ def _pair_phases(phase_re, phase_im, pi, pj, cos_out, sin_out):
 
 
 @numba.njit(cache=True)
-def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entries, mob):
-    """Adds the pair blocks as M_ij and M_ji = M_ij^T, from the values of each
-    independent entry (a, b) at (a, b) and at (b, a) of M_ij."""
+def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entries, mob, both=True):
+    """Adds the pair blocks as M_ij and M_ji = M_ij^T (both False: M_ij alone, for
+    `_mirror_lower_blocks`), from the values of each independent entry (a, b) at (a, b) and
+    at (b, a) of M_ij."""
     for p in range(pi.shape[0]):
         ri, rj = NDOF * pi[p], NDOF * pj[p]
         for half in range(2):
@@ -668,7 +674,7 @@ def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entr
                 mob[ri + a, rj + b] += v_ab[p, e]
                 if a != b:
                     mob[ri + b, rj + a] += v_ba[p, e]
-                if pi[p] != pj[p]:
+                if both and pi[p] != pj[p]:
                     mob[rj + b, ri + a] += v_ab[p, e]
                     if a != b:
                         mob[rj + a, ri + b] += v_ba[p, e]
@@ -698,9 +704,10 @@ def _wave_terms(radii, kvec, xi, volume):
     return {"cos": tcos, "sin": tsin}, ksq[:, None], c_row, c_col, equal
 
 
-def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
+def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
     """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N);
-    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand."""
+    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand; both False: the
+    blocks M_ji of pairs i < j left out (`_scatter_pairs`)."""
     n, nk = len(pos), len(kvec)
     tensors, ksq, c_row, c_col, equal = _wave_terms(radii, kvec, xi, volume) if terms is None else terms
     phase = pos @ kvec.T
@@ -723,7 +730,7 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
             ca, cb = c_row[part], c_col[part]
             g0 += ca * cb * ai2 * aj2 * g2
             vals += [g0 - (ca * ai2 + cb * aj2) * g1, sign * (g0 - (cb * ai2 + ca * aj2) * g1)]
-        _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob)
+        _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob, both)
 
 
 def _gauss_moment(p, xi):
@@ -907,17 +914,30 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD
     mob = np.zeros((NDOF * n, NDOF * n))
     xi_used = 0.0 if plan.params is None else plan.params.xi
     grid = plan.grid
-    _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob)
+    # the pair sums add the blocks M_ij, i <= j, only: M_ji = M_ij^T is copied at the end
+    # (every contribution to M_ji is the transpose of one to M_ij, in the same order)
+    _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob,
+                    False)
     if plan.params is not None:
         if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
             plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, xi_used, plan.volume))
-        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1])
+        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1], both=False)
+    _mirror_lower_blocks(mob)
     if len(plan.self_blocks) == 1:  # one radius: its self block on every diagonal block
         _add_diagonal_blocks(mob, next(iter(plan.self_blocks.values())))
     else:
         for i, a in enumerate(radii):
             mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob
+
+
+@numba.njit(cache=True)
+def _mirror_lower_blocks(mob):
+    """mob[r, c] = mob[c, r] below the diagonal 11x11 blocks (the blocks M_ji, i > j, from
+    M_ij)."""
+    for r in range(mob.shape[0]):
+        for c in range(NDOF * (r // NDOF)):
+            mob[r, c] = mob[c, r]
 
 
 @numba.njit(cache=True)
