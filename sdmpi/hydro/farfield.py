@@ -533,18 +533,19 @@ def far_field_change(positions, moved, radii, plan, w):
     grid = plan.grid
     _real_space_change(pos, moved, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
     if plan.params is not None:
-        # the pairs m = (normal direction t, wave vector k), t-major
-        kvec2 = np.concatenate([plan.kvec, plan.kvec])
+        # the pairs m = (normal direction t, wave vector k), t-major: per-k arrays tiled twice
         amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
         b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
-        ksq = np.einsum("ij,ij->i", kvec2, kvec2)
-        old, new = pos @ kvec2.T, moved @ kvec2.T
+        ksq = np.tile(np.einsum("ij,ij->i", plan.kvec, plan.kvec), 2)
+        trig = []
+        for x in (pos, moved):
+            phase = x @ plan.kvec.T
+            trig += [np.tile(np.cos(phase), 2), np.tile(np.sin(phase), 2)]
         raw = np.empty((3, len(pos), b.shape[1]))
         for part, rows in enumerate((slice(0, 3), slice(3, 6), slice(6, NDOF))):
             np.matmul(w[:, rows], b[rows], out=raw[part])
         d = np.empty_like(raw)
-        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii, raw, ksq / 6.0,
-                           ksq / 10.0, 2.0 / plan.volume, d)
+        _reciprocal_change(*trig, radii, raw, ksq / 6.0, ksq / 10.0, 2.0 / plan.volume, d)
         for part, rows in enumerate((slice(0, 3), slice(3, 6), slice(6, NDOF))):
             out[:, rows] += d[part] @ b[rows].T
     return out
