@@ -52,7 +52,9 @@ class DenseSolver:
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
-        rhs = forces.ravel() + self.resistance.strain_forces(einf)
+        rhs = forces.ravel()
+        if einf.any():
+            rhs = rhs + self.resistance.strain_forces(einf)
         sol, info = lapack.dpotrs(self._upper, rhs, lower=False)
         if info != 0:
             raise ValueError(f"potrs: illegal argument {-info}")
