@@ -273,8 +273,9 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
         q[n] = e0 * be[n, 0] + e1 * be[n, 1] + e2 * be[n, 2]
 
     # U-S:  -I.grad lap Gamma + grad^3 Gamma, Gamma = (1 + al_i lap)(1 + be_j lap) chi_r
-    # E-F:  same with (be_i, al_j), transposed
-    for side in range(2):
+    # E-F:  same with (be_i, al_j), transposed (the same values when a_i = a_j)
+    equal = ai == aj
+    for side in range(1 if equal else 2):
         if side == 0:
             t1, t2 = al_i + be_j, al_i * be_j
         else:
@@ -294,13 +295,13 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
                 out[0, 6 + n] += x0
                 out[1, 6 + n] += x1
                 out[2, 6 + n] += x2
-            else:
+            if side == 1 or equal:
                 out[6 + n, 0] -= x0
                 out[6 + n, 1] -= x1
                 out[6 + n, 2] -= x2
 
     # Omega-S and E-L:  -(1/2) A2 (e x B e)  and  (1/2) A2 (B e x e)
-    for side in range(2):
+    for side in range(1 if equal else 2):
         bb = be_j if side == 0 else be_i
         f1 = v11 + bb * v21
         f2 = v12 + bb * v22
@@ -313,7 +314,7 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
                 out[3, 6 + n] -= x0
                 out[4, 6 + n] -= x1
                 out[5, 6 + n] -= x2
-            else:
+            if side == 1 or equal:
                 out[6 + n, 3] -= x0
                 out[6 + n, 4] -= x1
                 out[6 + n, 5] -= x2
