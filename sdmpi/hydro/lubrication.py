@@ -50,7 +50,7 @@ import scipy.sparse
 from .basis import BASIS
 from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
 from .geometry import find_pairs
-from .two_sphere import _basis5, _fill_pair_work, pair_resistance
+from .two_sphere import _basis5, _fill_pair_columns, _fill_pair_work, pair_resistance
 from .workspace import work_array
 
 #: default lubrication cut-off: gap in units of the pair's mean radius
@@ -343,7 +343,8 @@ def lubrication_change(radii, pairs, blocks, vector):
         pair_products(bi, bj, old, -vector, out)
         return out
     if n_fast:
-        _tabulated_change_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, bi, bj, old, vector, out)
+        rigid = not vector[:, 6:].any()
+        _tabulated_change_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, bi, bj, old, vector, rigid, out)
     if len(slow):
         new = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
         pair_products(bi[n_fast:], bj[n_fast:], new - old[n_fast:], vector, out)
@@ -528,9 +529,11 @@ def _tabulated_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, res):
 
 
 @numba.njit(cache=True, inline="always")
-def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res):
+def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res,
+                        rigid_columns=False):
     """res (22, 22) = R_2B - R_2B,inf of pair p (interpolated scalars sc (4, 11) with the
-    Lagrange weights w (npt,) and unit vector d (3,) as scratch, `_fill_pair_work` tensors)."""
+    Lagrange weights w (npt,) and unit vector d (3,) as scratch, `_fill_pair_work` tensors;
+    rigid_columns: only the rigid-body columns, `two_sphere._fill_pair_columns`)."""
     npt = _TAB_NPT
     half = npt // 2
     r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
@@ -560,35 +563,34 @@ def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d
             flat[col] += wm * data[row + m, col]
     for col in range(4 * NDOF):
         flat[col] *= unscale
-    _fill_pair_work(d, a1[p], a2[p], sc, bm, res, work)
+    _fill_pair_columns(d, a1[p], a2[p], sc, bm, res, work, rigid_columns)
 
 
 @numba.njit(cache=True)
-def _tabulated_change_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, old, v, out):
+def _tabulated_change_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, old, v, rigid_columns, out):
     """out[(i, j)] += (res_p - old[p]) (v_i, v_j) for every pair p = (pi[p], pj[p]), res_p
-    its block R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory)."""
+    its block R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory);
+    rigid_columns: v is zero on the strain dofs (their columns are neither formed nor used)."""
     bm = _basis5()
     sc = np.empty((4, NDOF))
     w = np.empty(_TAB_NPT)
     d = np.empty(3)
     work = np.empty((8, 5, 5))
     res = np.empty((2 * NDOF, 2 * NDOF))
+    ncol = 6 if rigid_columns else NDOF
     for p in range(dx.shape[0]):
-        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res)
+        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res, rigid_columns)
         old_p = old[p]
-        for a in range(2 * NDOF):
-            for b in range(2 * NDOF):
-                res[a, b] -= old_p[a, b]
         i, j = pi[p], pj[p]
         for u in range(2):
             row = i if u == 0 else j
             for a in range(NDOF):
                 ra = NDOF * u + a
                 acc = 0.0
-                for b in range(NDOF):
-                    acc += res[ra, b] * v[i, b]
-                for b in range(NDOF):
-                    acc += res[ra, NDOF + b] * v[j, b]
+                for b in range(ncol):
+                    acc += (res[ra, b] - old_p[ra, b]) * v[i, b]
+                for b in range(ncol):
+                    acc += (res[ra, NDOF + b] - old_p[ra, NDOF + b]) * v[j, b]
                 out[row, a] += acc
 
 
