@@ -306,35 +306,71 @@ def pair_blocks(radii, pairs):
         yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
 
 
-def all_pair_blocks(radii, pairs):
+def all_pair_blocks(radii, pairs, keep_setup=False):
     """(pi, pj, res (P, 22, 22)): every pair's block as `pair_blocks` gives them, in one
-    fresh array (the tabulated pairs written into it directly), or None without pairs."""
+    fresh array (the tabulated pairs written into it directly), or None without pairs.
+    keep_setup: return (blocks, setup), setup the pairs' orientation, radii and tables for
+    `lubrication_change` at displaced separations (None when some pair is exact)."""
     if len(pairs.i) == 0:
-        return None
+        return (None, None) if keep_setup else None
     (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
     res = np.empty((len(sel) + len(slow), 2 * NDOF, 2 * NDOF))
     if len(slow) == 0:
         _tabulated_kernel(dx, a1, a2, tab, *tables, res)
-        return pi.copy(), pj.copy(), res
+        blocks = pi.copy(), pj.copy(), res
+        swap = None if pi is pi0 else pi != pi0
+        return (blocks, (swap, a1, a2, tab, tables)) if keep_setup else blocks
     _tabulated_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, res[:len(sel)])
     res[len(sel):] = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
-    return np.concatenate([pi[sel], pi0[slow]]), np.concatenate([pj[sel], pj0[slow]]), res
+    blocks = np.concatenate([pi[sel], pi0[slow]]), np.concatenate([pj[sel], pj0[slow]]), res
+    return (blocks, None) if keep_setup else blocks
 
 
-def lubrication_change(radii, pairs, blocks, vector):
+@numba.njit(cache=True)
+def _tables_cover(dx, a1, a2, tab, k_lo, n_rows):
+    """Whether every pair's interpolation (`_interpolated_block`) at separations dx reads
+    rows inside its table (no clamp; one row of margin) and has a gap in the tables'
+    range."""
+    half = _TAB_NPT // 2
+    for p in range(dx.shape[0]):
+        r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
+        asum = a1[p] + a2[p]
+        xi = 2.0 * (r - asum) / asum
+        if not (xi >= _XI_TABLE_MIN and xi <= _XI_TABLE_MAX):
+            return False
+        k = int(math.floor(math.log(xi) * (1.0 / _TAB_H)))
+        t = tab[p]
+        if k - 1 < k_lo[t] + half - 1 or k + 1 > k_lo[t] + n_rows[t] - half - 1:
+            return False
+    return True
+
+
+def lubrication_change(radii, pairs, blocks, vector, setup=None):
     """[L(pairs) - L_0] v (N, 11) for v (N, 11), pair by pair: L(pairs) the near-field
     correction at the pairs' separations (as `lubrication_product`) and L_0 the one given
     by its pair blocks, blocks = (pi, pj, res (P, 22, 22)) in the order of `pair_blocks`
     for the same pair set (e.g. the blocks of a nearby configuration with the same
     images). Each pair's block at the new separations is formed in scratch memory and
     its difference to the old one applied to v; no (P, 22, 22) array is written. Falls back
-    to the two products when the pair order differs."""
+    to the two products when the pair order differs. setup: the blocks' own (from
+    `all_pair_blocks(..., keep_setup=True)` for the same images), which spares the pairs'
+    ordering and table look-up when the tables cover the new separations (the same
+    values)."""
     vector = np.ascontiguousarray(vector, dtype=float)
     out = np.zeros_like(vector)
     bi, bj, old = blocks
     if len(pairs.i) == 0:
         pair_products(bi, bj, old, -vector, out)
         return out
+    rigid = not vector[:, 6:].any()
+    if setup is not None and len(pairs.i) == len(bi):
+        swap, a1, a2, tab, tables = setup
+        dx = np.ascontiguousarray(pairs.dx, dtype=float)
+        if swap is not None:
+            dx = np.ascontiguousarray(np.where(swap[:, None], -dx, dx))
+        if _tables_cover(dx, a1, a2, tab, tables[2], tables[3]):
+            _tabulated_change_kernel(dx, a1, a2, tab, *tables, bi, bj, old, vector, rigid, out)
+            return out
     (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
     n_fast = len(sel)
     if (len(bi) != len(pi) or not np.array_equal(bi[:n_fast], pi[sel]) or not np.array_equal(bj[:n_fast], pj[sel])
@@ -343,7 +379,6 @@ def lubrication_change(radii, pairs, blocks, vector):
         pair_products(bi, bj, old, -vector, out)
         return out
     if n_fast:
-        rigid = not vector[:, 6:].any()
         _tabulated_change_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, bi, bj, old, vector, rigid, out)
     if len(slow):
         new = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])

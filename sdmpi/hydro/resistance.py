@@ -58,6 +58,9 @@ class GrandResistance:
     plan: HydroPlan
     positions: np.ndarray
     radii: np.ndarray
+    #: the lubrication pairs' orientation and tables (`lubrication.all_pair_blocks`), for
+    #: `lubrication.lubrication_change`; None: looked up again
+    lubrication_setup: tuple | None = None
 
     @property
     def n_particles(self):
@@ -270,8 +273,10 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
-    lub = lubrication_blocks(radii, pairs) if plan.near_images is not None else None
-    return from_blocks(far, lub, pairs, plan, pos, radii)
+    lub, setup = all_pair_blocks(radii, pairs, keep_setup=True) if plan.near_images is not None else (None, None)
+    res = from_blocks(far, lub, pairs, plan, pos, radii)
+    res.lubrication_setup = setup
+    return res
 
 
 def lubrication_blocks(radii, pairs):
@@ -324,7 +329,7 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
     if base.plan.near_images is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
         if base.lubrication is not None:
-            out += lubrication_change(base.radii, pairs, base.lubrication, vector)
+            out += lubrication_change(base.radii, pairs, base.lubrication, vector, base.lubrication_setup)
     return out
 
 
