@@ -577,7 +577,7 @@ _EVEN = np.arange(NDOF) < 3  # U rows (real); Omega and E rows carry a factor i
 #: U row a, Omega/E column b (B_ba = -B_ab)
 _COS_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(a, NDOF) if _EVEN[a] == _EVEN[b]])
 _SIN_ENTRIES = np.array([(a, b) for a in range(3) for b in range(3, NDOF)])
-_PAIR_CHUNK = 2048  # pairs per matrix product (bounds the work arrays)
+_PAIR_CHUNK = 64  # pairs per matrix product: the phases of a chunk stay in cache (measured optimum at N = 27)
 
 
 @numba.njit(cache=True)
