@@ -92,16 +92,37 @@ def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=D
     if images is None:
         images = find_pairs(positions, radii, lattice, 0.0, 1.0 + 0.5 * cutoff)
     i, j, shift = images
-    dx = positions[j] + shift - positions[i]
     if len(i) == 0:
-        return PairList(i, j, dx, shift, np.zeros(0), 0, np.zeros(0))
-    r = np.sqrt(np.einsum("ij,ij->i", dx, dx))
-    asum = radii[i] + radii[j]
-    gap = r - asum
-    floor = 0.5 * min_gap * asum
-    short = gap < floor
-    dx[short] *= ((asum[short] + floor[short]) / r[short])[:, None]
-    return PairList(i, j, dx, shift, gap, int(short.sum()), asum)
+        return PairList(i, j, np.zeros((0, 3)), shift, np.zeros(0), 0, np.zeros(0))
+    dx, gap, asum = np.empty((len(i), 3)), np.empty(len(i)), np.empty(len(i))
+    short = _separations(np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(radii, dtype=float),
+                         np.ascontiguousarray(i, dtype=np.int64), np.ascontiguousarray(j, dtype=np.int64),
+                         np.ascontiguousarray(shift, dtype=float), float(min_gap), dx, gap, asum)
+    return PairList(i, j, dx, shift, gap, short, asum)
+
+
+@numba.njit(cache=True)
+def _separations(pos, radii, pi, pj, shift, min_gap, dx, gap, asum):
+    """dx[p] = x_j + shift - x_i, gap[p] = |dx| - (a_i + a_j), asum[p] = a_i + a_j for the
+    pairs p = (pi[p], pj[p]); separations with a gap below the floor (min_gap/2) asum are
+    stretched to it (`close_pairs`); returns how many were."""
+    short = 0
+    for p in range(pi.shape[0]):
+        i, j = pi[p], pj[p]
+        d0 = pos[j, 0] + shift[p, 0] - pos[i, 0]
+        d1 = pos[j, 1] + shift[p, 1] - pos[i, 1]
+        d2 = pos[j, 2] + shift[p, 2] - pos[i, 2]
+        r = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        s = radii[i] + radii[j]
+        g = r - s
+        floor = 0.5 * min_gap * s
+        if g < floor:
+            f = (s + floor) / r
+            d0, d1, d2 = d0 * f, d1 * f, d2 * f
+            short += 1
+        dx[p, 0], dx[p, 1], dx[p, 2] = d0, d1, d2
+        gap[p], asum[p] = g, s
+    return short
 
 
 @numba.njit(cache=True)
