@@ -541,17 +541,30 @@ class _TableStore:
     def lookup(self, lam, xi):
         """Per pair the table index (-1: exact path), building/extending tables as
         needed, and a consistent snapshot (data, offset, k_lo, n_rows) of the tables."""
+        half = _TAB_NPT // 2
+        n_in, k_min, k_max = _grid_range(xi)
+        if n_in == len(xi) and lam.min() == lam.max():
+            # every gap in range, one size ratio (monodisperse): no masks, no sort
+            lv = float(lam[0])
+            with self._lock:
+                tables = self._tables
+                if lv in tables.lams or (len(xi) >= _MIN_PAIRS_FOR_TABLE and len(tables.lams) < _MAX_TABLES):
+                    tables.ensure(lv, k_min - half, k_max + half + 2)
+                    tab = np.full(len(xi), tables.lams.index(lv), dtype=np.int64)
+                else:
+                    tab = np.full(len(xi), -1, dtype=np.int64)
+                snapshot = (tables.data, tables.offset, tables.k_lo, tables.n_rows)
+            return tab, snapshot
         tab = np.full(lam.shape[0], -1, dtype=np.int64)
         ok = (xi >= _XI_TABLE_MIN) & (xi <= _XI_TABLE_MAX)
         if not ok.any():
             return tab, None
         lam_ok = lam[ok]
-        if lam_ok.min() == lam_ok.max():  # one size ratio (monodisperse): no sort
+        if lam_ok.min() == lam_ok.max():  # one size ratio: no sort
             ulam, inv, counts = lam_ok[:1], np.zeros(len(lam_ok), dtype=np.int64), np.array([len(lam_ok)])
         else:
             ulam, inv, counts = np.unique(lam_ok, return_inverse=True, return_counts=True)
         kk = np.floor(np.log(xi[ok]) / _TAB_H).astype(np.int64)
-        half = _TAB_NPT // 2
         with self._lock:
             tables = self._tables
             for il, lv in enumerate(ulam):
@@ -570,6 +583,22 @@ class _TableStore:
 
 
 _STORE = _TableStore()
+
+
+@numba.njit(cache=True)
+def _grid_range(xi):
+    """(how many xi lie in [_XI_TABLE_MIN, _XI_TABLE_MAX], the smallest and the largest
+    grid row floor(log(xi)/h) among them)."""
+    count, k_min, k_max = 0, 0, 0
+    for p in range(xi.shape[0]):
+        if xi[p] >= _XI_TABLE_MIN and xi[p] <= _XI_TABLE_MAX:
+            k = int(math.floor(math.log(xi[p]) / _TAB_H))
+            if count == 0 or k < k_min:
+                k_min = k
+            if count == 0 or k > k_max:
+                k_max = k
+            count += 1
+    return count, k_min, k_max
 
 
 @numba.njit(cache=True)
