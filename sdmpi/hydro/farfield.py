@@ -577,6 +577,9 @@ _EVEN = np.arange(NDOF) < 3  # U rows (real); Omega and E rows carry a factor i
 #: U row a, Omega/E column b (B_ba = -B_ab)
 _COS_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(a, NDOF) if _EVEN[a] == _EVEN[b]])
 _SIN_ENTRIES = np.array([(a, b) for a in range(3) for b in range(3, NDOF)])
+#: the Faxen coefficients of the rows and columns of the independent entries
+_ENTRY_ROW_C = {"cos": _ROW_C[_COS_ENTRIES[:, 0]], "sin": _ROW_C[_SIN_ENTRIES[:, 0]]}
+_ENTRY_COL_C = {"cos": _ROW_C[_COS_ENTRIES[:, 1]], "sin": _ROW_C[_SIN_ENTRIES[:, 1]]}
 _PAIR_CHUNK = 64  # pairs per matrix product: the phases of a chunk stay in cache (measured optimum at N = 27)
 
 
@@ -701,9 +704,7 @@ def _wave_terms(radii, kvec, xi, volume):
     # all radii equal: f_a(a) f_b(a) folded into the tensors (one product per part)
     a2 = float(radii[0]) ** 2 if equal else -1.0
     _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, ksq, 2.0 / volume, a2, _ROW_C, tcos, tsin)
-    c_row = {"cos": _ROW_C[_COS_ENTRIES[:, 0]], "sin": _ROW_C[_SIN_ENTRIES[:, 0]]}
-    c_col = {"cos": _ROW_C[_COS_ENTRIES[:, 1]], "sin": _ROW_C[_SIN_ENTRIES[:, 1]]}
-    return {"cos": tcos, "sin": tsin}, ksq[:, None], c_row, c_col, equal
+    return {"cos": tcos, "sin": tsin}, ksq[:, None], _ENTRY_ROW_C, _ENTRY_COL_C, equal
 
 
 def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
@@ -714,7 +715,7 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
     tensors, ksq, c_row, c_col, equal = _wave_terms(radii, kvec, xi, volume) if terms is None else terms
     phase = pos @ kvec.T
     phase_re, phase_im = np.cos(phase), np.sin(phase)
-    pi, pj = np.triu_indices(n)
+    pi, pj = _upper_pairs(n)
     for start in range(0, len(pi), _PAIR_CHUNK):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
         cos_k, sin_k = work_array("cos_k", (len(ci), nk)), work_array("sin_k", (len(ci), nk))
@@ -733,6 +734,15 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
             g0 += ca * cb * ai2 * aj2 * g2
             vals += [g0 - (ca * ai2 + cb * aj2) * g1, sign * (g0 - (cb * ai2 + ca * aj2) * g1)]
         _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob, both)
+
+
+@functools.lru_cache(maxsize=8)
+def _upper_pairs(n):
+    """np.triu_indices(n) (the pairs i <= j), cached read-only."""
+    pi, pj = np.triu_indices(n)
+    pi.flags.writeable = False
+    pj.flags.writeable = False
+    return pi, pj
 
 
 def _gauss_moment(p, xi):
