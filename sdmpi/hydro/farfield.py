@@ -716,6 +716,10 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
     phase = pos @ kvec.T
     phase_re, phase_im = np.cos(phase), np.sin(phase)
     pi, pj = _upper_pairs(n)
+    if equal:
+        _reciprocal_equal(phase_re, phase_im, pi, pj, tensors["cos"], tensors["sin"], _COS_ENTRIES, _SIN_ENTRIES,
+                          _PAIR_CHUNK, mob, both)
+        return
     for start in range(0, len(pi), _PAIR_CHUNK):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
         cos_k, sin_k = work_array("cos_k", (len(ci), nk)), work_array("sin_k", (len(ci), nk))
@@ -734,6 +738,27 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
             g0 += ca * cb * ai2 * aj2 * g2
             vals += [g0 - (ca * ai2 + cb * aj2) * g1, sign * (g0 - (cb * ai2 + ca * aj2) * g1)]
         _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob, both)
+
+
+@numba.njit(cache=True)
+def _reciprocal_equal(phase_re, phase_im, pi, pj, tcos, tsin, cos_entries, sin_entries, chunk, mob, both):
+    """`_reciprocal_sum` for equal radii (the radius factors folded into tcos, tsin), chunk
+    pairs at a time: the pair phases, the two matrix products (BLAS) and the scatter."""
+    nk = phase_re.shape[1]
+    cos_k, sin_k = np.empty((chunk, nk)), np.empty((chunk, nk))
+    g_cos, g_sin = np.empty((chunk, tcos.shape[1])), np.empty((chunk, tsin.shape[1]))
+    g_neg = np.empty((chunk, tsin.shape[1]))
+    for start in range(0, pi.shape[0], chunk):
+        stop = min(start + chunk, pi.shape[0])
+        m = stop - start
+        ci, cj = pi[start:stop], pj[start:stop]
+        _pair_phases(phase_re, phase_im, ci, cj, cos_k[:m], sin_k[:m])
+        np.dot(cos_k[:m], tcos, g_cos[:m])
+        np.dot(sin_k[:m], tsin, g_sin[:m])
+        for p in range(m):
+            for e in range(tsin.shape[1]):
+                g_neg[p, e] = -g_sin[p, e]
+        _scatter_pairs(ci, cj, g_cos[:m], g_cos[:m], g_sin[:m], g_neg[:m], cos_entries, sin_entries, mob, both)
 
 
 @functools.lru_cache(maxsize=8)
