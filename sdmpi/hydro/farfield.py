@@ -468,21 +468,29 @@ def _scaled_difference_row(scale, f, x, y, out):
 
 
 @numba.njit(cache=True)
-def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, raw, k6, k10, scale, d):
-    """The reciprocal part of [M_k(moved) - M_k(pos)] w, in factored form (all arrays over
-    the M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector k, m = t n_k + k).
-    With c_j, s_j the cosine and sine of k.x_j (cos_old, ... (N, M)), b(k) the wave
-    amplitudes (`_wave_amplitudes`) and raw (3, N, M) = sum over the U, Omega and E rows a
-    of b_at w_ja for each particle j, f_a(a_j) = 1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows
-    (k6 = k^2/6), 0 on Omega, 1/10 on E (k10 = k^2/10)): the sums P_c,s = sum_j (c_j, s_j)
-    f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E) give
-    (M w)_ia = scale f_a(a_i) b_at [c_i (P_c - Q_s) + s_i (P_s + Q_c)] on the U rows and
-    scale f_a(a_i) b_at [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the others, scale = 2/V.
-    Fills d (3, N, M) with the brackets' change between the two configurations times
-    scale f_U (U rows), scale (Omega rows) and scale f_E (E rows), so that the change is
-    sum_m b_a(m) d[., i, m] (`far_field_change` does these products by BLAS). O(N n_k)
-    operations, no pair loop; every loop over m is contiguous (vectorised)."""
-    n, nm = cos_old.shape
+def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, ksq, scale, w, out):
+    """Adds the reciprocal part of [M_k(moved) - M_k(pos)] w into out (N, 11), w (N, 11).
+    Arrays run over the M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector
+    k, m = t n_k + k: b (11, M) the wave amplitudes b_a(k) q_t (`_wave_amplitudes`); the
+    cosines and sines of k.x_j (cos_old, ... (N, n_k)) and |k|^2 (ksq (n_k,)) serve both t.
+    With raw (3, N, M) = sum over the U, Omega and E rows a of b_a(m) w_ja for each particle
+    j and f_a(a_j) = 1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows, 0 on Omega, 1/10 on E), the
+    sums P_c,s = sum_j (c_j, s_j) f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E)
+    give (M w)_ia = scale f_a(a_i) b_a(m) [c_i (P_c - Q_s) + s_i (P_s + Q_c)] on the U rows
+    and scale f_a(a_i) b_a(m) [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the others, summed over
+    m, scale = 2/V; the brackets' change between the two configurations is taken per m.
+    O(N n_k) operations, no pair loop: every loop over m is contiguous (vectorised), and the
+    projections onto b and the sums over m are BLAS products."""
+    n, nk = cos_old.shape
+    nm = 2 * nk
+    k6, k10 = np.empty(nm), np.empty(nm)
+    for m in range(nm):
+        k6[m], k10[m] = ksq[m % nk] / 6.0, ksq[m % nk] / 10.0
+    rows = ((0, 3), (3, 6), (6, NDOF))
+    raw = np.empty((3, n, nm))
+    for part in range(3):
+        lo, hi = rows[part]
+        raw[part] = np.dot(np.ascontiguousarray(w[:, lo:hi]), b[lo:hi])
     f_u, f_e = np.empty((n, nm)), np.empty((n, nm))
     proj_u, proj_o = np.empty(nm), np.empty(nm)
     sums = np.zeros((8, nm))  # P_c, P_s, Q_c, Q_s at the moved configuration, then at the start
@@ -494,10 +502,12 @@ def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, raw, k6, k10, 
         _add_product_row(raw[1, j], f_e[j], raw[2, j], proj_o)
         for side in range(2):
             c, s = (cos_new[j], sin_new[j]) if side == 0 else (cos_old[j], sin_old[j])
-            _accumulate_row(sums[4 * side + 0], c, proj_u)
-            _accumulate_row(sums[4 * side + 1], s, proj_u)
-            _accumulate_row(sums[4 * side + 2], c, proj_o)
-            _accumulate_row(sums[4 * side + 3], s, proj_o)
+            for t in range(2):
+                h = slice(t * nk, (t + 1) * nk)
+                _accumulate_row(sums[4 * side + 0, h], c, proj_u[h])
+                _accumulate_row(sums[4 * side + 1, h], s, proj_u[h])
+                _accumulate_row(sums[4 * side + 2, h], c, proj_o[h])
+                _accumulate_row(sums[4 * side + 3, h], s, proj_o[h])
     # per side: P_c - Q_s, P_s + Q_c (U rows), Q_c + P_s, Q_s - P_c (Omega, E rows)
     g = np.empty((8, nm))
     for side in range(2):
@@ -506,16 +516,22 @@ def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, raw, k6, k10, 
         _combine_row(ps, 1.0, qc, g[4 * side + 1])
         _combine_row(qc, 1.0, ps, g[4 * side + 2])
         _combine_row(qs, -1.0, pc, g[4 * side + 3])
+    d = np.empty((3, n, nm))
     u_new, u_old, o_new, o_old = np.empty(nm), np.empty(nm), np.empty(nm), np.empty(nm)
     for i in range(n):
-        _bracket_row(cos_new[i], g[0], sin_new[i], g[1], u_new)
-        _bracket_row(cos_old[i], g[4], sin_old[i], g[5], u_old)
-        _bracket_row(cos_new[i], g[2], sin_new[i], g[3], o_new)
-        _bracket_row(cos_old[i], g[6], sin_old[i], g[7], o_old)
+        for t in range(2):
+            h = slice(t * nk, (t + 1) * nk)
+            _bracket_row(cos_new[i], g[0, h], sin_new[i], g[1, h], u_new[h])
+            _bracket_row(cos_old[i], g[4, h], sin_old[i], g[5, h], u_old[h])
+            _bracket_row(cos_new[i], g[2, h], sin_new[i], g[3, h], o_new[h])
+            _bracket_row(cos_old[i], g[6, h], sin_old[i], g[7, h], o_old[h])
         _scaled_difference_row(scale, f_u[i], u_new, u_old, d[0, i])
         _scaled_difference_row(scale, f_e[i], o_new, o_old, d[2, i])
         for m in range(nm):
             d[1, i, m] = scale * (o_new[m] - o_old[m])
+    for part in range(3):
+        lo, hi = rows[part]
+        out[:, lo:hi] += np.dot(d[part], np.ascontiguousarray(b[lo:hi].T))
 
 
 def far_field_change(positions, moved, radii, plan, w):
@@ -534,21 +550,12 @@ def far_field_change(positions, moved, radii, plan, w):
     grid = plan.grid
     _real_space_change(pos, moved, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
     if plan.params is not None:
-        # the pairs m = (normal direction t, wave vector k), t-major: per-k arrays tiled twice
+        # the pairs m = (normal direction t, wave vector k), t-major
         amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
         b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
-        ksq = np.tile(np.einsum("ij,ij->i", plan.kvec, plan.kvec), 2)
-        trig = []
-        for x in (pos, moved):
-            phase = x @ plan.kvec.T
-            trig += [np.tile(np.cos(phase), 2), np.tile(np.sin(phase), 2)]
-        raw = np.empty((3, len(pos), b.shape[1]))
-        for part, rows in enumerate((slice(0, 3), slice(3, 6), slice(6, NDOF))):
-            np.matmul(w[:, rows], b[rows], out=raw[part])
-        d = np.empty_like(raw)
-        _reciprocal_change(*trig, radii, raw, ksq / 6.0, ksq / 10.0, 2.0 / plan.volume, d)
-        for part, rows in enumerate((slice(0, 3), slice(3, 6), slice(6, NDOF))):
-            out[:, rows] += d[part] @ b[rows].T
+        old, new = pos @ plan.kvec.T, moved @ plan.kvec.T
+        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii, b,
+                           np.einsum("ij,ij->i", plan.kvec, plan.kvec), 2.0 / plan.volume, w, out)
     return out
 
 
