@@ -6,15 +6,16 @@ F = (F, L, -S) = R (U - U_inf, Omega - Omega_inf, -E_inf), viscosity 1.
 
 M_inf^-1 is kept in block form (`GrandResistance`): with the rigid-body dofs a (U, Omega: 6
 per particle) and the strain dofs b (E: 5 per particle), M_bb = U_b^T U_b (Cholesky) and
-Y = U_b^-T M_ba, the Schur complement S = M_aa - Y^T Y gives (block inversion; e.g. Golub &
+X = M_ab U_b^-1, the Schur complement S = M_aa - X X^T gives (block inversion; e.g. Golub &
 Van Loan, Matrix Computations, sec. 3.2)
 
     [M^-1]_aa = S^-1,   [M^-1]_ab = -S^-1 M_ab M_bb^-1,
     [M^-1]_bb = M_bb^-1 + M_bb^-1 M_ba S^-1 M_ab M_bb^-1.
 
 Only S^-1 (6N x 6N) is formed, by Cholesky (LAPACK potrf/potri): R_FU = S^-1 + L_aa must be
-a matrix (it is factorised), while R_FE, R_SU and R_SE only act on vectors, through solves
-with U_b. This costs about half the flops of inverting the whole (11N)^2 M_inf.
+a matrix (it is factorised), while R_FE, R_SU and R_SE only act on vectors, through X and
+triangular solves with U_b. This costs about half the flops of inverting the whole (11N)^2
+M_inf.
 """
 
 from dataclasses import dataclass
@@ -44,14 +45,15 @@ class HydroPlan:
 @dataclass
 class GrandResistance:
     """R = M_inf^-1 + L at one configuration, in the block form of the module docstring:
-    R_FU = S^-1 + L_aa (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, M_ab (6N x 5N)
-    and the upper Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b); the lubrication as
+    R_FU = S^-1 + L_aa (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, the upper
+    Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b) and X = M_ab U_b^-1 (6N x 5N,
+    Fortran-ordered); the lubrication as
     its pair blocks (pair_i, pair_j, blocks (P, 22, 22)); its close pairs, the plan it was
     built with, the (wrapped) positions it was built at and the radii."""
 
     r_fu: np.ndarray
     s_inverse: np.ndarray
-    m_ab: np.ndarray
+    x_ab: np.ndarray
     chol_bb: np.ndarray
     lubrication: tuple | None
     pairs: PairList
@@ -67,18 +69,19 @@ class GrandResistance:
         return self.positions.shape[0]
 
     def far_inverse_product(self, v, rows=None):
-        """M_inf^-1 v (N, 11) for v (N, 11): t = M_bb^-1 v_b, y_a = S^-1 (v_a - M_ab t),
-        y_b = t - M_bb^-1 M_ba y_a. rows "rigid": y_a alone (N, 6); "strain": y_b alone
-        (N, 5); None: both (N, 11)."""
+        """M_inf^-1 v (N, 11) for v (N, 11): with z = U_b^-T v_b, y_a = S^-1 (v_a - X z)
+        and y_b = U_b^-1 (z - X^T y_a) (= M_bb^-1 v_b - M_bb^-1 M_ba y_a). rows "rigid":
+        y_a alone (N, 6); "strain": y_b alone (N, 5); None: both (N, 11)."""
         n = self.n_particles
         v_a, v_b = np.ascontiguousarray(v[:, :6]).ravel(), np.ascontiguousarray(v[:, 6:]).ravel()
-        t = _chol_solve(self.chol_bb, v_b) if v_b.any() else None  # none for rigid-body v
-        y_a = self.s_inverse @ (v_a if t is None else v_a - self.m_ab @ t)
+        z = _triangular_solve(self.chol_bb, v_b, 1) if v_b.any() else None  # none for rigid-body v
+        y_a = self.s_inverse @ (v_a if z is None else v_a - self.x_ab @ z)
         if rows == "rigid":
             return y_a.reshape(n, 6)
-        y_b = -_chol_solve(self.chol_bb, self.m_ab.T @ y_a)
-        if t is not None:
-            y_b += t
+        rhs = -(self.x_ab.T @ y_a)
+        if z is not None:
+            rhs += z
+        y_b = _triangular_solve(self.chol_bb, rhs, 0)
         if rows == "strain":
             return y_b.reshape(n, 5)
         out = np.empty((n, NDOF))
@@ -127,7 +130,7 @@ class GrandResistance:
         each; R_SU = R_FE^T): formed explicitly from the block form, for reference and
         tests (a step uses `apply`)."""
         n = self.n_particles
-        x = _chol_solve(self.chol_bb, np.ascontiguousarray(self.m_ab.T))  # M_bb^-1 M_ba (5N x 6N)
+        x = _triangular_solve(self.chol_bb, np.asfortranarray(self.x_ab.T), 0)  # M_bb^-1 M_ba (5N x 6N)
         inv_ab = -self.s_inverse @ x.T
         inv_bb = _chol_solve(self.chol_bb, np.eye(5 * n)) + x @ self.s_inverse @ x.T
         lub = np.zeros((NDOF * n, NDOF * n))
@@ -150,6 +153,14 @@ class GrandResistance:
         out[np.ix_(rigid, rigid)], out[np.ix_(rigid, strain)] = r_fu, r_fe
         out[np.ix_(strain, rigid)], out[np.ix_(strain, strain)] = r_su, r_se
         return out
+
+
+def _triangular_solve(upper, rhs, trans):
+    """U^-1 rhs (trans 0) or U^-T rhs (trans 1) for the upper triangular U (LAPACK trtrs)."""
+    sol, info = lapack.dtrtrs(upper, rhs, lower=0, trans=trans)
+    if info != 0:
+        raise ValueError(f"trtrs: illegal argument {-info}")
+    return sol
 
 
 def _chol_solve(upper, rhs):
@@ -288,15 +299,15 @@ def lubrication_blocks(radii, pairs):
 def from_blocks(far, lub, pairs, plan, positions, radii):
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
     lubrication blocks lub (`lubrication_blocks`, None: none): R_FU = S^-1 + L_aa."""
-    s_inverse, m_ab, chol_bb = far
+    s_inverse, x_ab, chol_bb = far
     r_fu = s_inverse.copy()
     if lub is not None:
         _scatter_rigid(*lub, r_fu)
-    return GrandResistance(r_fu, s_inverse, m_ab, chol_bb, lub, pairs, plan, positions, radii)
+    return GrandResistance(r_fu, s_inverse, x_ab, chol_bb, lub, pairs, plan, positions, radii)
 
 
 def far_field_blocks(mob):
-    """(S^-1, M_ab, U_b) of the far-field mobility mob (11N x 11N) (module docstring)."""
+    """(S^-1, X = M_ab U_b^-1, U_b) of the far-field mobility mob (11N x 11N) (module docstring)."""
     n = mob.shape[0] // NDOF
     m_aa, m_ab, m_bb = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
     _partition(mob, m_aa, m_ab, m_bb)
@@ -306,7 +317,7 @@ def far_field_blocks(mob):
     # X = M_ab U_b^-1 (6N x 5N; the right-side solve is the faster kernel), S = M_aa - X X^T
     x = blas.dtrsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
     schur = blas.dsyrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
-    return _spd_inverse_of_upper(schur).T, m_ab, chol_bb
+    return _spd_inverse_of_upper(schur).T, x, chol_bb
 
 
 def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
