@@ -621,12 +621,13 @@ def _wave_amplitudes(kvec, xi, basis, b):
             b[kk, 3, t] = 0.5 * scale * (k1 * q[2] - k2 * q[1])
             b[kk, 4, t] = 0.5 * scale * (k2 * q[0] - k0 * q[2])
             b[kk, 5, t] = 0.5 * scale * (k0 * q[1] - k1 * q[0])
-            for m in range(5):
-                acc = 0.0
-                for a in range(3):
-                    for c in range(3):
-                        acc += kvec[kk, a] * basis[m, a, c] * q[c]
-                b[kk, 6 + m, t] = scale * acc
+            # k.B^m.q with the sparse basis.BASIS (B^1 = (xx - yy)/sqrt2, B^2 = (2zz - xx -
+            # yy)/sqrt6, B^3, B^4, B^5 = (xy + yx, xz + zx, yz + zy)/sqrt2)
+            b[kk, 6, t] = scale * _ISQ2 * (k0 * q[0] - k1 * q[1])
+            b[kk, 7, t] = scale * _ISQ6 * (2.0 * k2 * q[2] - k0 * q[0] - k1 * q[1])
+            b[kk, 8, t] = scale * _ISQ2 * (k0 * q[1] + k1 * q[0])
+            b[kk, 9, t] = scale * _ISQ2 * (k0 * q[2] + k2 * q[0])
+            b[kk, 10, t] = scale * _ISQ2 * (k1 * q[2] + k2 * q[1])
 
 
 @numba.njit(cache=True)
