@@ -118,8 +118,8 @@ from ..hydro.farfield import NDOF
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
 from ..hydro.resistance import resistance_change
-from ..hydro.solvers import (MATRIX_FREE, assemble, make_solver, mobility_forms, noise_shape, resolve_backend,
-                             solver_stats, take_preconditioner)
+from ..hydro.solvers import (MATRIX_FREE, assemble, brownian_velocities, make_solver, mobility_forms, noise_shape,
+                             resolve_backend, solver_stats, take_preconditioner)
 
 #: hydrodynamics.model choices
 MODELS = ("stokesian", "far-field", "free-draining")
@@ -154,8 +154,8 @@ def unit_pair_forces(i, j, e, n):
     line of centres), no torques."""
     forces = np.zeros((len(i), n, 6))
     rows = np.arange(len(i))
-    np.add.at(forces, (rows, j, slice(0, 3)), e)
-    np.add.at(forces, (rows, i, slice(0, 3)), -e)
+    forces[rows, j, :3] = e  # each (row, particle) once per statement: no np.add.at needed
+    forces[rows, i, :3] -= e  # (a self-image pair, i = j, gets zero)
     return forces
 
 
@@ -192,9 +192,12 @@ class ResistanceEvaluation:
         F_B = sqrt(2 kT/dt) C z (C C^T = R_FU, or any F_B of that covariance), the
         displacement direction m = R_FU^-1 C z (module docstring); z_near: the independent
         noise z' of the near-contact correction (None: no correction)."""
-        unit_force = self.solver.brownian_forces(z)
         zero = np.zeros((self.n_particles, 5))
-        m = self.solver.velocities(unit_force, zero)
+        if self.model.scheme == "midpoint":
+            unit_force = self.solver.brownian_forces(z)
+            m = self.solver.velocities(unit_force, zero)
+        else:
+            m = brownian_velocities(self.solver, z)
         noise = math.sqrt(2 * kT / dt) * m
         near = 0.0 if z_near is None else self._near_contact(m, z_near, kT, dt)
         if self.model.scheme == "midpoint":
@@ -225,8 +228,9 @@ class ResistanceEvaluation:
         if not close.any():
             return np.zeros((n, 6))
         i, j = pairs.i[close], pairs.j[close]
-        e = pairs.dx[close] / np.linalg.norm(pairs.dx[close], axis=1)[:, None]
-        m_indep = self.solver.velocities(self.solver.brownian_forces(z_near), zero)
+        dx = pairs.dx[close]
+        e = dx / np.sqrt(np.einsum("pc,pc->p", dx, dx))[:, None]
+        m_indep = brownian_velocities(self.solver, z_near)
         m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
         gap = np.maximum(pairs.gap[close], self.model.min_gap * mean_radius[close])  # the lubrication's floor
         forces = unit_pair_forces(i, j, e, n)

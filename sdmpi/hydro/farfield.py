@@ -192,124 +192,166 @@ def _pair_block(rvec, ai, aj, table, bounds, xi, basis, work, out):
     _block_from_radial(rvec, r, v, ai, aj, basis, work[0:3], work[51:66].reshape((5, 3)), work[66:71], out)
 
 
+#: 1/sqrt(2), 1/sqrt(6): the non-zero entries of the strain basis `basis.BASIS`
+_ISQ2 = 1.0 / math.sqrt(2.0)
+_ISQ6 = 1.0 / math.sqrt(6.0)
+
+
 @numba.njit(cache=True)
 def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
     (e (3,), be (5, 3), q (5,): scratch, passed in so that a loop over images makes no
-    array views per image)."""
-    for c in range(3):
-        e[c] = rvec[c] / r
+    array views per image); adds into out. The strain basis is `basis.BASIS` (its sparse
+    entries are used explicitly: B^m e and e.B^m.e below)."""
+    ir = 1.0 / r
+    e0, e1, e2 = rvec[0] / r, rvec[1] / r, rvec[2] / r
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
     be_i, be_j = ai * ai / 10.0, aj * aj / 10.0
-    ir = 1.0 / r
+    v00, v01, v02, v03, v04 = v[0, 0], v[0, 1], v[0, 2], v[0, 3], v[0, 4]
+    v10, v11, v12, v13, v14 = v[1, 0], v[1, 1], v[1, 2], v[1, 3], v[1, 4]
+    v20, v21, v22, v23, v24 = v[2, 0], v[2, 1], v[2, 2], v[2, 3], v[2, 4]
+    v30, v31, v32 = v[3, 0], v[3, 1], v[3, 2]
 
     # UF: I lap Psi0 - grad grad Psi0,  Psi0 = (1 + al_i lap)(1 + al_j lap) chi_r
     s1, s2 = al_i + al_j, al_i * al_j
-    psi1 = v[1, 0] + s1 * v[2, 0] + s2 * v[3, 0]
-    d1 = v[0, 1] + s1 * v[1, 1] + s2 * v[2, 1]
-    d2 = v[0, 2] + s1 * v[1, 2] + s2 * v[2, 2]
+    psi1 = v10 + s1 * v20 + s2 * v30
+    d1 = v01 + s1 * v11 + s2 * v21
+    d2 = v02 + s1 * v12 + s2 * v22
     a2 = d2 - d1 * ir
-    b2 = d1 * ir
-    for a in range(3):
-        for b in range(3):
-            out[a, b] += -a2 * e[a] * e[b]
-        out[a, a] += psi1 - b2
+    diag = psi1 - d1 * ir
+    e00, e01, e02, e11, e12, e22 = e0 * e0, e0 * e1, e0 * e2, e1 * e1, e1 * e2, e2 * e2
+    out[0, 0] += diag - a2 * e00
+    out[1, 1] += diag - a2 * e11
+    out[2, 2] += diag - a2 * e22
+    t = a2 * e01
+    out[0, 1] -= t
+    out[1, 0] -= t
+    t = a2 * e02
+    out[0, 2] -= t
+    out[2, 0] -= t
+    t = a2 * e12
+    out[1, 2] -= t
+    out[2, 1] -= t
 
     # UL and Omega-F: (1/2) eps grad (lap chi_r + al lap^2 chi_r) = (1/2) f' [e]x
-    f_ul = 0.5 * (v[1, 1] + al_i * v[2, 1])
-    f_of = 0.5 * (v[1, 1] + al_j * v[2, 1])
+    f_ul = 0.5 * (v11 + al_i * v21)
+    f_of = 0.5 * (v11 + al_j * v21)
     for side in range(2):
         f = f_ul if side == 0 else f_of
         r0, c0 = (0, 3) if side == 0 else (3, 0)
-        out[r0 + 0, c0 + 1] -= f * e[2]
-        out[r0 + 0, c0 + 2] += f * e[1]
-        out[r0 + 1, c0 + 0] += f * e[2]
-        out[r0 + 1, c0 + 2] -= f * e[0]
-        out[r0 + 2, c0 + 0] -= f * e[1]
-        out[r0 + 2, c0 + 1] += f * e[0]
+        out[r0 + 0, c0 + 1] -= f * e2
+        out[r0 + 0, c0 + 2] += f * e1
+        out[r0 + 1, c0 + 0] += f * e2
+        out[r0 + 1, c0 + 2] -= f * e0
+        out[r0 + 2, c0 + 0] -= f * e1
+        out[r0 + 2, c0 + 1] += f * e0
 
     # Omega-L: (1/4)(grad grad lap chi_r - I lap^2 chi_r)
-    a2 = v[1, 2] - v[1, 1] * ir
-    b2 = v[1, 1] * ir
-    for m in range(3):
-        for n in range(3):
-            out[3 + m, 3 + n] += 0.25 * a2 * e[m] * e[n]
-        out[3 + m, 3 + m] += 0.25 * (b2 - v[2, 0])
+    a2 = 0.25 * (v12 - v11 * ir)
+    diag = 0.25 * (v11 * ir - v20)
+    out[3, 3] += diag + a2 * e00
+    out[4, 4] += diag + a2 * e11
+    out[5, 5] += diag + a2 * e22
+    t = a2 * e01
+    out[3, 4] += t
+    out[4, 3] += t
+    t = a2 * e02
+    out[3, 5] += t
+    out[5, 3] += t
+    t = a2 * e12
+    out[4, 5] += t
+    out[5, 4] += t
 
-    # B^n . e and e . B^n . e
-    be[:, :] = 0.0
-    q[:] = 0.0
+    # B^n . e and e . B^n . e (basis.BASIS: B^1 = (xx - yy)/sqrt2, B^2 = (2zz - xx - yy)/sqrt6,
+    # B^3, B^4, B^5 = (xy + yx, xz + zx, yz + zy)/sqrt2)
+    be[0, 0], be[0, 1], be[0, 2] = _ISQ2 * e0, -_ISQ2 * e1, 0.0
+    be[1, 0], be[1, 1], be[1, 2] = -_ISQ6 * e0, -_ISQ6 * e1, 2.0 * _ISQ6 * e2
+    be[2, 0], be[2, 1], be[2, 2] = _ISQ2 * e1, _ISQ2 * e0, 0.0
+    be[3, 0], be[3, 1], be[3, 2] = _ISQ2 * e2, 0.0, _ISQ2 * e0
+    be[4, 0], be[4, 1], be[4, 2] = 0.0, _ISQ2 * e2, _ISQ2 * e1
     for n in range(5):
-        for k in range(3):
-            for l in range(3):
-                be[n, k] += basis[n, k, l] * e[l]
-        for k in range(3):
-            q[n] += e[k] * be[n, k]
+        q[n] = e0 * be[n, 0] + e1 * be[n, 1] + e2 * be[n, 2]
 
     # U-S:  -I.grad lap Gamma + grad^3 Gamma, Gamma = (1 + al_i lap)(1 + be_j lap) chi_r
-    # E-F:  same with (be_i, al_j), transposed
-    for side in range(2):
+    # E-F:  same with (be_i, al_j), transposed (the same values when a_i = a_j)
+    equal = ai == aj
+    for side in range(1 if equal else 2):
         if side == 0:
             t1, t2 = al_i + be_j, al_i * be_j
         else:
             t1, t2 = be_i + al_j, be_i * al_j
-        g1 = v[1, 1] + t1 * v[2, 1] + t2 * v[3, 1]
-        f1 = v[0, 1] + t1 * v[1, 1] + t2 * v[2, 1]
-        f2 = v[0, 2] + t1 * v[1, 2] + t2 * v[2, 2]
-        f3 = v[0, 3] + t1 * v[1, 3] + t2 * v[2, 3]
+        g1 = v11 + t1 * v21 + t2 * v31
+        f1 = v01 + t1 * v11 + t2 * v21
+        f2 = v02 + t1 * v12 + t2 * v22
+        f3 = v03 + t1 * v13 + t2 * v23
         c1 = f3 - 3 * f2 * ir + 3 * f1 * ir * ir
-        c2 = f2 * ir - f1 * ir * ir
+        c2 = 2 * (f2 * ir - f1 * ir * ir) - g1
         for n in range(5):
-            for a in range(3):
-                val = (2 * c2 - g1) * be[n, a] + c1 * e[a] * q[n]
-                if side == 0:
-                    out[a, 6 + n] += val
-                else:
-                    out[6 + n, a] -= val
+            cq = c1 * q[n]
+            x0 = c2 * be[n, 0] + cq * e0
+            x1 = c2 * be[n, 1] + cq * e1
+            x2 = c2 * be[n, 2] + cq * e2
+            if side == 0:
+                out[0, 6 + n] += x0
+                out[1, 6 + n] += x1
+                out[2, 6 + n] += x2
+            if side == 1 or equal:
+                out[6 + n, 0] -= x0
+                out[6 + n, 1] -= x1
+                out[6 + n, 2] -= x2
 
     # Omega-S and E-L:  -(1/2) A2 (e x B e)  and  (1/2) A2 (B e x e)
-    for side in range(2):
+    for side in range(1 if equal else 2):
         bb = be_j if side == 0 else be_i
-        f1 = v[1, 1] + bb * v[2, 1]
-        f2 = v[1, 2] + bb * v[2, 2]
-        a2 = f2 - f1 * ir
+        f1 = v11 + bb * v21
+        f2 = v12 + bb * v22
+        h = 0.5 * (f2 - f1 * ir)
         for n in range(5):
-            for m in range(3):
-                m1, m2 = (m + 1) % 3, (m + 2) % 3
-                cross = e[m1] * be[n, m2] - e[m2] * be[n, m1]  # (e x B e)_m
-                if side == 0:
-                    out[3 + m, 6 + n] -= 0.5 * a2 * cross
-                else:
-                    out[6 + n, 3 + m] -= 0.5 * a2 * cross
+            x0 = h * (e1 * be[n, 2] - e2 * be[n, 1])  # (1/2) A2 (e x B e)
+            x1 = h * (e2 * be[n, 0] - e0 * be[n, 2])
+            x2 = h * (e0 * be[n, 1] - e1 * be[n, 0])
+            if side == 0:
+                out[3, 6 + n] -= x0
+                out[4, 6 + n] -= x1
+                out[5, 6 + n] -= x2
+            if side == 1 or equal:
+                out[6 + n, 3] -= x0
+                out[6 + n, 4] -= x1
+                out[6 + n, 5] -= x2
 
-    # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I
+    # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I, w = (B^m e).(B^n e)
     u1, u2 = be_i + be_j, be_i * be_j
-    h1 = v[1, 1] + u1 * v[2, 1] + u2 * v[3, 1]
-    h2 = v[1, 2] + u1 * v[2, 2] + u2 * v[3, 2]
-    f1 = v[0, 1] + u1 * v[1, 1] + u2 * v[2, 1]
-    f2 = v[0, 2] + u1 * v[1, 2] + u2 * v[2, 2]
-    f3 = v[0, 3] + u1 * v[1, 3] + u2 * v[2, 3]
-    f4 = v[0, 4] + u1 * v[1, 4] + u2 * v[2, 4]
+    h1 = v11 + u1 * v21 + u2 * v31
+    h2 = v12 + u1 * v22 + u2 * v32
+    f1 = v01 + u1 * v11 + u2 * v21
+    f2 = v02 + u1 * v12 + u2 * v22
+    f3 = v03 + u1 * v13 + u2 * v23
+    f4 = v04 + u1 * v14 + u2 * v24
+    ir2 = ir * ir
+    ir3 = ir2 * ir
     a2 = h2 - h1 * ir
-    b2 = h1 * ir
-    dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir * ir - 15 * f1 * ir ** 3
-    dd2 = f3 * ir - 3 * f2 * ir * ir + 3 * f1 * ir ** 3
-    dd3 = f2 * ir * ir - f1 * ir ** 3
+    dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir2 - 15 * f1 * ir3
+    cw = 4 * (f3 * ir - 3 * f2 * ir2 + 3 * f1 * ir3) - a2
+    cd = 2 * (f2 * ir2 - f1 * ir3) - h1 * ir
     for m in range(5):
-        for n in range(5):
-            w = be[m, 0] * be[n, 0] + be[m, 1] * be[n, 1] + be[m, 2] * be[n, 2]
-            out[6 + m, 6 + n] += (4 * dd2 - a2) * w + dd1 * q[m] * q[n]
-        out[6 + m, 6 + m] += 2 * dd3 - b2
+        bm0, bm1, bm2, dq = be[m, 0], be[m, 1], be[m, 2], dd1 * q[m]
+        out[6 + m, 6 + m] += cw * (bm0 * bm0 + bm1 * bm1 + bm2 * bm2) + dq * q[m] + cd
+        for n in range(m + 1, 5):
+            x = cw * (bm0 * be[n, 0] + bm1 * be[n, 1] + bm2 * be[n, 2]) + dq * q[n]
+            out[6 + m, 6 + n] += x
+            out[6 + n, 6 + m] += x
 
 
 @numba.njit(cache=True)
-def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, mob):
+def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, mob, both=True):
     """Adds the real-space Ewald sum over the pair images (pi, pj, shift) (or, with
     xi = 0 and zero shifts, the unbounded pair couplings) into the (11N, 11N) matrix mob.
     Radial values come from the interpolation grid (see RadialGrid) where it covers r.
     Each image pair is stored once: M_ji = M_ij^T (reciprocity) fills the other
-    triangle, and for a self-image (i == j) adds the -n image. Consecutive images of the
-    same pair (find_pairs lists them together) are summed before being added to mob."""
+    triangle, and for a self-image (i == j) adds the -n image; with both False the blocks
+    M_ji of pairs i < j are left out (`_mirror_lower_blocks` fills them afterwards).
+    Consecutive images of the same pair (find_pairs lists them together) are summed before
+    being added to mob."""
     bounds = _power_bounds(table)
     pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
     v = np.empty((4, 5))
@@ -328,7 +370,10 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         for a in range(NDOF):
             for b in range(NDOF):
                 mob[NDOF * i + a, NDOF * j + b] += block[a, b]
-                mob[NDOF * j + b, NDOF * i + a] += block[a, b]
+        if both or i == j:
+            for a in range(NDOF):
+                for b in range(NDOF):
+                    mob[NDOF * j + b, NDOF * i + a] += block[a, b]
         block[:, :] = 0.0
 
 
@@ -368,47 +413,125 @@ def _real_space_change(pos, moved, radii, pi, pj, shift, table, grid, grid_r0, g
         old[:, :] = 0.0
 
 
+# Elementwise loops over the (t, k) pairs of `_reciprocal_change`, one output and at most
+# four inputs each: LLVM vectorises a loop only when its runtime check that the arrays do
+# not overlap stays small.
+
+
+@numba.njit(cache=True, inline="never")
+def _faxen_row(a2, kc, out):
+    """out[m] = 1 - a2 kc[m] (a Faxen factor 1 - c a^2 k^2 per wave vector)."""
+    for m in range(out.shape[0]):
+        out[m] = 1.0 - a2 * kc[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _product_row(x, y, out):
+    """out = x y elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = x[m] * y[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _add_product_row(x, y, z, out):
+    """out = x + y z elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = x[m] + y[m] * z[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _accumulate_row(acc, x, y):
+    """acc += x y elementwise."""
+    for m in range(acc.shape[0]):
+        acc[m] += x[m] * y[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _combine_row(x, sx, y, out):
+    """out = x + sx y elementwise (sx = +-1)."""
+    for m in range(out.shape[0]):
+        out[m] = x[m] + sx * y[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _bracket_row(c, g, s, h, out):
+    """out = c g + s h elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = c[m] * g[m] + s[m] * h[m]
+
+
+@numba.njit(cache=True, inline="never")
+def _scaled_difference_row(scale, f, x, y, out):
+    """out = scale f (x - y) elementwise."""
+    for m in range(out.shape[0]):
+        out[m] = scale * f[m] * (x[m] - y[m])
+
+
 @numba.njit(cache=True)
-def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, kvec, row_c, scale, w, out):
-    """Adds [M_k(moved) - M_k(pos)] w into out (N, 11): the reciprocal sum of the pair form
-    above applied to w, from the cosines and sines (N, nk) of k.x at both configurations.
-    With c_j, s_j those of k.x_j and f_a(a_j) = 1 - row_c[a] a_j^2 k^2, per wave vector and
-    normal direction t the sums P_c,s = sum_j (c_j, s_j) sum_{a in U} f b_at w_ja and
-    Q_c,s (a in Omega, E) give (M w)_ia = scale f_a(a_i) b_at [c_i (P_c - Q_s) + s_i (P_s +
-    Q_c)] on the U rows and scale f_a(a_i) b_at [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the
-    others, scale = 2/V: O(N n_k) operations, no pair loop."""
-    n = w.shape[0]
-    proj = np.empty((n, 2))
-    fb = np.empty((n, NDOF))
-    for kk in range(kvec.shape[0]):
-        ksq = kvec[kk, 0] ** 2 + kvec[kk, 1] ** 2 + kvec[kk, 2] ** 2
+def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, ksq, scale, w, out):
+    """Adds the reciprocal part of [M_k(moved) - M_k(pos)] w into out (N, 11), w (N, 11).
+    Arrays run over the M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector
+    k, m = t n_k + k: b (11, M) the wave amplitudes b_a(k) q_t (`_wave_amplitudes`); the
+    cosines and sines of k.x_j (cos_old, ... (N, n_k)) and |k|^2 (ksq (n_k,)) serve both t.
+    With raw (3, N, M) = sum over the U, Omega and E rows a of b_a(m) w_ja for each particle
+    j and f_a(a_j) = 1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows, 0 on Omega, 1/10 on E), the
+    sums P_c,s = sum_j (c_j, s_j) f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E)
+    give (M w)_ia = scale f_a(a_i) b_a(m) [c_i (P_c - Q_s) + s_i (P_s + Q_c)] on the U rows
+    and scale f_a(a_i) b_a(m) [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the others, summed over
+    m, scale = 2/V; the brackets' change between the two configurations is taken per m.
+    O(N n_k) operations, no pair loop: every loop over m is contiguous (vectorised), and the
+    projections onto b and the sums over m are BLAS products."""
+    n, nk = cos_old.shape
+    nm = 2 * nk
+    k6, k10 = np.empty(nm), np.empty(nm)
+    for m in range(nm):
+        k6[m], k10[m] = ksq[m % nk] / 6.0, ksq[m % nk] / 10.0
+    rows = ((0, 3), (3, 6), (6, NDOF))
+    raw = np.empty((3, n, nm))
+    for part in range(3):
+        lo, hi = rows[part]
+        raw[part] = np.dot(np.ascontiguousarray(w[:, lo:hi]), b[lo:hi])
+    f_u, f_e = np.empty((n, nm)), np.empty((n, nm))
+    proj_u, proj_o = np.empty(nm), np.empty(nm)
+    sums = np.zeros((8, nm))  # P_c, P_s, Q_c, Q_s at the moved configuration, then at the start
+    for j in range(n):
+        a2 = radii[j] * radii[j]
+        _faxen_row(a2, k6, f_u[j])
+        _faxen_row(a2, k10, f_e[j])
+        _product_row(f_u[j], raw[0, j], proj_u)
+        _add_product_row(raw[1, j], f_e[j], raw[2, j], proj_o)
+        for side in range(2):
+            c, s = (cos_new[j], sin_new[j]) if side == 0 else (cos_old[j], sin_old[j])
+            for t in range(2):
+                h = slice(t * nk, (t + 1) * nk)
+                _accumulate_row(sums[4 * side + 0, h], c, proj_u[h])
+                _accumulate_row(sums[4 * side + 1, h], s, proj_u[h])
+                _accumulate_row(sums[4 * side + 2, h], c, proj_o[h])
+                _accumulate_row(sums[4 * side + 3, h], s, proj_o[h])
+    # per side: P_c - Q_s, P_s + Q_c (U rows), Q_c + P_s, Q_s - P_c (Omega, E rows)
+    g = np.empty((8, nm))
+    for side in range(2):
+        pc, ps, qc, qs = sums[4 * side], sums[4 * side + 1], sums[4 * side + 2], sums[4 * side + 3]
+        _combine_row(pc, -1.0, qs, g[4 * side])
+        _combine_row(ps, 1.0, qc, g[4 * side + 1])
+        _combine_row(qc, 1.0, ps, g[4 * side + 2])
+        _combine_row(qs, -1.0, pc, g[4 * side + 3])
+    d = np.empty((3, n, nm))
+    u_new, u_old, o_new, o_old = np.empty(nm), np.empty(nm), np.empty(nm), np.empty(nm)
+    for i in range(n):
         for t in range(2):
-            for j in range(n):  # f b(k) per particle, its U and (Omega, E) parts of (f b)^T w_j
-                a2k2 = radii[j] ** 2 * ksq
-                even, odd = 0.0, 0.0
-                for a in range(NDOF):
-                    fb[j, a] = (1.0 - row_c[a] * a2k2) * b[kk, a, t]
-                    if a < 3:
-                        even += fb[j, a] * w[j, a]
-                    else:
-                        odd += fb[j, a] * w[j, a]
-                proj[j, 0], proj[j, 1] = even, odd
-            for side in range(2):
-                c, s = (cos_new, sin_new) if side == 0 else (cos_old, sin_old)
-                sign = scale if side == 0 else -scale
-                pc, ps, qc, qs = 0.0, 0.0, 0.0, 0.0
-                for j in range(n):
-                    pc += c[j, kk] * proj[j, 0]
-                    ps += s[j, kk] * proj[j, 0]
-                    qc += c[j, kk] * proj[j, 1]
-                    qs += s[j, kk] * proj[j, 1]
-                for i in range(n):
-                    u_part = sign * (c[i, kk] * (pc - qs) + s[i, kk] * (ps + qc))
-                    o_part = sign * (c[i, kk] * (qc + ps) + s[i, kk] * (qs - pc))
-                    for a in range(3):
-                        out[i, a] += fb[i, a] * u_part
-                    for a in range(3, NDOF):
-                        out[i, a] += fb[i, a] * o_part
+            h = slice(t * nk, (t + 1) * nk)
+            _bracket_row(cos_new[i], g[0, h], sin_new[i], g[1, h], u_new[h])
+            _bracket_row(cos_old[i], g[4, h], sin_old[i], g[5, h], u_old[h])
+            _bracket_row(cos_new[i], g[2, h], sin_new[i], g[3, h], o_new[h])
+            _bracket_row(cos_old[i], g[6, h], sin_old[i], g[7, h], o_old[h])
+        _scaled_difference_row(scale, f_u[i], u_new, u_old, d[0, i])
+        _scaled_difference_row(scale, f_e[i], o_new, o_old, d[2, i])
+        for m in range(nm):
+            d[1, i, m] = scale * (o_new[m] - o_old[m])
+    for part in range(3):
+        lo, hi = rows[part]
+        out[:, lo:hi] += np.dot(d[part], np.ascontiguousarray(b[lo:hi].T))
 
 
 def far_field_change(positions, moved, radii, plan, w):
@@ -427,9 +550,12 @@ def far_field_change(positions, moved, radii, plan, w):
     grid = plan.grid
     _real_space_change(pos, moved, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
     if plan.params is not None:
+        # the pairs m = (normal direction t, wave vector k), t-major
+        amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
+        b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
         old, new = pos @ plan.kvec.T, moved @ plan.kvec.T
-        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii,
-                           wave_amplitudes(plan.kvec, xi), plan.kvec, _ROW_C, 2.0 / plan.volume, w, out)
+        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii, b,
+                           np.einsum("ij,ij->i", plan.kvec, plan.kvec), 2.0 / plan.volume, w, out)
     return out
 
 
@@ -458,7 +584,10 @@ _EVEN = np.arange(NDOF) < 3  # U rows (real); Omega and E rows carry a factor i
 #: U row a, Omega/E column b (B_ba = -B_ab)
 _COS_ENTRIES = np.array([(a, b) for a in range(NDOF) for b in range(a, NDOF) if _EVEN[a] == _EVEN[b]])
 _SIN_ENTRIES = np.array([(a, b) for a in range(3) for b in range(3, NDOF)])
-_PAIR_CHUNK = 2048  # pairs per matrix product (bounds the work arrays)
+#: the Faxen coefficients of the rows and columns of the independent entries
+_ENTRY_ROW_C = {"cos": _ROW_C[_COS_ENTRIES[:, 0]], "sin": _ROW_C[_SIN_ENTRIES[:, 0]]}
+_ENTRY_COL_C = {"cos": _ROW_C[_COS_ENTRIES[:, 1]], "sin": _ROW_C[_SIN_ENTRIES[:, 1]]}
+_PAIR_CHUNK = 64  # pairs per matrix product: the phases of a chunk stay in cache (measured optimum at N = 27)
 
 
 @numba.njit(cache=True)
@@ -492,41 +621,61 @@ def _wave_amplitudes(kvec, xi, basis, b):
             b[kk, 3, t] = 0.5 * scale * (k1 * q[2] - k2 * q[1])
             b[kk, 4, t] = 0.5 * scale * (k2 * q[0] - k0 * q[2])
             b[kk, 5, t] = 0.5 * scale * (k0 * q[1] - k1 * q[0])
-            for m in range(5):
-                acc = 0.0
-                for a in range(3):
-                    for c in range(3):
-                        acc += kvec[kk, a] * basis[m, a, c] * q[c]
-                b[kk, 6 + m, t] = scale * acc
+            # k.B^m.q with the sparse basis.BASIS (B^1 = (xx - yy)/sqrt2, B^2 = (2zz - xx -
+            # yy)/sqrt6, B^3, B^4, B^5 = (xy + yx, xz + zx, yz + zy)/sqrt2)
+            b[kk, 6, t] = scale * _ISQ2 * (k0 * q[0] - k1 * q[1])
+            b[kk, 7, t] = scale * _ISQ6 * (2.0 * k2 * q[2] - k0 * q[0] - k1 * q[1])
+            b[kk, 8, t] = scale * _ISQ2 * (k0 * q[1] + k1 * q[0])
+            b[kk, 9, t] = scale * _ISQ2 * (k0 * q[2] + k2 * q[0])
+            b[kk, 10, t] = scale * _ISQ2 * (k1 * q[2] + k2 * q[1])
 
 
 @numba.njit(cache=True)
-def _wave_tensors(b, cos_entries, sin_entries, tcos, tsin):
-    """tcos[k, e], tsin[k, e] = (b b^T)[entry e] of the cosine and sine entries, for the
-    wave vectors' b (`_wave_amplitudes`)."""
+def _wave_tensors(b, cos_entries, sin_entries, ksq, scale, a2, row_c, tcos, tsin):
+    """tcos[k, e], tsin[k, e] = scale (b b^T)[entry e] of the cosine and sine entries, for
+    the wave vectors' b (`_wave_amplitudes`); with a2 >= 0 (all radii equal, a^2) times the
+    radius factors f_r(a) f_c(a), f = 1 - row_c a^2 |k|^2 (ksq), of the entry's row and
+    column."""
     for kk in range(b.shape[0]):
-        for e in range(cos_entries.shape[0]):
-            r, c = cos_entries[e, 0], cos_entries[e, 1]
-            tcos[kk, e] = b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]
-        for e in range(sin_entries.shape[0]):
-            r, c = sin_entries[e, 0], sin_entries[e, 1]
-            tsin[kk, e] = b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]
+        for half in range(2):
+            entries, out = (cos_entries, tcos) if half == 0 else (sin_entries, tsin)
+            for e in range(entries.shape[0]):
+                r, c = entries[e, 0], entries[e, 1]
+                val = (b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]) * scale
+                if a2 >= 0.0:
+                    val *= (1 - row_c[r] * a2 * ksq[kk]) * (1 - row_c[c] * a2 * ksq[kk])
+                out[kk, e] = val
+
+
+@numba.njit(cache=True, inline="never")
+def _cos_difference_row(re_i, im_i, re_j, im_j, out):
+    """out = cos(a_i - a_j) = re_i re_j + im_i im_j from exp(i a) (one pair, all k)."""
+    for k in range(out.shape[0]):
+        out[k] = re_i[k] * re_j[k] + im_i[k] * im_j[k]
+
+
+@numba.njit(cache=True, inline="never")
+def _sin_difference_row(re_i, im_i, re_j, im_j, out):
+    """out = sin(a_i - a_j) = im_i re_j - re_i im_j from exp(i a) (one pair, all k)."""
+    for k in range(out.shape[0]):
+        out[k] = im_i[k] * re_j[k] - re_i[k] * im_j[k]
 
 
 @numba.njit(cache=True)
 def _pair_phases(phase_re, phase_im, pi, pj, cos_out, sin_out):
-    """cos and sin of k.(x_i - x_j) for the pairs (pi, pj), from exp(i k.x) per particle."""
+    """cos and sin of k.(x_i - x_j) for the pairs (pi, pj), from exp(i k.x) per particle
+    (rows over the wave vectors, vectorised)."""
     for p in range(pi.shape[0]):
         i, j = pi[p], pj[p]
-        for kk in range(phase_re.shape[1]):
-            cos_out[p, kk] = phase_re[i, kk] * phase_re[j, kk] + phase_im[i, kk] * phase_im[j, kk]
-            sin_out[p, kk] = phase_im[i, kk] * phase_re[j, kk] - phase_re[i, kk] * phase_im[j, kk]
+        _cos_difference_row(phase_re[i], phase_im[i], phase_re[j], phase_im[j], cos_out[p])
+        _sin_difference_row(phase_re[i], phase_im[i], phase_re[j], phase_im[j], sin_out[p])
 
 
 @numba.njit(cache=True)
-def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entries, mob):
-    """Adds the pair blocks as M_ij and M_ji = M_ij^T, from the values of each
-    independent entry (a, b) at (a, b) and at (b, a) of M_ij."""
+def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entries, mob, both=True):
+    """Adds the pair blocks as M_ij and M_ji = M_ij^T (both False: M_ij alone, for
+    `_mirror_lower_blocks`), from the values of each independent entry (a, b) at (a, b) and
+    at (b, a) of M_ij."""
     for p in range(pi.shape[0]):
         ri, rj = NDOF * pi[p], NDOF * pj[p]
         for half in range(2):
@@ -538,7 +687,7 @@ def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entr
                 mob[ri + a, rj + b] += v_ab[p, e]
                 if a != b:
                     mob[ri + b, rj + a] += v_ba[p, e]
-                if pi[p] != pj[p]:
+                if both and pi[p] != pj[p]:
                     mob[rj + b, ri + a] += v_ab[p, e]
                     if a != b:
                         mob[rj + a, ri + b] += v_ba[p, e]
@@ -558,28 +707,27 @@ def _wave_terms(radii, kvec, xi, volume):
     whether the radii are equal."""
     nk = len(kvec)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
-    _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, tcos, tsin)
-    tcos *= 2.0 / volume
-    tsin *= 2.0 / volume
-    ksq = np.einsum("ij,ij->i", kvec, kvec)[:, None]
-    c_row = {"cos": _ROW_C[_COS_ENTRIES[:, 0]], "sin": _ROW_C[_SIN_ENTRIES[:, 0]]}
-    c_col = {"cos": _ROW_C[_COS_ENTRIES[:, 1]], "sin": _ROW_C[_SIN_ENTRIES[:, 1]]}
+    ksq = np.einsum("ij,ij->i", kvec, kvec)
     equal = bool(np.all(radii == radii[0]))
-    if equal:  # fold f_a(a) f_b(a) into the tensors: one product per part
-        a2 = radii[0] ** 2
-        tcos *= (1 - c_row["cos"] * a2 * ksq) * (1 - c_col["cos"] * a2 * ksq)
-        tsin *= (1 - c_row["sin"] * a2 * ksq) * (1 - c_col["sin"] * a2 * ksq)
-    return {"cos": tcos, "sin": tsin}, ksq, c_row, c_col, equal
+    # all radii equal: f_a(a) f_b(a) folded into the tensors (one product per part)
+    a2 = float(radii[0]) ** 2 if equal else -1.0
+    _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, ksq, 2.0 / volume, a2, _ROW_C, tcos, tsin)
+    return {"cos": tcos, "sin": tsin}, ksq[:, None], _ENTRY_ROW_C, _ENTRY_COL_C, equal
 
 
-def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
+def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
     """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N);
-    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand."""
+    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand; both False: the
+    blocks M_ji of pairs i < j left out (`_scatter_pairs`)."""
     n, nk = len(pos), len(kvec)
     tensors, ksq, c_row, c_col, equal = _wave_terms(radii, kvec, xi, volume) if terms is None else terms
     phase = pos @ kvec.T
     phase_re, phase_im = np.cos(phase), np.sin(phase)
-    pi, pj = np.triu_indices(n)
+    pi, pj = _upper_pairs(n)
+    if equal:
+        _reciprocal_equal(phase_re, phase_im, pi, pj, tensors["cos"], tensors["sin"], _COS_ENTRIES, _SIN_ENTRIES,
+                          _PAIR_CHUNK, mob, both)
+        return
     for start in range(0, len(pi), _PAIR_CHUNK):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
         cos_k, sin_k = work_array("cos_k", (len(ci), nk)), work_array("sin_k", (len(ci), nk))
@@ -597,7 +745,37 @@ def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None):
             ca, cb = c_row[part], c_col[part]
             g0 += ca * cb * ai2 * aj2 * g2
             vals += [g0 - (ca * ai2 + cb * aj2) * g1, sign * (g0 - (cb * ai2 + ca * aj2) * g1)]
-        _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob)
+        _scatter_pairs(ci, cj, *vals, _COS_ENTRIES, _SIN_ENTRIES, mob, both)
+
+
+@numba.njit(cache=True)
+def _reciprocal_equal(phase_re, phase_im, pi, pj, tcos, tsin, cos_entries, sin_entries, chunk, mob, both):
+    """`_reciprocal_sum` for equal radii (the radius factors folded into tcos, tsin), chunk
+    pairs at a time: the pair phases, the two matrix products (BLAS) and the scatter."""
+    nk = phase_re.shape[1]
+    cos_k, sin_k = np.empty((chunk, nk)), np.empty((chunk, nk))
+    g_cos, g_sin = np.empty((chunk, tcos.shape[1])), np.empty((chunk, tsin.shape[1]))
+    g_neg = np.empty((chunk, tsin.shape[1]))
+    for start in range(0, pi.shape[0], chunk):
+        stop = min(start + chunk, pi.shape[0])
+        m = stop - start
+        ci, cj = pi[start:stop], pj[start:stop]
+        _pair_phases(phase_re, phase_im, ci, cj, cos_k[:m], sin_k[:m])
+        np.dot(cos_k[:m], tcos, g_cos[:m])
+        np.dot(sin_k[:m], tsin, g_sin[:m])
+        for p in range(m):
+            for e in range(tsin.shape[1]):
+                g_neg[p, e] = -g_sin[p, e]
+        _scatter_pairs(ci, cj, g_cos[:m], g_cos[:m], g_sin[:m], g_neg[:m], cos_entries, sin_entries, mob, both)
+
+
+@functools.lru_cache(maxsize=8)
+def _upper_pairs(n):
+    """np.triu_indices(n) (the pairs i <= j), cached read-only."""
+    pi, pj = np.triu_indices(n)
+    pi.flags.writeable = False
+    pj.flags.writeable = False
+    return pi, pj
 
 
 def _gauss_moment(p, xi):
@@ -781,11 +959,36 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD
     mob = np.zeros((NDOF * n, NDOF * n))
     xi_used = 0.0 if plan.params is None else plan.params.xi
     grid = plan.grid
-    _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob)
+    # the pair sums add the blocks M_ij, i <= j, only: M_ji = M_ij^T is copied at the end
+    # (every contribution to M_ji is the transpose of one to M_ij, in the same order)
+    _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob,
+                    False)
     if plan.params is not None:
         if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
             plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, xi_used, plan.volume))
-        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1])
-    for i, a in enumerate(radii):
-        mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
+        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1], both=False)
+    _mirror_lower_blocks(mob)
+    if len(plan.self_blocks) == 1:  # one radius: its self block on every diagonal block
+        _add_diagonal_blocks(mob, next(iter(plan.self_blocks.values())))
+    else:
+        for i, a in enumerate(radii):
+            mob[NDOF * i : NDOF * (i + 1), NDOF * i : NDOF * (i + 1)] += plan.self_blocks[a]
     return mob
+
+
+@numba.njit(cache=True)
+def _mirror_lower_blocks(mob):
+    """mob[r, c] = mob[c, r] below the diagonal 11x11 blocks (the blocks M_ji, i > j, from
+    M_ij)."""
+    for r in range(mob.shape[0]):
+        for c in range(NDOF * (r // NDOF)):
+            mob[r, c] = mob[c, r]
+
+
+@numba.njit(cache=True)
+def _add_diagonal_blocks(mob, block):
+    """Adds the 11x11 block to every diagonal 11x11 block of mob (11N x 11N)."""
+    for i in range(mob.shape[0] // NDOF):
+        for a in range(NDOF):
+            for b in range(NDOF):
+                mob[NDOF * i + a, NDOF * i + b] += block[a, b]

@@ -7,6 +7,7 @@ gamma -> gamma + Lx/Ly, so the strain is reduced to |gamma| <= Lx/(2 Ly) before 
 this keeps the lattice vectors short and makes every result periodic in the strain.
 """
 
+import functools
 import math
 
 import numba
@@ -20,7 +21,7 @@ def check_box(box):
     box = np.asarray(box, dtype=float)
     if box.shape != (3,):
         raise ValueError(f"box must have shape (3,) (Lx, Ly, Lz) or be None, got shape {box.shape}")
-    if not np.all(np.isfinite(box)) or np.any(box <= 0):
+    if not all(math.isfinite(length) and length > 0 for length in box.tolist()):
         raise ValueError(f"box lengths must be finite and > 0, got {box.tolist()}")
     return box
 
@@ -42,6 +43,11 @@ class Lattice:
         self.reciprocal = np.array([[1 / lx, -self.strain / lx, 0.0], [0.0, 1 / ly, 0.0], [0.0, 0.0, 1 / lz]])
         self.volume = float(lx * ly * lz)
 
+    @functools.cached_property
+    def plane_density(self):
+        """|b_i| (3,): the inverse spacings of the lattice planes."""
+        return np.linalg.norm(self.reciprocal, axis=1)
+
     def wrap(self, positions):
         """Map positions into the primary (sheared) cell, fractional coords in [0, 1)."""
         frac = positions @ self.reciprocal.T
@@ -60,7 +66,7 @@ class Lattice:
     def image_shifts(self, reach):
         """Lattice translations n . L with |n_i| <= ceil(reach |b_i|) + 1: every image of a
         point of the primary cell that can lie within `reach` of another point of it."""
-        counts = np.ceil(reach * np.linalg.norm(self.reciprocal, axis=1)).astype(int) + 1
+        counts = np.ceil(reach * self.plane_density).astype(int) + 1
         ranges = [np.arange(-c, c + 1) for c in counts]
         n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
         return n @ self.vectors
@@ -211,7 +217,7 @@ def _scan_pairs_cells(pos, radii, cell, counts, reach_abs, reach_rel, out_i, out
 def _cell_counts(lattice, reach):
     """Cells per lattice axis for _scan_pairs_cells: the plane spacings 1/|b_i| over the
     reach, floored; None when a cell list does not apply (fewer than 3 along an axis)."""
-    counts = np.floor(1.0 / (np.linalg.norm(lattice.reciprocal, axis=1) * reach)).astype(np.int64)
+    counts = np.floor(1.0 / (lattice.plane_density * reach)).astype(np.int64)
     return counts if counts.min() >= 3 else None
 
 

@@ -50,7 +50,7 @@ import scipy.sparse
 from .basis import BASIS
 from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
 from .geometry import find_pairs
-from .two_sphere import _basis5, _fill_pair_work, pair_resistance
+from .two_sphere import _basis5, _fill_pair_columns, _fill_pair_work, pair_resistance
 from .workspace import work_array
 
 #: default lubrication cut-off: gap in units of the pair's mean radius
@@ -92,16 +92,37 @@ def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=D
     if images is None:
         images = find_pairs(positions, radii, lattice, 0.0, 1.0 + 0.5 * cutoff)
     i, j, shift = images
-    dx = positions[j] + shift - positions[i]
     if len(i) == 0:
-        return PairList(i, j, dx, shift, np.zeros(0), 0, np.zeros(0))
-    r = np.linalg.norm(dx, axis=1)
-    asum = radii[i] + radii[j]
-    gap = r - asum
-    floor = 0.5 * min_gap * asum
-    short = gap < floor
-    dx[short] *= ((asum[short] + floor[short]) / r[short])[:, None]
-    return PairList(i, j, dx, shift, gap, int(short.sum()), asum)
+        return PairList(i, j, np.zeros((0, 3)), shift, np.zeros(0), 0, np.zeros(0))
+    dx, gap, asum = np.empty((len(i), 3)), np.empty(len(i)), np.empty(len(i))
+    short = _separations(np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(radii, dtype=float),
+                         np.ascontiguousarray(i, dtype=np.int64), np.ascontiguousarray(j, dtype=np.int64),
+                         np.ascontiguousarray(shift, dtype=float), float(min_gap), dx, gap, asum)
+    return PairList(i, j, dx, shift, gap, short, asum)
+
+
+@numba.njit(cache=True)
+def _separations(pos, radii, pi, pj, shift, min_gap, dx, gap, asum):
+    """dx[p] = x_j + shift - x_i, gap[p] = |dx| - (a_i + a_j), asum[p] = a_i + a_j for the
+    pairs p = (pi[p], pj[p]); separations with a gap below the floor (min_gap/2) asum are
+    stretched to it (`close_pairs`); returns how many were."""
+    short = 0
+    for p in range(pi.shape[0]):
+        i, j = pi[p], pj[p]
+        d0 = pos[j, 0] + shift[p, 0] - pos[i, 0]
+        d1 = pos[j, 1] + shift[p, 1] - pos[i, 1]
+        d2 = pos[j, 2] + shift[p, 2] - pos[i, 2]
+        r = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        s = radii[i] + radii[j]
+        g = r - s
+        floor = 0.5 * min_gap * s
+        if g < floor:
+            f = (s + floor) / r
+            d0, d1, d2 = d0 * f, d1 * f, d2 * f
+            short += 1
+        dx[p, 0], dx[p, 1], dx[p, 2] = d0, d1, d2
+        gap[p], asum[p] = g, s
+    return short
 
 
 @numba.njit(cache=True)
@@ -260,13 +281,11 @@ def _rigid_cholesky(res, out):
 _CHUNK = 2048
 
 
-def pair_blocks(radii, pairs):
-    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
-    columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
-    exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
-    `workspace.work_array`, valid until the next chunk is asked for."""
-    if len(pairs.i) == 0:
-        return
+def _pair_setup(radii, pairs):
+    """What `pair_blocks` and `lubrication_change` share: the pairs ordered big sphere first
+    (pi, pj, a1, a2, dx), each pair's table (-1: exact path) and the tables' snapshot
+    (`_TableStore.lookup`), the tabulated pairs' indices (fast) and the exact ones (slow),
+    and the pairs as given (pi0, pj0, a10, a20, dx0)."""
     radii = np.asarray(radii, dtype=float)
     pi0, pj0 = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
     dx0 = np.ascontiguousarray(pairs.dx, dtype=float)
@@ -284,15 +303,108 @@ def pair_blocks(radii, pairs):
     lam = a2 / a1
     tab, tables = _STORE.lookup(lam, xi)
     fast = tab >= 0
-    sel = np.flatnonzero(fast)
+    if fast.all():
+        sel, slow = np.arange(len(fast)), np.zeros(0, dtype=np.int64)
+    else:
+        sel, slow = np.flatnonzero(fast), np.flatnonzero(~fast)
+    return (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0)
+
+
+def pair_blocks(radii, pairs):
+    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
+    columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
+    exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
+    `workspace.work_array`, valid until the next chunk is asked for."""
+    if len(pairs.i) == 0:
+        return
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
     for c in range(0, len(sel), _CHUNK):
         part = sel[c:c + _CHUNK]
         res = work_array("pair_blocks", (len(part), 2 * NDOF, 2 * NDOF))
         _tabulated_kernel(dx[part], a1[part], a2[part], tab[part], *tables, res)
         yield pi[part], pj[part], res
-    if not fast.all():
-        slow = np.flatnonzero(~fast)  # as given (not reordered): same as lubrication_matrix_exact
+    if len(slow):  # as given (not reordered): same as lubrication_matrix_exact
         yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+
+
+def all_pair_blocks(radii, pairs, keep_setup=False):
+    """(pi, pj, res (P, 22, 22)): every pair's block as `pair_blocks` gives them, in one
+    fresh array (the tabulated pairs written into it directly), or None without pairs.
+    keep_setup: return (blocks, setup), setup the pairs' orientation, radii and tables for
+    `lubrication_change` at displaced separations (None when some pair is exact)."""
+    if len(pairs.i) == 0:
+        return (None, None) if keep_setup else None
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
+    res = np.empty((len(sel) + len(slow), 2 * NDOF, 2 * NDOF))
+    if len(slow) == 0:
+        _tabulated_kernel(dx, a1, a2, tab, *tables, res)
+        blocks = pi.copy(), pj.copy(), res
+        swap = None if pi is pi0 else pi != pi0
+        return (blocks, (swap, a1, a2, tab, tables)) if keep_setup else blocks
+    _tabulated_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, res[:len(sel)])
+    res[len(sel):] = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+    blocks = np.concatenate([pi[sel], pi0[slow]]), np.concatenate([pj[sel], pj0[slow]]), res
+    return (blocks, None) if keep_setup else blocks
+
+
+@numba.njit(cache=True)
+def _tables_cover(dx, a1, a2, tab, k_lo, n_rows):
+    """Whether every pair's interpolation (`_interpolated_block`) at separations dx reads
+    rows inside its table (no clamp; one row of margin) and has a gap in the tables'
+    range."""
+    half = _TAB_NPT // 2
+    for p in range(dx.shape[0]):
+        r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
+        asum = a1[p] + a2[p]
+        xi = 2.0 * (r - asum) / asum
+        if not (xi >= _XI_TABLE_MIN and xi <= _XI_TABLE_MAX):
+            return False
+        k = int(math.floor(math.log(xi) * (1.0 / _TAB_H)))
+        t = tab[p]
+        if k - 1 < k_lo[t] + half - 1 or k + 1 > k_lo[t] + n_rows[t] - half - 1:
+            return False
+    return True
+
+
+def lubrication_change(radii, pairs, blocks, vector, setup=None):
+    """[L(pairs) - L_0] v (N, 11) for v (N, 11), pair by pair: L(pairs) the near-field
+    correction at the pairs' separations (as `lubrication_product`) and L_0 the one given
+    by its pair blocks, blocks = (pi, pj, res (P, 22, 22)) in the order of `pair_blocks`
+    for the same pair set (e.g. the blocks of a nearby configuration with the same
+    images). Each pair's block at the new separations is formed in scratch memory and
+    its difference to the old one applied to v; no (P, 22, 22) array is written. Falls back
+    to the two products when the pair order differs. setup: the blocks' own (from
+    `all_pair_blocks(..., keep_setup=True)` for the same images), which spares the pairs'
+    ordering and table look-up when the tables cover the new separations (the same
+    values)."""
+    vector = np.ascontiguousarray(vector, dtype=float)
+    out = np.zeros_like(vector)
+    bi, bj, old = blocks
+    if len(pairs.i) == 0:
+        pair_products(bi, bj, old, -vector, out)
+        return out
+    rigid = not vector[:, 6:].any()
+    if setup is not None and len(pairs.i) == len(bi):
+        swap, a1, a2, tab, tables = setup
+        dx = np.ascontiguousarray(pairs.dx, dtype=float)
+        if swap is not None:
+            dx = np.ascontiguousarray(np.where(swap[:, None], -dx, dx))
+        if _tables_cover(dx, a1, a2, tab, tables[2], tables[3]):
+            _tabulated_change_kernel(dx, a1, a2, tab, *tables, bi, bj, old, vector, rigid, out)
+            return out
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
+    n_fast = len(sel)
+    if (len(bi) != len(pi) or not np.array_equal(bi[:n_fast], pi[sel]) or not np.array_equal(bj[:n_fast], pj[sel])
+            or not np.array_equal(bi[n_fast:], pi0[slow]) or not np.array_equal(bj[n_fast:], pj0[slow])):
+        out = lubrication_product(radii, pairs, vector)
+        pair_products(bi, bj, old, -vector, out)
+        return out
+    if n_fast:
+        _tabulated_change_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, bi, bj, old, vector, rigid, out)
+    if len(slow):
+        new = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+        pair_products(bi[n_fast:], bj[n_fast:], new - old[n_fast:], vector, out)
+    return out
 
 
 def pair_corrections(dx, a1, a2):
@@ -429,13 +541,30 @@ class _TableStore:
     def lookup(self, lam, xi):
         """Per pair the table index (-1: exact path), building/extending tables as
         needed, and a consistent snapshot (data, offset, k_lo, n_rows) of the tables."""
+        half = _TAB_NPT // 2
+        n_in, k_min, k_max = _grid_range(xi)
+        if n_in == len(xi) and lam.min() == lam.max():
+            # every gap in range, one size ratio (monodisperse): no masks, no sort
+            lv = float(lam[0])
+            with self._lock:
+                tables = self._tables
+                if lv in tables.lams or (len(xi) >= _MIN_PAIRS_FOR_TABLE and len(tables.lams) < _MAX_TABLES):
+                    tables.ensure(lv, k_min - half, k_max + half + 2)
+                    tab = np.full(len(xi), tables.lams.index(lv), dtype=np.int64)
+                else:
+                    tab = np.full(len(xi), -1, dtype=np.int64)
+                snapshot = (tables.data, tables.offset, tables.k_lo, tables.n_rows)
+            return tab, snapshot
         tab = np.full(lam.shape[0], -1, dtype=np.int64)
         ok = (xi >= _XI_TABLE_MIN) & (xi <= _XI_TABLE_MAX)
         if not ok.any():
             return tab, None
-        ulam, inv, counts = np.unique(lam[ok], return_inverse=True, return_counts=True)
+        lam_ok = lam[ok]
+        if lam_ok.min() == lam_ok.max():  # one size ratio: no sort
+            ulam, inv, counts = lam_ok[:1], np.zeros(len(lam_ok), dtype=np.int64), np.array([len(lam_ok)])
+        else:
+            ulam, inv, counts = np.unique(lam_ok, return_inverse=True, return_counts=True)
         kk = np.floor(np.log(xi[ok]) / _TAB_H).astype(np.int64)
-        half = _TAB_NPT // 2
         with self._lock:
             tables = self._tables
             for il, lv in enumerate(ulam):
@@ -457,46 +586,97 @@ _STORE = _TableStore()
 
 
 @numba.njit(cache=True)
+def _grid_range(xi):
+    """(how many xi lie in [_XI_TABLE_MIN, _XI_TABLE_MAX], the smallest and the largest
+    grid row floor(log(xi)/h) among them)."""
+    count, k_min, k_max = 0, 0, 0
+    for p in range(xi.shape[0]):
+        if xi[p] >= _XI_TABLE_MIN and xi[p] <= _XI_TABLE_MAX:
+            k = int(math.floor(math.log(xi[p]) / _TAB_H))
+            if count == 0 or k < k_min:
+                k_min = k
+            if count == 0 or k > k_max:
+                k_max = k
+            count += 1
+    return count, k_min, k_max
+
+
+@numba.njit(cache=True)
 def _tabulated_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, res):
-    """res[p] = R_2B - R_2B,inf of every pair (interpolated scalars, `_fill_pair_work`
-    tensors)."""
-    npt = _TAB_NPT
-    half = npt // 2
-    denom = _TAB_DENOM
-    inv_h = 1.0 / _TAB_H
+    """res[p] = R_2B - R_2B,inf of every pair (`_interpolated_block`)."""
     bm = _basis5()
     sc = np.empty((4, NDOF))
-    w = np.empty(npt)
+    w = np.empty(_TAB_NPT)
     d = np.empty(3)
     work = np.empty((8, 5, 5))
     for p in range(dx.shape[0]):
-        r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
-        for c in range(3):
-            d[c] = dx[p, c] / r
-        asum = a1[p] + a2[p]
-        xi = 2.0 * (r - asum) / asum
-        x = math.log(xi) * inv_h
-        k = int(math.floor(x))
-        t = tab[p]
-        # clamp (never active when the table covers the pair, see _TableStore.lookup)
-        k = min(max(k, k_lo[t] + half - 1), k_lo[t] + n_rows[t] - half - 1)
-        frac = x - k
-        for m in range(npt):
-            acc = 1.0
-            for l in range(npt):
-                if l != m:
-                    acc *= frac - (l - half + 1)
-            w[m] = acc / denom[m]
-        row = offset[t] + k - k_lo[t] - half + 1
-        unscale = (1.0 + xi) / xi
-        for b in range(4):
-            for f in range(NDOF):
-                col = NDOF * b + f
+        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res[p])
+
+
+@numba.njit(cache=True, inline="always")
+def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res,
+                        rigid_columns=False):
+    """res (22, 22) = R_2B - R_2B,inf of pair p (interpolated scalars sc (4, 11) with the
+    Lagrange weights w (npt,) and unit vector d (3,) as scratch, `_fill_pair_work` tensors;
+    rigid_columns: only the rigid-body columns, `two_sphere._fill_pair_columns`)."""
+    npt = _TAB_NPT
+    half = npt // 2
+    r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
+    for c in range(3):
+        d[c] = dx[p, c] / r
+    asum = a1[p] + a2[p]
+    xi = 2.0 * (r - asum) / asum
+    x = math.log(xi) * (1.0 / _TAB_H)
+    k = int(math.floor(x))
+    t = tab[p]
+    # clamp (never active when the table covers the pair, see _TableStore.lookup)
+    k = min(max(k, k_lo[t] + half - 1), k_lo[t] + n_rows[t] - half - 1)
+    frac = x - k
+    for m in range(npt):
+        acc = 1.0
+        for l in range(npt):
+            if l != m:
+                acc *= frac - (l - half + 1)
+        w[m] = acc / _TAB_DENOM[m]
+    row = offset[t] + k - k_lo[t] - half + 1
+    unscale = (1.0 + xi) / xi
+    flat = sc.ravel()  # (44,): the scalars, accumulated over the points in ascending order
+    flat[:] = 0.0
+    for m in range(npt):
+        wm = w[m]
+        for col in range(4 * NDOF):
+            flat[col] += wm * data[row + m, col]
+    for col in range(4 * NDOF):
+        flat[col] *= unscale
+    _fill_pair_columns(d, a1[p], a2[p], sc, bm, res, work, rigid_columns)
+
+
+@numba.njit(cache=True)
+def _tabulated_change_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, old, v, rigid_columns, out):
+    """out[(i, j)] += (res_p - old[p]) (v_i, v_j) for every pair p = (pi[p], pj[p]), res_p
+    its block R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory);
+    rigid_columns: v is zero on the strain dofs (their columns are neither formed nor used)."""
+    bm = _basis5()
+    sc = np.empty((4, NDOF))
+    w = np.empty(_TAB_NPT)
+    d = np.empty(3)
+    work = np.empty((8, 5, 5))
+    res = np.empty((2 * NDOF, 2 * NDOF))
+    ncol = 6 if rigid_columns else NDOF
+    for p in range(dx.shape[0]):
+        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res, rigid_columns)
+        old_p = old[p]
+        i, j = pi[p], pj[p]
+        for u in range(2):
+            row = i if u == 0 else j
+            for a in range(NDOF):
+                ra = NDOF * u + a
                 acc = 0.0
-                for m in range(npt):
-                    acc += w[m] * data[row + m, col]
-                sc[b, f] = acc * unscale
-        _fill_pair_work(d, a1[p], a2[p], sc, bm, res[p], work)
+                for b in range(ncol):
+                    acc += (res[ra, b] - old_p[ra, b]) * v[i, b]
+                for b in range(ncol):
+                    acc += (res[ra, NDOF + b] - old_p[ra, NDOF + b]) * v[j, b]
+                out[row, a] += acc
 
 
 @numba.njit(cache=True)

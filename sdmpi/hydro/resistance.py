@@ -6,15 +6,16 @@ F = (F, L, -S) = R (U - U_inf, Omega - Omega_inf, -E_inf), viscosity 1.
 
 M_inf^-1 is kept in block form (`GrandResistance`): with the rigid-body dofs a (U, Omega: 6
 per particle) and the strain dofs b (E: 5 per particle), M_bb = U_b^T U_b (Cholesky) and
-Y = U_b^-T M_ba, the Schur complement S = M_aa - Y^T Y gives (block inversion; e.g. Golub &
+X = M_ab U_b^-1, the Schur complement S = M_aa - X X^T gives (block inversion; e.g. Golub &
 Van Loan, Matrix Computations, sec. 3.2)
 
     [M^-1]_aa = S^-1,   [M^-1]_ab = -S^-1 M_ab M_bb^-1,
     [M^-1]_bb = M_bb^-1 + M_bb^-1 M_ba S^-1 M_ab M_bb^-1.
 
 Only S^-1 (6N x 6N) is formed, by Cholesky (LAPACK potrf/potri): R_FU = S^-1 + L_aa must be
-a matrix (it is factorised), while R_FE, R_SU and R_SE only act on vectors, through solves
-with U_b. This costs about half the flops of inverting the whole (11N)^2 M_inf.
+a matrix (it is factorised), while R_FE, R_SU and R_SE only act on vectors, through X and
+triangular solves with U_b. This costs about half the flops of inverting the whole (11N)^2
+M_inf.
 """
 
 from dataclasses import dataclass
@@ -28,8 +29,8 @@ from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, 
                        plan_far_field_change)
 from .geometry import Lattice, find_pairs
 from .krylov import DenseFarField, far_field_operator
-from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_product,
-                          lubrication_sparse, pair_blocks, pair_products, scatter_pair_blocks)
+from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
+                          lubrication_change, lubrication_sparse, scatter_pair_blocks)
 
 
 @dataclass
@@ -44,48 +45,64 @@ class HydroPlan:
 @dataclass
 class GrandResistance:
     """R = M_inf^-1 + L at one configuration, in the block form of the module docstring:
-    R_FU = S^-1 + L_aa (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, M_ab (6N x 5N)
-    and the upper Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b); the lubrication as
+    R_FU = S^-1 + L_aa (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, the upper
+    Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b) and X = M_ab U_b^-1 (6N x 5N,
+    Fortran-ordered); the lubrication as
     its pair blocks (pair_i, pair_j, blocks (P, 22, 22)); its close pairs, the plan it was
     built with, the (wrapped) positions it was built at and the radii."""
 
     r_fu: np.ndarray
     s_inverse: np.ndarray
-    m_ab: np.ndarray
+    x_ab: np.ndarray
     chol_bb: np.ndarray
     lubrication: tuple | None
     pairs: PairList
     plan: HydroPlan
     positions: np.ndarray
     radii: np.ndarray
+    #: the lubrication pairs' orientation and tables (`lubrication.all_pair_blocks`), for
+    #: `lubrication.lubrication_change`; None: looked up again
+    lubrication_setup: tuple | None = None
 
     @property
     def n_particles(self):
         return self.positions.shape[0]
 
-    def far_inverse_product(self, v):
-        """M_inf^-1 v (N, 11) for v (N, 11): t = M_bb^-1 v_b, y_a = S^-1 (v_a - M_ab t),
-        y_b = t - M_bb^-1 M_ba y_a."""
+    def far_inverse_product(self, v, rows=None):
+        """M_inf^-1 v (N, 11) for v (N, 11): with z = U_b^-T v_b, y_a = S^-1 (v_a - X z)
+        and y_b = U_b^-1 (z - X^T y_a) (= M_bb^-1 v_b - M_bb^-1 M_ba y_a). rows "rigid":
+        y_a alone (N, 6); "strain": y_b alone (N, 5); None: both (N, 11)."""
         n = self.n_particles
         v_a, v_b = np.ascontiguousarray(v[:, :6]).ravel(), np.ascontiguousarray(v[:, 6:]).ravel()
-        t = _chol_solve(self.chol_bb, v_b) if v_b.any() else None  # none for rigid-body v
-        y_a = self.s_inverse @ (v_a if t is None else v_a - self.m_ab @ t)
-        y_b = -_chol_solve(self.chol_bb, self.m_ab.T @ y_a)
+        z = _triangular_solve(self.chol_bb, v_b, 1) if v_b.any() else None  # none for rigid-body v
+        y_a = self.s_inverse @ (v_a if z is None else v_a - self.x_ab @ z)
+        if rows == "rigid":
+            return y_a.reshape(n, 6)
+        rhs = -(self.x_ab.T @ y_a)
+        if z is not None:
+            rhs += z
+        y_b = _triangular_solve(self.chol_bb, rhs, 0)
+        if rows == "strain":
+            return y_b.reshape(n, 5)
         out = np.empty((n, NDOF))
         out[:, :6] = y_a.reshape(n, 6)
-        out[:, 6:] = (y_b if t is None else y_b + t).reshape(n, 5)
+        out[:, 6:] = y_b.reshape(n, 5)
         return out
 
-    def lubrication_product(self, v):
-        """L v (N, 11) for v (N, 11), pair by pair."""
-        out = np.zeros((self.n_particles, NDOF))
+    def lubrication_product(self, v, rows=None, strain_only=False):
+        """L v (N, 11) for v (N, 11), pair by pair; rows "rigid" (N, 6) or "strain" (N, 5):
+        those rows alone; strain_only: v is zero on the rigid-body dofs (skipped)."""
+        first, stop = {None: (0, NDOF), "rigid": (0, 6), "strain": (6, NDOF)}[rows]
+        out = np.zeros((self.n_particles, stop - first))
         if self.lubrication is not None:
-            pair_products(*self.lubrication, np.ascontiguousarray(v, dtype=float), out)
+            _pair_product_rows(*self.lubrication, np.ascontiguousarray(v, dtype=float), first,
+                               6 if strain_only else 0, NDOF, out)
         return out
 
-    def product(self, v):
-        """R v (N, 11) for v (N, 11)."""
-        return self.far_inverse_product(v) + self.lubrication_product(v)
+    def product(self, v, rows=None, strain_only=False):
+        """R v (N, 11) for v (N, 11); rows "rigid" (N, 6) or "strain" (N, 5): those rows alone;
+        strain_only: v is zero on the rigid-body dofs."""
+        return self.far_inverse_product(v, rows) + self.lubrication_product(v, rows, strain_only)
 
     def apply(self, rigid, strain):
         """The rigid (N, 6) and strain (N, 5) rows of R (rigid, strain): R_FU u + R_FE e and
@@ -97,18 +114,23 @@ class GrandResistance:
         """R_FE e_inf (6N,) for einf (N, 5) (zero without a strain)."""
         if not np.any(einf):
             return np.zeros(6 * self.n_particles)
-        return self.apply(np.zeros((self.n_particles, 6)), einf)[0].ravel()
+        v = np.zeros((self.n_particles, NDOF))
+        v[:, 6:] = einf
+        return self.product(v, "rigid", strain_only=True).ravel()
 
     def stresslets(self, velocities, einf):
         """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5)."""
-        return self.apply(-np.asarray(velocities, dtype=float), np.asarray(einf, dtype=float))[1]
+        v = np.empty((self.n_particles, NDOF))
+        np.negative(velocities, out=v[:, :6])
+        v[:, 6:] = einf
+        return self.product(v, "strain")
 
     def blocks(self):
         """(R_FU, R_FE, R_SU, R_SE) as fresh dense matrices (dofs particle by particle within
         each; R_SU = R_FE^T): formed explicitly from the block form, for reference and
         tests (a step uses `apply`)."""
         n = self.n_particles
-        x = _chol_solve(self.chol_bb, np.ascontiguousarray(self.m_ab.T))  # M_bb^-1 M_ba (5N x 6N)
+        x = _triangular_solve(self.chol_bb, np.asfortranarray(self.x_ab.T), 0)  # M_bb^-1 M_ba (5N x 6N)
         inv_ab = -self.s_inverse @ x.T
         inv_bb = _chol_solve(self.chol_bb, np.eye(5 * n)) + x @ self.s_inverse @ x.T
         lub = np.zeros((NDOF * n, NDOF * n))
@@ -133,12 +155,37 @@ class GrandResistance:
         return out
 
 
+def _triangular_solve(upper, rhs, trans):
+    """U^-1 rhs (trans 0) or U^-T rhs (trans 1) for the upper triangular U (LAPACK trtrs)."""
+    sol, info = lapack.dtrtrs(upper, rhs, lower=0, trans=trans)
+    if info != 0:
+        raise ValueError(f"trtrs: illegal argument {-info}")
+    return sol
+
+
 def _chol_solve(upper, rhs):
     """A^-1 rhs for A = U^T U (upper factor U, LAPACK potrs)."""
     sol, info = lapack.dpotrs(upper, rhs, lower=False)
     if info != 0:
         raise ValueError(f"potrs: illegal argument {-info}")
     return sol
+
+
+@numba.njit(cache=True)
+def _pair_product_rows(pi, pj, res, v, first, col_first, col_stop, out):
+    """out[(i, j), a - first] += res[p] (v_i, v_j) for the rows first <= a < first +
+    out.shape[1] of each particle's 11 (as `lubrication.pair_products` on those rows),
+    summing over the columns col_first <= b < col_stop of each particle (v is zero on the
+    others)."""
+    for p in range(pi.shape[0]):
+        idx = (pi[p], pj[p])
+        for u in range(2):
+            for a in range(first, first + out.shape[1]):
+                acc = 0.0
+                for s in range(2):
+                    for b in range(col_first, col_stop):
+                        acc += res[p, NDOF * u + a, NDOF * s + b] * v[idx[s], b]
+                out[idx[u], a - first] += acc
 
 
 @numba.njit(cache=True)
@@ -237,40 +284,40 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
-    lub = lubrication_blocks(radii, pairs) if plan.near_images is not None else None
-    return from_blocks(far, lub, pairs, plan, pos, radii)
+    lub, setup = all_pair_blocks(radii, pairs, keep_setup=True) if plan.near_images is not None else (None, None)
+    res = from_blocks(far, lub, pairs, plan, pos, radii)
+    res.lubrication_setup = setup
+    return res
 
 
 def lubrication_blocks(radii, pairs):
     """(pair_i, pair_j, blocks (P, 22, 22)) of the lubrication pairs (`lubrication.pair_blocks`
-    gathered), or None without pairs."""
-    if len(pairs.i) == 0:
-        return None
-    chunks = [(pi.copy(), pj.copy(), res.copy()) for pi, pj, res in pair_blocks(radii, pairs)]
-    return tuple(np.concatenate(part) for part in zip(*chunks))
+    gathered: `lubrication.all_pair_blocks`), or None without pairs."""
+    return all_pair_blocks(radii, pairs)
 
 
 def from_blocks(far, lub, pairs, plan, positions, radii):
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
     lubrication blocks lub (`lubrication_blocks`, None: none): R_FU = S^-1 + L_aa."""
-    s_inverse, m_ab, chol_bb = far
+    s_inverse, x_ab, chol_bb = far
     r_fu = s_inverse.copy()
     if lub is not None:
         _scatter_rigid(*lub, r_fu)
-    return GrandResistance(r_fu, s_inverse, m_ab, chol_bb, lub, pairs, plan, positions, radii)
+    return GrandResistance(r_fu, s_inverse, x_ab, chol_bb, lub, pairs, plan, positions, radii)
 
 
 def far_field_blocks(mob):
-    """(S^-1, M_ab, U_b) of the far-field mobility mob (11N x 11N) (module docstring)."""
+    """(S^-1, X = M_ab U_b^-1, U_b) of the far-field mobility mob (11N x 11N) (module docstring)."""
     n = mob.shape[0] // NDOF
     m_aa, m_ab, m_bb = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
     _partition(mob, m_aa, m_ab, m_bb)
     chol_bb, info = lapack.dpotrf(m_bb.T, lower=False, clean=True, overwrite_a=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info}, strain block)")
-    y = blas.dtrsm(1.0, chol_bb, m_ab.T, trans_a=1)  # U_b^-T M_ba (5N x 6N)
-    schur = blas.dsyrk(-1.0, y, beta=1.0, c=m_aa.T, trans=1, lower=0, overwrite_c=1)  # upper triangle
-    return _spd_inverse_of_upper(schur).T, m_ab, chol_bb
+    # X = M_ab U_b^-1 (6N x 5N; the right-side solve is the faster kernel), S = M_aa - X X^T
+    x = blas.dtrsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
+    schur = blas.dsyrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
+    return _spd_inverse_of_upper(schur).T, x, chol_bb
 
 
 def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
@@ -282,8 +329,8 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
 
     M^-1 from base's block form, Delta M_inf w by `farfield.far_field_change` (on its own
     plan, `plan_far_field_change` for a mobility of tolerance ewald_tol, in the lattice of
-    base's strain), L(moved) v pair by pair (`lubrication.lubrication_product`, separations
-    floored at min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M
+    base's strain), L(moved) v - L(base) v pair by pair (`lubrication.lubrication_change`,
+    separations floored at min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M
     M^-1 v, is second order in the displacement."""
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
@@ -292,7 +339,8 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
     out = -base.far_inverse_product(far_field_change(base.positions, moved, base.radii, base.plan.change, far_v))
     if base.plan.near_images is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
-        out += lubrication_product(base.radii, pairs, vector) - base.lubrication_product(vector)
+        if base.lubrication is not None:
+            out += lubrication_change(base.radii, pairs, base.lubrication, vector, base.lubrication_setup)
     return out
 
 

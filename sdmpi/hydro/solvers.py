@@ -52,7 +52,9 @@ class DenseSolver:
 
     def velocities(self, forces, einf):
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
-        rhs = forces.ravel() + self.resistance.strain_forces(einf)
+        rhs = forces.ravel()
+        if einf.any():
+            rhs = rhs + self.resistance.strain_forces(einf)
         sol, info = lapack.dpotrs(self._upper, rhs, lower=False)
         if info != 0:
             raise ValueError(f"potrs: illegal argument {-info}")
@@ -65,6 +67,13 @@ class DenseSolver:
     def brownian_forces(self, noise):
         """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
         return (self._upper.T @ noise.ravel()).reshape(self.n, 6)
+
+    def brownian_velocities(self, noise):
+        """R_FU^-1 C z (N, 6) for z (N, 6) (C = U^T): U^-1 z, one triangular solve."""
+        sol, info = lapack.dtrtrs(self._upper, noise.ravel(), lower=0)
+        if info != 0:
+            raise ValueError(f"trtrs: illegal argument {-info}")
+        return sol.reshape(self.n, 6)
 
     def mobility_forms(self, forces):
         """f.R_FU^-1.f for each of the force sets forces (P, N, 6): |U^-T f|^2 with R_FU =
@@ -149,6 +158,16 @@ def mobility_forms(solver, forces):
         return forms(forces)
     zero = np.zeros((solver.n, 5))
     return np.array([np.vdot(f, solver.velocities(f, zero)) for f in forces])
+
+
+def brownian_velocities(solver, noise):
+    """R_FU^-1 C z for the noise z (`noise_shape`): the velocities of the Brownian force
+    C z (C C^T = R_FU), by the backend's own short cut where it has one (dense: one
+    triangular solve), else `velocities(brownian_forces(z))`."""
+    direct = getattr(solver, "brownian_velocities", None)
+    if direct is not None:
+        return direct(noise)
+    return solver.velocities(solver.brownian_forces(noise), np.zeros((solver.n, 5)))
 
 
 def take_preconditioner(solver, previous):

@@ -636,6 +636,24 @@ def _basis5():
     return bm
 
 
+def _basis_products():
+    """B^m : B^n (5, 5) of `_basis5`, summed over i then j as `_fill_pair_work` did per pair
+    (the same floating-point values)."""
+    bm = _basis5()
+    out = np.empty((5, 5))
+    for m in range(5):
+        for n in range(5):
+            acc = 0.0
+            for i in range(3):
+                for j in range(3):
+                    acc += float(bm[m, i, j]) * float(bm[n, i, j])
+            out[m, n] = acc
+    return out
+
+
+_BASIS_PRODUCTS = _basis_products()
+
+
 @nb.njit(cache=True)
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
@@ -655,6 +673,14 @@ def _fill_pair_work(d, a1, a2, sc, bm, R, pat):
     the tabulated near-field kernel of `lubrication`). The tensors of d are formed once
     and combined with the scalars of the four blocks. Every entry of R is written (none
     accumulated), so R needs no zeroing between pairs."""
+    _fill_pair_columns(d, a1, a2, sc, bm, R, pat, False)
+
+
+@nb.njit(cache=True)
+def _fill_pair_columns(d, a1, a2, sc, bm, R, pat, rigid_columns):
+    """`_fill_pair_work`; with rigid_columns only the columns of the rigid-body dofs (U,
+    Omega of either sphere: 0-5, 11-16) are written (for products with vectors that are
+    zero on the strain dofs), the others are left as they were."""
     # patterns of d: pat[0][k, i] = (e_k x d)_i; G: pat[1] (XG), pat[2] (YG), H: pat[3]
     # (YH) as [m, k] in the 5-basis; M: pat[4..6][m, n] = B^m : d^(0,1,2) : B^n
     bv = pat[0]
@@ -679,11 +705,10 @@ def _fill_pair_work(d, a1, a2, sc, bm, R, pat):
             pat[2, m, k] = 2.0 * bd[m, k] - 2.0 * dBd * d[k]
             # sum_ij B^m_ij (v_i d_j + v_j d_i), v = e_k x d
             pat[3, m, k] = 2.0 * (bv[k, 0] * bd[m, 0] + bv[k, 1] * bd[m, 1] + bv[k, 2] * bd[m, 2])
+        if rigid_columns:
+            continue
         for n in range(5):
-            bb = 0.0
-            for i in range(3):
-                for j in range(3):
-                    bb += bm[m, i, j] * bm[n, i, j]
+            bb = _BASIS_PRODUCTS[m, n]  # B^m : B^n of bm = _basis5(), a constant
             cross = bd[m, 0] * bd[n, 0] + bd[m, 1] * bd[n, 1] + bd[m, 2] * bd[n, 2]
             dBdn = bd[n, 3]
             # t0 = 1.5 (d_i d_j - delta_ij/3) dBd_n
@@ -733,10 +758,14 @@ def _fill_pair_work(d, a1, a2, sc, bm, R, pat):
                 for m in range(5):
                     val = XG * pat[1, m, k] + YG * pat[2, m, k]
                     R[r0 + 6 + m, c0 + k] = val
-                    R[c0 + k, r0 + 6 + m] = val
+                    if not rigid_columns:
+                        R[c0 + k, r0 + 6 + m] = val
                     val = YH * pat[3, m, k]
                     R[r0 + 6 + m, c0 + 3 + k] = val
-                    R[c0 + 3 + k, r0 + 6 + m] = val
+                    if not rigid_columns:
+                        R[c0 + 3 + k, r0 + 6 + m] = val
+            if rigid_columns:
+                continue
             # M^{ab}: S_a = M : E_b, in the 5-basis
             for m in range(5):
                 for n in range(5):
