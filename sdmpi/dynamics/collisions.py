@@ -16,11 +16,11 @@ the correction is repeated while it brings other pairs into contact:
   forces), after which pairs in contact are separated to SEPARATION x min_gap, and its
   Brownian part, after which they are reflected at the hard-sphere surface, gap ->
   2 min_gap - gap. Both corrections are the displacement of a contact impulse acting
-  through the model's mobility M = R_FU^-1 of the step (`through_mobility`): impulses
-  lambda_p along the pairs' unit pair forces f_p (e_p on j, -e_p on i) move the particles
-  by M sum_p lambda_p f_p, with the lambda solving sum_q (f_p.M.f_q) lambda_q = s_p for
-  the pairs' separation changes s_p. The default of the far-field and free-draining
-  models, whose relative mobility stays finite at contact.
+  through the model's mobility M = R_FU^-1 of the step (`through_mobility`): an impulse
+  lambda_p along the pair's unit pair force f_p (e_p on j, -e_p on i) moves the particles
+  by lambda_p M f_p, with lambda_p = s_p/G_p, G_p = f_p.M.f_p, for its separation change
+  s_p. The default of the far-field and free-draining models, whose relative mobility
+  stays finite at contact.
 
 Why reflect, and why through M. For diffusion of a pair's gap x >= 0 against a hard wall,
 the reflected Gaussian p(y) = G(y - x) + G(y + x) is the exact transition density (the
@@ -48,9 +48,12 @@ near contact (far field, N = 27, phi = 0.45: g 1.4-1.8 times its equilibrium val
 gaps of 1e-2 at dt = 5e-4, still 1.3-1.4 times at dt = 1e-4, so not a time-step error;
 through the mobility it is the equilibrium value within errors; docs/physics.md). The
 deterministic part is separated through M for the same reason: a contact force acts on the
-suspension through its mobility. With several pairs corrected at once the impulses solve
-the pairs' joint constraint: the displacement of least M^-1 norm that changes each pair's
-separation by its s_p (to first order; Gauss's principle of least constraint).
+suspension through its mobility. Pairs in contact at once each get their own impulse and
+the displacements are added, the sweep repeated while pairs are left in contact, as for the
+symmetric move (`through_mobility`). Solving the pairs' joint constraint instead (the
+displacement of least M^-1 norm that gives every pair exactly its s_p) under-fills the
+gaps 1e-4 ... 3e-4 next to the floor: free draining, N = 27, phi = 0.45, four seeds, g =
+3.8-4.2 against 4.4-4.9 with the sweeps and 4.69 +- 0.07 by Monte Carlo.
 
 Collision stress (Heyes & Melrose 1993; Strating 1999; Foss & Brady, J. Fluid Mech. 407,
 167 (2000)). A correction that changes a pair's separation by s along its unit line of
@@ -62,7 +65,7 @@ G = e.(M_jj + M_ii - M_ij - M_ji).e:
 
 (free draining: G = 1/(6 pi a_i) + 1/(6 pi a_j), the hard-sphere impulse of Brownian
 dynamics); a correction through the mobility records its impulses, f = lambda/dt (the
-same for a pair corrected alone). Its stress is that of any interparticle force (Batchelor 1977; `realisation`):
+same, summed over the sweeps of a correction). Its stress is that of any interparticle force (Batchelor 1977; `realisation`):
 
     Sigma_C = -(1/V) [sum_pairs r f e + sum_i R_SU R_FU^-1 F_C],
 
@@ -178,40 +181,42 @@ def remove_overlaps(positions, radii, pairs, min_gap, reflect=False, sweeps=100)
     return pos, moved
 
 
-def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False):
-    """One correction of the pairs in contact of a pair list through the mobility (module
-    docstring): each is moved apart by s_p along its line of centres, to SEPARATION x
-    min_gap (mean radii), or reflected at the gap min_gap (reflect: s_p twice its depth
-    below it), by impulses lambda along the unit pair forces f_p with
-    sum_q (f_p.M.f_q) lambda_q = s_p, which move the particles by M sum_p lambda_p f_p.
-    mobility(forces (N, 6)) -> velocities (N, 6), M = R_FU^-1 of the step. Returns the new
-    positions and, per listed pair, its separation change (0 for pairs not in contact)
-    and impulse."""
+def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False, sweeps=100):
+    """Correction (module docstring) of the pairs in contact of one pair list through the
+    mobility: each is moved apart by s_p along its line of centres, to SEPARATION x min_gap
+    (mean radii), or reflected at the gap min_gap (reflect: s_p twice its depth below it),
+    by its own impulse lambda_p = s_p/G_p along its unit pair force f_p (G_p = f_p.M.f_p),
+    which moves the particles by lambda_p M f_p; the displacements of the pairs in contact
+    at once are added, and the sweep is repeated (up to `sweeps` times) while pairs of the
+    list are in contact, as `remove_overlaps` does for the symmetric move (which it equals
+    for free draining of equal spheres). mobility(forces (N, 6)) -> velocities (N, 6),
+    M = R_FU^-1 of the step. Returns the new positions and each listed pair's total
+    separation change and impulse (0 for the pairs never moved)."""
     n = len(positions)
-    dx = positions[pairs.j] + pairs.shift - positions[pairs.i]
-    dist = np.linalg.norm(dx, axis=1)
-    asum = radii[pairs.i] + radii[pairs.j]
-    surface = asum * (1 + 0.5 * min_gap)
-    bad = dist < surface
-    moved, impulse = np.zeros(len(dist)), np.zeros(len(dist))
-    if not bad.any():
-        return positions, moved, impulse
-    target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
-    moved[bad] = (target - dist)[bad]
-    i, j, e = pairs.i[bad], pairs.j[bad], (dx / dist[:, None])[bad]
-    velocities = np.empty((len(i), n, 6))  # M f_q
+    pos = positions.copy()
+    moved, impulse = np.zeros(len(pairs.i)), np.zeros(len(pairs.i))
     force = np.zeros((n, 6))
-    for q in range(len(i)):
-        force[i[q], :3], force[j[q], :3] = -e[q], e[q]
-        velocities[q] = mobility(force)
-        force[i[q], :3] = force[j[q], :3] = 0.0
-    # f_p.M.f_q = e_p.((M f_q)_j_p - (M f_q)_i_p): symmetric positive definite
-    coupling = np.einsum("pc,qpc->pq", e, velocities[:, j, :3] - velocities[:, i, :3])
-    try:
-        impulse[bad] = np.linalg.solve(coupling, moved[bad])
-    except np.linalg.LinAlgError:  # pair forces that balance (a closed chain of contacts): least squares
-        impulse[bad] = np.linalg.lstsq(coupling, moved[bad], rcond=None)[0]
-    return positions + np.tensordot(impulse[bad], velocities[:, :, :3], axes=1), moved, impulse
+    for _ in range(sweeps):
+        dx = pos[pairs.j] + pairs.shift - pos[pairs.i]
+        dist = np.linalg.norm(dx, axis=1)
+        asum = radii[pairs.i] + radii[pairs.j]
+        surface = asum * (1 + 0.5 * min_gap)
+        bad = np.flatnonzero(dist < surface)
+        if len(bad) == 0:
+            break
+        target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
+        displacement = np.zeros((n, 3))
+        for p in bad:
+            i, j, e = pairs.i[p], pairs.j[p], dx[p] / dist[p]
+            force[i, :3], force[j, :3] = -e, e
+            velocities = mobility(force)
+            force[i, :3] = force[j, :3] = 0.0
+            lam = (target[p] - dist[p]) / (e @ (velocities[j, :3] - velocities[i, :3]))
+            displacement += lam * velocities[:, :3]
+            moved[p] += target[p] - dist[p]
+            impulse[p] += lam
+        pos += displacement
+    return pos, moved, impulse
 
 
 def separate(positions, radii, lattice, min_gap, reflect=False, rounds=10, mobility=None):
