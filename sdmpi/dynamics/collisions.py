@@ -53,7 +53,7 @@ the displacements are added, the sweep repeated while pairs are left in contact,
 symmetric move (`through_mobility`). Solving the pairs' joint constraint instead (the
 displacement of least M^-1 norm that gives every pair exactly its s_p) under-fills the
 gaps 1e-4 ... 3e-4 next to the floor: free draining, N = 27, phi = 0.45, four seeds, g =
-3.8-4.2 against 4.4-4.9 with the sweeps and 4.69 +- 0.07 by Monte Carlo.
+3.8-4.3 against 4.4-4.9 with the sweeps and 4.69 +- 0.07 by Monte Carlo.
 
 Collision stress (Heyes & Melrose 1993; Strating 1999; Foss & Brady, J. Fluid Mech. 407,
 167 (2000)). A correction that changes a pair's separation by s along its unit line of
