@@ -140,12 +140,12 @@ def test_lanczos_inverse_square_root():
 
 def near_contact_start():
     """A split resistance at phi = 0.5 with near-contact pairs (petsc_check.configuration,
-    27 spheres, strain 0.2) and its box: the start of a Brownian step."""
-    from petsc_check import configuration
+    27 spheres, at the strain it was made at) and its box: the start of a Brownian step."""
+    from petsc_check import STRAIN, configuration
 
     pos, side = configuration(0.5, 1)
     box = np.full(3, side)
-    return split_resistance(pos, np.ones(len(pos)), box, 0.2), box
+    return split_resistance(pos, np.ones(len(pos)), box, STRAIN), box
 
 
 def test_midpoint_difference_is_accurate():
@@ -158,13 +158,15 @@ def test_midpoint_difference_is_accurate():
     although each solve is accurate to ~2e-5 of itself only. Started from the start's
     solution, the midpoint needs fewer iterations (12 vs 19) but its error is independent:
     4e-3 and 3e-2 of the difference."""
+    from petsc_check import STRAIN
+
     start, box = near_contact_start()
     n = start.n_particles
     rng = np.random.default_rng(7)
     forces, zero = rng.standard_normal((n, 6)), np.zeros((n, 5))
     # the midpoint of a step: displacements ~1e-3 a with the start's pair sets
     mid = split_resistance(start.positions + 1e-3 * rng.standard_normal((n, 3)), np.ones(n), box,
-                           0.2, plan=start.plan)
+                           STRAIN, plan=start.plan)
 
     def solved(solver):
         u = solver.velocities(forces, zero)
@@ -176,7 +178,8 @@ def test_midpoint_difference_is_accurate():
     follow = make_solver("petsc-krylov", mid, tolerance=1e-5)
     take_preconditioner(follow, first)
     assert follow.inner is not None and first.inner is None  # taken over
-    take_preconditioner(make_solver("dense", grand_resistance(start.positions, np.ones(n), box, 0.2)), first)  # no-op
+    take_preconditioner(make_solver("dense", grand_resistance(start.positions, np.ones(n), box, STRAIN)),
+                        first)  # no-op
     u_follow, s_follow = solved(follow)
     assert np.abs(u_first - u0).max() > 1e-6 * np.abs(u0).max()  # each solve is only ~1e-5 accurate
     for got, exact, whole in ((u_follow - u_first, u1 - u0, u0), (s_follow - s_first, s1 - s0, s0)):
@@ -320,13 +323,15 @@ def test_two_ranks_per_task_killed_and_resumed_is_bit_identical(tmp_path):
 
 @pytest.mark.parametrize("fast, bounds", [((1e-6, 1e-4, 1e-4), (1e-3, 1e-3)),
                                           ((1e-5, 1e-4, 1e-4), (1e-3, 1e-3)),
-                                          ((1e-4, 1e-4, 1e-4), (1e-3, 2e-3))])
+                                          ((1e-4, 1e-4, 1e-4), (3e-3, 3e-3))])
 def test_fast_tolerances_change_the_stream_only_at_their_level(fast, bounds):
     """The benchmark's fast settings (solver tolerance 1e-6, 1e-5 or 1e-4, Lanczos 1e-4,
     Ewald 1e-4) against tight ones (1e-10, 1e-10, 1e-8) on the same realisation (N = 27,
     phi = 0.45, the same noise): each sample's stresses agree to `bounds` (hydrodynamic,
     Brownian) of their scale (measured 7e-5 and 2e-4 at 1e-6; 5e-5 and 3e-4 at 1e-5;
-    2.5e-4 and 3.4e-4 at 1e-4 (N = 125: 5e-4 and 2e-4): far below the sampling noise of a
+    2.5e-4 to 1.2e-3 and 3.4e-4 at 1e-4, depending on the start's closest pairs (N = 125:
+    5e-4 and 2e-4); the solver's relative residual bounds the error only up to the
+    condition number of the resistance near contact): far below the sampling noise of a
     stress average; the Brownian stress, a difference of two solves ~sqrt(dt) apart, keeps
     its accuracy because the two solves' errors cancel, test_midpoint_difference_is_accurate;
     with the midpoint started from the start's solution it was 8e-3 at 1e-5), positions to
@@ -413,7 +418,8 @@ def test_preconditioner_keeps_iterations_low_near_contact(phi, monkeypatch):
     from sdmpi.hydro import krylov
 
     n = 125
-    pos, side = hard_sphere_fluid(n, phi, np.random.default_rng(2), strain=0.3)
+    # a compressed start with few sweeps keeps pairs below the minimum gap
+    pos, side = hard_sphere_fluid(n, phi, np.random.default_rng(2), strain=0.3, sweeps=200)
     res = split_resistance(pos, np.ones(n), np.full(3, side), 0.3)
     assert res.pairs.n_regularised > 0  # pairs closer than the minimum gap
     rng = np.random.default_rng(1)
