@@ -344,7 +344,7 @@ def test_frictional_job_file_killed_then_resumed_on_two_ranks(tmp_path):
     in-process run."""
     path = ROOT / "jobs" / "frictional_mu0.5.toml"
     short = ["system.n_particles=8", "system.phi=[0.5]", "ensemble.realisations=1",
-             "integration.n_steps=200", "integration.discard_steps=20", "job.seed=1",
+             "integration.n_steps=200", "integration.discard_steps=20", "job.seed=2",
              "output.checkpoint_every=50", "hydrodynamics.min_gap=0.02", "interparticle.k_t=300.0",
              "interparticle.k_n=2000.0", "system.size_classes=[{radius = 1.0, fraction = 1.0}]"]
     sets = [a for item in short for a in ("--set", item)]
