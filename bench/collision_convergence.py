@@ -1,15 +1,14 @@
-"""The collision stress of full Stokesian dynamics against the time step and the
-lubrication floor: N spheres at volume fraction phi at rest, Brownian, one realisation per
+"""The collision stress against the time step and the lubrication floor: N spheres at
+volume fraction phi at rest, Brownian, one hydrodynamic model, one realisation per
 (dt, min_gap), the contact part of the osmotic pressure implied by the overlap correction,
 Pi_c/(n kT) = -tr(sigma_collision)/(3 n kT), and the share of steps with a pair in contact.
-With lubrication, pairs never touch in continuous time, so Pi_c measures the step's
-discretisation error and goes to 0 with dt and min_gap (docs/physics.md, Collision
-stress); for scale, hard spheres without hydrodynamic interactions have Pi_c/(n kT) =
-4 phi g(2) (Carnahan-Starling: 9.4 at phi = 0.45). Errors: one standard error over 10
-blocks of the run.
+Without lubrication (far-field, free-draining) this is the hard-sphere contact pressure,
+4 phi g(2) (Carnahan-Starling: 8.39 at phi = 0.45); with lubrication (stokesian) pairs
+never touch in continuous time, and Pi_c measures the floor and the step
+(docs/physics.md, Collision stress). Errors: one standard error over 10 blocks of the run.
 
-    python bench/collision_convergence.py [--phi 0.45] [--steps 3000] [--dt 2e-3 1e-3 5e-4 2.5e-4]
-        [--min-gap 1e-4 3e-5]
+    python bench/collision_convergence.py [--model stokesian] [--phi 0.45] [--steps 3000]
+        [--dt 2e-3 1e-3 5e-4 2.5e-4] [--min-gap 1e-4 3e-5]
 
 Prints one JSON line per (dt, min_gap), appended to bench/collision_convergence.json.
 """
@@ -24,6 +23,7 @@ import numpy as np
 
 from sdmpi.config.loader import parse_job
 from sdmpi.config.tasks import enumerate_tasks
+from sdmpi.dynamics.models import MODELS
 from sdmpi.dynamics.realisation import KT_REDUCED, Realisation
 
 JOB = """
@@ -42,13 +42,14 @@ dt = {dt}
 n_steps = {steps}
 discard_steps = 0
 [hydrodynamics]
+model = "{model}"
 min_gap = {min_gap}
 """
 
 
-def measure(n, phi, dt, min_gap, steps, blocks=10):
+def measure(model, n, phi, dt, min_gap, steps, blocks=10):
     """Pi_c/(n kT) with its standard error, and the share of steps with a correction."""
-    job = parse_job(JOB.format(n=n, phi=phi, dt=dt, steps=steps, min_gap=min_gap))
+    job = parse_job(JOB.format(model=model, n=n, phi=phi, dt=dt, steps=steps, min_gap=min_gap))
     real = Realisation(job, enumerate_tasks(job)[0])
     out = real.advance(steps)
     pressure = -out["stress_collision"][:, :3].sum(axis=1) / 3 / (n / real.volume * KT_REDUCED)
@@ -59,6 +60,7 @@ def measure(n, phi, dt, min_gap, steps, blocks=10):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", choices=MODELS, default="stokesian")
     parser.add_argument("--n", type=int, default=27)
     parser.add_argument("--phi", type=float, default=0.45)
     parser.add_argument("--steps", type=int, default=3000)
@@ -69,8 +71,8 @@ def main():
     for min_gap in args.min_gap:
         for dt in args.dt:
             start = time.perf_counter()
-            mean, err, contacts = measure(args.n, args.phi, dt, min_gap, args.steps)
-            row = {"model": "stokesian", "n_particles": args.n, "phi": args.phi, "dt": dt,
+            mean, err, contacts = measure(args.model, args.n, args.phi, dt, min_gap, args.steps)
+            row = {"model": args.model, "n_particles": args.n, "phi": args.phi, "dt": dt,
                    "min_gap": min_gap, "steps": args.steps, "pressure_collision": mean,
                    "pressure_collision_err": err, "steps_with_contacts": contacts,
                    "seconds": round(time.perf_counter() - start)}
