@@ -346,8 +346,28 @@ def test_info(reference, job_file):
     assert "sdmpi run file, format 1" in text and "job 'ensemble-test'" in text
     assert "progress: 8/8 tasks complete, 384/384 steps (100.0%); complete" in text
     assert text.count(" done\n") == N_TASKS
-    assert "versions: sdmpi 0.1.0" in text and "hdf5" in text and "MPI" in text
+    assert "versions: sdmpi 0.1.0, sdmpi source " in text and "hdf5" in text and "MPI" in text
     assert "units: time t_D, stress eta_m/t_D" in text
     res = sdmpi("info", reference, "--job")
     assert parse_job(res.stdout) == load_job(job_file)
     assert sdmpi("info", reference.parent / "missing.h5").returncode == 2
+
+
+def test_source_digest_tells_code_apart(tmp_path):
+    """The run file's source digest (sdmpi.ensemble.runner.source_digest) depends on every
+    source file's path and content, and on nothing else."""
+    from sdmpi.ensemble.runner import source_digest
+
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "a.py").write_text("x = 1\n")
+    (tmp_path / "b.py").write_text("y = 2\n")
+    (tmp_path / "notes.txt").write_text("not source")
+    first = source_digest(tmp_path)
+    assert len(first) == 12 and int(first, 16) >= 0
+    (tmp_path / "notes.txt").write_text("changed")
+    assert source_digest(tmp_path) == first
+    (tmp_path / "pkg" / "a.py").write_text("x = 2\n")
+    assert source_digest(tmp_path) != first
+    (tmp_path / "pkg" / "a.py").write_text("x = 1\n")
+    (tmp_path / "pkg" / "a.py").rename(tmp_path / "pkg" / "c.py")
+    assert source_digest(tmp_path) != first

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import errno
+import hashlib
 import json
 import os
 import platform
@@ -324,11 +325,22 @@ def _different_job(out: Path, stored, job, extend: bool) -> str:
                       "choose another output file (-o)."])
 
 
+def source_digest(root: Path = Path(__file__).resolve().parents[1]) -> str:
+    """The first 12 hex digits of the SHA-256 of the Python sources under ``root`` (sdmpi's
+    package directory): each file's relative path and bytes, in sorted order. Run files
+    written by different code carry different digests, whatever the version number."""
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()[:12]
+
+
 def versions() -> dict[str, str]:
-    """Versions of sdmpi and of the stack it runs on."""
+    """Versions of sdmpi (its number and its source digest) and of the stack it runs on."""
     import mpi4py
 
-    return {"sdmpi": __version__, "python": platform.python_version(),
+    return {"sdmpi": __version__, "sdmpi source": source_digest(), "python": platform.python_version(),
             "numpy": np.__version__, "h5py": h5py.version.version,
             "hdf5": h5py.version.hdf5_version, "mpi4py": mpi4py.__version__,
             "MPI": MPI.Get_library_version().split(",")[0].splitlines()[0].strip()}
