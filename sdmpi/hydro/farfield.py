@@ -648,13 +648,6 @@ def _wave_tensors(b, cos_entries, sin_entries, ksq, scale, a2, row_c, tcos, tsin
 
 
 @numba.njit(cache=True, inline="never")
-def _cos_difference_row(re_i, im_i, re_j, im_j, out):
-    """out = cos(a_i - a_j) = re_i re_j + im_i im_j from exp(i a) (one pair, all k)."""
-    for k in range(out.shape[0]):
-        out[k] = re_i[k] * re_j[k] + im_i[k] * im_j[k]
-
-
-@numba.njit(cache=True, inline="never")
 def _sin_difference_row(re_i, im_i, re_j, im_j, out):
     """out = sin(a_i - a_j) = im_i re_j - re_i im_j from exp(i a) (one pair, all k)."""
     for k in range(out.shape[0]):
@@ -667,7 +660,8 @@ def _pair_phases(phase_re, phase_im, pi, pj, cos_out, sin_out):
     (rows over the wave vectors, vectorised)."""
     for p in range(pi.shape[0]):
         i, j = pi[p], pj[p]
-        _cos_difference_row(phase_re[i], phase_im[i], phase_re[j], phase_im[j], cos_out[p])
+        # cos(a_i - a_j) = re_i re_j + im_i im_j from exp(i a) (one pair, all k)
+        _bracket_row(phase_re[i], phase_re[j], phase_im[i], phase_im[j], cos_out[p])
         _sin_difference_row(phase_re[i], phase_im[i], phase_re[j], phase_im[j], sin_out[p])
 
 
