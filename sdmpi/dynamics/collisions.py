@@ -157,6 +157,18 @@ class Collisions:
         return forces, virial
 
 
+def _contacts(pos, radii, pairs, min_gap, reflect):
+    """For the listed pairs: separation vectors dx (P, 3) (j's image minus i), distances,
+    the hard-sphere surface distance (gap min_gap, mean radii) and the distance a
+    correction moves them to (reflected at the surface, or SEPARATION x min_gap)."""
+    dx = pos[pairs.j] + pairs.shift - pos[pairs.i]
+    dist = np.linalg.norm(dx, axis=1)
+    asum = radii[pairs.i] + radii[pairs.j]
+    surface = asum * (1 + 0.5 * min_gap)
+    target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
+    return dx, dist, surface, target
+
+
 def remove_overlaps(positions, radii, pairs, min_gap, reflect=False, sweeps=100):
     """Potential-free correction (module docstring) of the pairs in contact of one pair
     list, placed at SEPARATION x min_gap (reflect: reflected at the gap min_gap), repeated
@@ -166,11 +178,7 @@ def remove_overlaps(positions, radii, pairs, min_gap, reflect=False, sweeps=100)
     pos = positions.copy()
     moved = np.zeros(len(pairs.i))
     for _ in range(sweeps):
-        dx = pos[pairs.j] + pairs.shift - pos[pairs.i]
-        dist = np.linalg.norm(dx, axis=1)
-        asum = radii[pairs.i] + radii[pairs.j]
-        surface = asum * (1 + 0.5 * min_gap)
-        target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
+        dx, dist, surface, target = _contacts(pos, radii, pairs, min_gap, reflect)
         bad = dist < surface
         if not bad.any():
             break
@@ -197,14 +205,10 @@ def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False, 
     moved, impulse = np.zeros(len(pairs.i)), np.zeros(len(pairs.i))
     force = np.zeros((n, 6))
     for _ in range(sweeps):
-        dx = pos[pairs.j] + pairs.shift - pos[pairs.i]
-        dist = np.linalg.norm(dx, axis=1)
-        asum = radii[pairs.i] + radii[pairs.j]
-        surface = asum * (1 + 0.5 * min_gap)
+        dx, dist, surface, target = _contacts(pos, radii, pairs, min_gap, reflect)
         bad = np.flatnonzero(dist < surface)
         if len(bad) == 0:
             break
-        target = 2 * surface - dist if reflect else asum * (1 + 0.5 * SEPARATION * min_gap)
         displacement = np.zeros((n, 3))
         for p in bad:
             i, j, e = pairs.i[p], pairs.j[p], dx[p] / dist[p]
