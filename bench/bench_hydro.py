@@ -29,7 +29,7 @@ def one_solve(pos, side, timings):
     farfield._real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h,
                              plan.params.xi, farfield.BASIS, mob)
     t1 = time.perf_counter()
-    farfield._reciprocal_sum(pos, radii, plan.kvec, plan.params.xi, plan.volume, mob)
+    farfield._reciprocal_sum(pos, radii, plan, mob)
     for i in range(n):
         s = slice(farfield.NDOF * i, farfield.NDOF * (i + 1))
         mob[s, s] += plan.self_blocks[1.0]

@@ -553,8 +553,7 @@ def far_field_change(positions, moved, radii, plan, w):
         # the pairs m = (normal direction t, wave vector k), t-major
         amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
         b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
-        old, new = pos @ plan.kvec.T, moved @ plan.kvec.T
-        _reciprocal_change(np.cos(old), np.sin(old), np.cos(new), np.sin(new), radii, b,
+        _reciprocal_change(*wave_phases(pos, plan), *wave_phases(moved, plan), radii, b,
                            np.einsum("ij,ij->i", plan.kvec, plan.kvec), 2.0 / plan.volume, w, out)
     return out
 
@@ -694,6 +693,39 @@ def wave_amplitudes(kvec, xi):
     return b
 
 
+@numba.njit(cache=True)
+def _phases(pos, index, basis, cos_out, sin_out):
+    """cos_out, sin_out (N, nk) = cos and sin of k.x_j for k = index[k] . basis (integer
+    coordinates on the reciprocal lattice with rows basis), as the products
+    exp(i k.x) = prod_c exp(i n_c theta_c), theta_c = basis_c . x: per particle one
+    trigonometric pair per distinct n_c (a few dozen) instead of one per wave vector."""
+    lo, hi = np.empty(3, np.int64), np.empty(3, np.int64)
+    for c in range(3):
+        lo[c], hi[c] = index[:, c].min(), index[:, c].max()
+    width = int((hi - lo).max()) + 1
+    re, im = np.empty((3, width)), np.empty((3, width))
+    for j in range(pos.shape[0]):
+        for c in range(3):
+            theta = basis[c, 0] * pos[j, 0] + basis[c, 1] * pos[j, 1] + basis[c, 2] * pos[j, 2]
+            for m in range(hi[c] - lo[c] + 1):
+                re[c, m], im[c, m] = math.cos((lo[c] + m) * theta), math.sin((lo[c] + m) * theta)
+        for k in range(index.shape[0]):
+            a, b, c = index[k, 0] - lo[0], index[k, 1] - lo[1], index[k, 2] - lo[2]
+            xr = re[0, a] * re[1, b] - im[0, a] * im[1, b]
+            xim = re[0, a] * im[1, b] + im[0, a] * re[1, b]
+            cos_out[j, k] = xr * re[2, c] - xim * im[2, c]
+            sin_out[j, k] = xr * im[2, c] + xim * re[2, c]
+
+
+def wave_phases(positions, plan):
+    """(cos, sin) of k.x (N, nk each) for the positions (N, 3) and the plan's wave vectors."""
+    shape = (len(positions), len(plan.kvec))
+    cos, sin = np.empty(shape), np.empty(shape)
+    if shape[1]:
+        _phases(np.ascontiguousarray(positions, dtype=float), plan.wave_index, plan.wave_basis, cos, sin)
+    return cos, sin
+
+
 def _wave_terms(radii, kvec, xi, volume):
     """What the reciprocal sum needs besides the positions: the cosine and sine tensors
     of every wave vector (scaled by 2/V, with the radius factors folded in when all radii
@@ -709,14 +741,15 @@ def _wave_terms(radii, kvec, xi, volume):
     return {"cos": tcos, "sin": tsin}, ksq[:, None], _ENTRY_ROW_C, _ENTRY_COL_C, equal
 
 
-def _reciprocal_sum(pos, radii, kvec, xi, volume, mob, terms=None, both=True):
-    """Adds the reciprocal-space Ewald sum (the pair form above) into mob (11N x 11N);
-    terms: `_wave_terms(radii, kvec, xi, volume)` if already at hand; both False: the
-    blocks M_ji of pairs i < j left out (`_scatter_pairs`)."""
-    n, nk = len(pos), len(kvec)
-    tensors, ksq, c_row, c_col, equal = _wave_terms(radii, kvec, xi, volume) if terms is None else terms
-    phase = pos @ kvec.T
-    phase_re, phase_im = np.cos(phase), np.sin(phase)
+def _reciprocal_sum(pos, radii, plan, mob, both=True):
+    """Adds the reciprocal-space Ewald sum (the pair form above) of the plan's wave vectors
+    into mob (11N x 11N); both False: the blocks M_ji of pairs i < j left out
+    (`_scatter_pairs`). The wave vectors' tensors are kept in the plan for its radii."""
+    n, nk = len(pos), len(plan.kvec)
+    if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
+        plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, plan.params.xi, plan.volume))
+    tensors, ksq, c_row, c_col, equal = plan.wave_terms[1]
+    phase_re, phase_im = wave_phases(pos, plan)
     pi, pj = _upper_pairs(n)
     if equal:
         _reciprocal_equal(phase_re, phase_im, pi, pj, tensors["cos"], tensors["sin"], _COS_ENTRIES, _SIN_ENTRIES,
@@ -851,12 +884,15 @@ class FarFieldPlan:
     """What the far-field sums need besides the positions, fixed for a configuration and
     its small displacements (random finite differences must not see pairs cross the
     cut-off): Ewald parameters (None: unbounded), real-space pair images (i, j, shift),
-    wave vectors, radial coefficient table, the self blocks per radius and the volume;
+    wave vectors (and their integer coordinates on the reciprocal lattice), radial
+    coefficient table, the self blocks per radius and the volume;
     the wave vectors' tensors are kept once computed (a step's midpoint reuses them)."""
 
     params: EwaldParameters | None
     images: tuple
     kvec: np.ndarray
+    wave_index: np.ndarray  # (nk, 3) int: k = wave_index . wave_basis
+    wave_basis: np.ndarray  # (3, 3): the rows 2 pi b_c of the reciprocal lattice
     table: np.ndarray
     grid: "RadialGrid"
     self_blocks: dict
@@ -902,14 +938,15 @@ def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=Non
     """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid)."""
     if lattice is None:
         images = find_pairs(positions, radii, None, np.inf, 0.0)
-        return FarFieldPlan(None, images, np.zeros((0, 3)), _cached_radial_table(0.0),
+        return FarFieldPlan(None, images, np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros((3, 3)),
+                            _cached_radial_table(0.0),
                             RadialGrid.build(0.0, 0.0, tol),
                             {a: self_mobility(a) for a in np.unique(radii)}, np.inf)
     par = EwaldParameters.choose(lattice, tol=tol, xi=xi)
     images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
     # the grid reaches past r_c for the small displacements a plan is reused for
     grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
-    return FarFieldPlan(par, images, lattice.wave_vectors(par.kcut), _cached_radial_table(par.xi),
+    return FarFieldPlan(par, images, *lattice.wave_vectors(par.kcut), lattice.wave_basis, _cached_radial_table(par.xi),
                         grid, {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
 
 
@@ -958,9 +995,7 @@ def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD
     _real_space_sum(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi_used, BASIS, mob,
                     False)
     if plan.params is not None:
-        if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
-            plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, xi_used, plan.volume))
-        _reciprocal_sum(pos, radii, plan.kvec, xi_used, plan.volume, mob, plan.wave_terms[1], both=False)
+        _reciprocal_sum(pos, radii, plan, mob, both=False)
     _mirror_lower_blocks(mob)
     if len(plan.self_blocks) == 1:  # one radius: its self block on every diagonal block
         _add_diagonal_blocks(mob, next(iter(plan.self_blocks.values())))

@@ -71,19 +71,27 @@ class Lattice:
         n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
         return n @ self.vectors
 
+    @property
+    def wave_basis(self):
+        """The rows 2 pi b_i (3, 3): the reciprocal lattice is k = n . wave_basis, n integer."""
+        return 2 * np.pi * self.reciprocal
+
     def wave_vectors(self, kmax):
         """Reciprocal lattice vectors k = 2 pi n . b with 0 < |k| <= kmax, one of each
-        +-k pair (the sums below use that the terms at -k are complex conjugates)."""
+        +-k pair (the sums below use that the terms at -k are complex conjugates), and
+        their integer coordinates n: (k (nk, 3), n (nk, 3) int)."""
         counts = np.ceil(kmax * np.linalg.norm(self.vectors, axis=1) / (2 * np.pi)).astype(np.int64)
-        out = np.empty((int(np.prod(2 * counts + 1)) // 2, 3))
-        return out[:_wave_vectors(counts, 2 * np.pi * self.reciprocal, float(kmax), out)]
+        size = int(np.prod(2 * counts + 1)) // 2
+        out, index = np.empty((size, 3)), np.empty((size, 3), dtype=np.int64)
+        count = _wave_vectors(counts, self.wave_basis, float(kmax), out, index)
+        return out[:count], index[:count]
 
 
 @numba.njit(cache=True)
-def _wave_vectors(counts, recip, kmax, out):
-    """Fills out with k = n . recip for the integer n, |n_c| <= counts[c], in the half
-    space (first non-zero n_c positive) with |k| <= kmax, in lexicographic order of n;
-    returns how many."""
+def _wave_vectors(counts, recip, kmax, out, index):
+    """Fills out with k = n . recip (and index with n) for the integer n, |n_c| <= counts[c],
+    in the half space (first non-zero n_c positive) with |k| <= kmax, in lexicographic
+    order of n; returns how many."""
     count = 0
     for n0 in range(-counts[0], counts[0] + 1):
         for n1 in range(-counts[1], counts[1] + 1):
@@ -96,6 +104,7 @@ def _wave_vectors(counts, recip, kmax, out):
                 k2 = n0 * recip[0, 2] + n1 * recip[1, 2] + n2 * recip[2, 2]
                 if k0 * k0 + k1 * k1 + k2 * k2 <= kmax * kmax:
                     out[count, 0], out[count, 1], out[count, 2] = k0, k1, k2
+                    index[count, 0], index[count, 1], index[count, 2] = n0, n1, n2
                     count += 1
     return count
 
