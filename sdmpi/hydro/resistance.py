@@ -12,10 +12,14 @@ Van Loan, Matrix Computations, sec. 3.2)
     [M^-1]_aa = S^-1,   [M^-1]_ab = -S^-1 M_ab M_bb^-1,
     [M^-1]_bb = M_bb^-1 + M_bb^-1 M_ba S^-1 M_ab M_bb^-1.
 
-Only S^-1 (6N x 6N) is formed, by Cholesky (LAPACK potrf/potri): R_FU = S^-1 + L_aa must be
-a matrix (it is factorised), while R_FE, R_SU and R_SE only act on vectors, through X and
-triangular solves with U_b. This costs about half the flops of inverting the whole (11N)^2
-M_inf.
+Only S^-1 (6N x 6N) is formed, by Cholesky (LAPACK potrf/potri): R_FU = S^-1 + L_FU must be
+a matrix (it is factorised), while the far-field parts of R_FE, R_SU and R_SE only act on
+vectors, through X and triangular solves with U_b. This costs about half the flops of
+inverting the whole (11N)^2 M_inf. The lubrication L is kept both as its pair blocks (for
+`resistance_change`) and scattered into dense partitions L_FU, L_FE, L_SE (its products
+are then BLAS matrix-vector products: a pair list within the lubrication cut-off of 2
+radii holds about as many entries as the dense partitions up to N ~ 50, and the dense
+products stream them several times faster).
 """
 
 from dataclasses import dataclass
@@ -30,7 +34,7 @@ from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, 
 from .geometry import Lattice, find_pairs
 from .krylov import DenseFarField, far_field_operator
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
-                          lubrication_change, lubrication_sparse, scatter_pair_blocks)
+                          lubrication_change, lubrication_sparse)
 
 
 @dataclass
@@ -45,17 +49,19 @@ class HydroPlan:
 @dataclass
 class GrandResistance:
     """R = M_inf^-1 + L at one configuration, in the block form of the module docstring:
-    R_FU = S^-1 + L_aa (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, the upper
+    R_FU = S^-1 + L_FU (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, the upper
     Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b) and X = M_ab U_b^-1 (6N x 5N,
-    Fortran-ordered); the lubrication as
-    its pair blocks (pair_i, pair_j, blocks (P, 22, 22)); its close pairs, the plan it was
-    built with, the (wrapped) positions it was built at and the radii."""
+    Fortran-ordered); the lubrication as its pair blocks (pair_i, pair_j, blocks (P, 22,
+    22)) and as dense partitions (L_FU, L_FE, L_SE) (`lubrication_partitions`); its close
+    pairs, the plan it was built with, the (wrapped) positions it was built at and the
+    radii."""
 
     r_fu: np.ndarray
     s_inverse: np.ndarray
     x_ab: np.ndarray
     chol_bb: np.ndarray
     lubrication: tuple | None
+    lubrication_dense: tuple | None
     pairs: PairList
     plan: HydroPlan
     positions: np.ndarray
@@ -90,14 +96,25 @@ class GrandResistance:
         return out
 
     def lubrication_product(self, v, rows=None, strain_only=False):
-        """L v (N, 11) for v (N, 11), pair by pair; rows "rigid" (N, 6) or "strain" (N, 5):
-        those rows alone; strain_only: v is zero on the rigid-body dofs (skipped)."""
-        first, stop = {None: (0, NDOF), "rigid": (0, 6), "strain": (6, NDOF)}[rows]
-        out = np.zeros((self.n_particles, stop - first))
-        if self.lubrication is not None:
-            _pair_product_rows(*self.lubrication, np.ascontiguousarray(v, dtype=float), first,
-                               6 if strain_only else 0, NDOF, out)
-        return out
+        """L v (N, 11) for v (N, 11) by the dense partitions; rows "rigid" (N, 6) or "strain"
+        (N, 5): those rows alone; strain_only: v is zero on the rigid-body dofs (skipped)."""
+        n = self.n_particles
+        if self.lubrication_dense is None:
+            return np.zeros((n, {None: NDOF, "rigid": 6, "strain": 5}[rows]))
+        l_fu, l_fe, l_se = self.lubrication_dense
+        v_a, v_b = v[:, :6].ravel(), v[:, 6:].ravel()
+        parts = []
+        if rows != "strain":
+            rigid = l_fe @ v_b
+            if not strain_only:
+                rigid += l_fu @ v_a
+            parts.append(rigid.reshape(n, 6))
+        if rows != "rigid":
+            strain = l_se @ v_b
+            if not strain_only:
+                strain += l_fe.T @ v_a
+            parts.append(strain.reshape(n, 5))
+        return parts[0] if len(parts) == 1 else np.hstack(parts)
 
     def product(self, v, rows=None, strain_only=False):
         """R v (N, 11) for v (N, 11); rows "rigid" (N, 6) or "strain" (N, 5): those rows alone;
@@ -133,11 +150,9 @@ class GrandResistance:
         x = _triangular_solve(self.chol_bb, np.asfortranarray(self.x_ab.T), 0)  # M_bb^-1 M_ba (5N x 6N)
         inv_ab = -self.s_inverse @ x.T
         inv_bb = _chol_solve(self.chol_bb, np.eye(5 * n)) + x @ self.s_inverse @ x.T
-        lub = np.zeros((NDOF * n, NDOF * n))
-        if self.lubrication is not None:
-            scatter_pair_blocks(*self.lubrication, lub)
-        l_fu, l_fe, l_se = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
-        _partition(lub, l_fu, l_fe, l_se)
+        if self.lubrication_dense is None:
+            return self.r_fu.copy(), inv_ab, inv_ab.T, inv_bb
+        _, l_fe, l_se = self.lubrication_dense
         r_fe = inv_ab + l_fe
         return self.r_fu.copy(), r_fe, r_fe.T, inv_bb + l_se
 
@@ -172,33 +187,32 @@ def _chol_solve(upper, rhs):
 
 
 @numba.njit(cache=True)
-def _pair_product_rows(pi, pj, res, v, first, col_first, col_stop, out):
-    """out[(i, j), a - first] += res[p] (v_i, v_j) for the rows first <= a < first +
-    out.shape[1] of each particle's 11 (as `lubrication.pair_products` on those rows),
-    summing over the columns col_first <= b < col_stop of each particle (v is zero on the
-    others)."""
+def _scatter_partitions(pi, pj, blocks, l_fu, l_fe, l_se):
+    """Adds each pair's 22x22 block (rows and columns: pi's 11 dofs, pj's 11) into the dense
+    partitions L_FU (6N x 6N), L_FE (6N x 5N) and L_SE (5N x 5N); L_SU = L_FE^T is not
+    stored."""
     for p in range(pi.shape[0]):
-        idx = (pi[p], pj[p])
         for u in range(2):
-            for a in range(first, first + out.shape[1]):
-                acc = 0.0
-                for s in range(2):
-                    for b in range(col_first, col_stop):
-                        acc += res[p, NDOF * u + a, NDOF * s + b] * v[idx[s], b]
-                out[idx[u], a - first] += acc
-
-
-@numba.njit(cache=True)
-def _scatter_rigid(pi, pj, blocks, r_fu):
-    """Adds the rigid-body rows and columns (U, Omega of either sphere) of each pair's 22x22
-    block into the (6N, 6N) matrix r_fu."""
-    for p in range(pi.shape[0]):
-        idx = (pi[p], pj[p])
-        for u in range(2):
+            row = pi[p] if u == 0 else pj[p]
             for v in range(2):
+                col = pi[p] if v == 0 else pj[p]
+                block = blocks[p, NDOF * u : NDOF * (u + 1), NDOF * v : NDOF * (v + 1)]
                 for a in range(6):
                     for b in range(6):
-                        r_fu[6 * idx[u] + a, 6 * idx[v] + b] += blocks[p, NDOF * u + a, NDOF * v + b]
+                        l_fu[6 * row + a, 6 * col + b] += block[a, b]
+                    for b in range(5):
+                        l_fe[6 * row + a, 5 * col + b] += block[a, 6 + b]
+                for a in range(5):
+                    for b in range(5):
+                        l_se[5 * row + a, 5 * col + b] += block[6 + a, 6 + b]
+
+
+def lubrication_partitions(lub, n):
+    """The lubrication pair blocks lub = (pair_i, pair_j, blocks (P, 22, 22)) as dense
+    partitions (L_FU (6N x 6N), L_FE (6N x 5N), L_SE (5N x 5N)), dofs particle by particle."""
+    dense = np.zeros((6 * n, 6 * n)), np.zeros((6 * n, 5 * n)), np.zeros((5 * n, 5 * n))
+    _scatter_partitions(*lub, *dense)
+    return dense
 
 
 @numba.njit(cache=True)
@@ -298,12 +312,11 @@ def lubrication_blocks(radii, pairs):
 
 def from_blocks(far, lub, pairs, plan, positions, radii):
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
-    lubrication blocks lub (`lubrication_blocks`, None: none): R_FU = S^-1 + L_aa."""
+    lubrication blocks lub (`lubrication_blocks`, None: none): R_FU = S^-1 + L_FU."""
     s_inverse, x_ab, chol_bb = far
-    r_fu = s_inverse.copy()
-    if lub is not None:
-        _scatter_rigid(*lub, r_fu)
-    return GrandResistance(r_fu, s_inverse, x_ab, chol_bb, lub, pairs, plan, positions, radii)
+    dense = None if lub is None else lubrication_partitions(lub, len(positions))
+    r_fu = s_inverse.copy() if dense is None else s_inverse + dense[0]
+    return GrandResistance(r_fu, s_inverse, x_ab, chol_bb, lub, dense, pairs, plan, positions, radii)
 
 
 def far_field_blocks(mob):
