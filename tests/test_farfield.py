@@ -176,6 +176,28 @@ def test_pair_search_finds_exactly_the_images_within_reach(box, count, reach_abs
         assert np.all(np.diff(i * count + j) >= 0)
 
 
+@pytest.mark.parametrize("box, count", [([5.0, 4.0, 6.0], 7), ([16.0, 14.0, 15.0], 60)])
+def test_pairs_within_a_longer_search_are_the_shorter_search(box, count):
+    """pairs_within (a longer pair list filtered) gives exactly find_pairs' list at the
+    shorter reach, in its order, on both search paths (by translations, by cell list):
+    one search serves the Ewald sums and the lubrication."""
+    from sdmpi.hydro.geometry import find_pairs, pairs_within
+
+    rng = np.random.default_rng(8)
+    box = np.array(box)
+    for strain in (0.0, 0.45, -0.3):
+        lat = Lattice(box, strain)
+        pos = lat.wrap(rng.uniform(0, 1, (count, 3)) * box)
+        radii = rng.uniform(0.5, 1.0, count)
+        long = find_pairs(pos, radii, lat, 4.5, 0.0)
+        for reach_abs, reach_rel in ((3.0, 0.0), (0.0, 2.0)):
+            want = find_pairs(pos, radii, lat, reach_abs, reach_rel)
+            got = pairs_within(long, pos, radii, reach_abs, reach_rel)
+            assert len(want[0]) > count // 2
+            for a, b in zip(got, want):
+                assert np.array_equal(a, b)
+
+
 @pytest.mark.parametrize("phi", [0.1, 0.45])
 def test_pair_room_covers_a_suspension(phi):
     """find_pairs sizes its outputs by the mean count of pair images within reach

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.special import gamma as gamma_function
 
 from .basis import BASIS
-from .geometry import Lattice, find_pairs
+from .geometry import Lattice, find_pairs, pairs_within
 from .workspace import work_array
 
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
@@ -934,8 +934,11 @@ class RadialGrid:
         return cls(cls.START, h, values)
 
 
-def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=None):
-    """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid)."""
+def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=None, candidates=None):
+    """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid).
+    candidates: a periodic plan for the same positions and lattice; where its real-space
+    cut-off covers this plan's, its images are filtered (`geometry.pairs_within`) instead
+    of searched again."""
     if lattice is None:
         images = find_pairs(positions, radii, None, np.inf, 0.0)
         return FarFieldPlan(None, images, np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros((3, 3)),
@@ -943,7 +946,10 @@ def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=Non
                             RadialGrid.build(0.0, 0.0, tol),
                             {a: self_mobility(a) for a in np.unique(radii)}, np.inf)
     par = EwaldParameters.choose(lattice, tol=tol, xi=xi)
-    images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
+    if candidates is not None and candidates.params is not None and candidates.params.rcut >= par.rcut:
+        images = pairs_within(candidates.images, positions, radii, par.rcut, 0.0)
+    else:
+        images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
     # the grid reaches past r_c for the small displacements a plan is reused for
     grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
     return FarFieldPlan(par, images, *lattice.wave_vectors(par.kcut), lattice.wave_basis, _cached_radial_table(par.xi),
@@ -962,13 +968,14 @@ CHANGE_TOL_MAX = 1e-4
 CHANGE_XI_FACTOR = 1.3
 
 
-def plan_far_field_change(positions, radii, lattice, tol=DEFAULT_EWALD_TOL):
+def plan_far_field_change(positions, radii, lattice, tol=DEFAULT_EWALD_TOL, candidates=None):
     """The FarFieldPlan of `far_field_change` about (wrapped) positions for a mobility of
     Ewald tolerance tol: tolerance min(CHANGE_TOL_FACTOR tol, CHANGE_TOL_MAX), splitting
-    parameter CHANGE_XI_FACTOR times the assembly's choice."""
+    parameter CHANGE_XI_FACTOR times the assembly's choice; candidates as in
+    `plan_far_field` (e.g. the assembly's plan)."""
     tol = min(CHANGE_TOL_FACTOR * tol, CHANGE_TOL_MAX)
     xi = None if lattice is None else CHANGE_XI_FACTOR * EwaldParameters.choose(lattice, tol).xi
-    return plan_far_field(positions, radii, lattice, tol, xi)
+    return plan_far_field(positions, radii, lattice, tol, xi, candidates)
 
 
 def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD_TOL, xi=None, plan=None):

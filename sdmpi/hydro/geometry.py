@@ -242,6 +242,17 @@ def _expected_pairs(n, lattice, reach):
     return int(1.1 * mean) + 16 * n
 
 
+def pairs_within(images, positions, radii, reach_abs, reach_rel):
+    """The images (i, j, shift) of a `find_pairs` list of a larger reach (same positions and
+    lattice) that lie within reach_abs + reach_rel (a_i + a_j), in their order: a second
+    pair search at a shorter reach without scanning again."""
+    i, j, shift = images
+    d = positions[j] + shift - positions[i]
+    reach = reach_abs + reach_rel * (radii[i] + radii[j])
+    keep = np.einsum("pc,pc->p", d, d) < reach * reach
+    return i[keep], j[keep], shift[keep]
+
+
 def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
     """Pairs (i <= j) and lattice images within reach_abs + reach_rel (a_i + a_j):
     arrays i, j and shift vectors (so that the separation is x_j + shift - x_i), ordered

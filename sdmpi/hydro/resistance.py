@@ -31,7 +31,7 @@ from scipy.linalg import blas, lapack
 
 from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, far_field_mobility, plan_far_field,
                        plan_far_field_change)
-from .geometry import Lattice, find_pairs
+from .geometry import Lattice, find_pairs, pairs_within
 from .krylov import DenseFarField, far_field_operator
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
                           lubrication_change, lubrication_sparse)
@@ -267,13 +267,24 @@ def check_overlaps(pairs, radii, max_overlap):
                          f"{depth[p]:.3g} mean radii (allowed: up to {max_overlap})")
 
 
-def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap, max_overlap, plan):
-    """(lattice, positions, close pairs, plan) of `grand_resistance` and `split_resistance`."""
+def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap, max_overlap, plan,
+                    far_field=False, ewald_tol=DEFAULT_EWALD_TOL):
+    """(lattice, positions, close pairs, plan) of `grand_resistance` and `split_resistance`;
+    far_field: a new plan gets its far-field plan too (tolerance ewald_tol), whose
+    real-space images then serve the lubrication pairs where they reach far enough (one
+    pair search)."""
     lattice = None if box is None else Lattice(box, strain)
     if plan is None:
         pos = positions if lattice is None else lattice.wrap(positions)
-        near = find_pairs(pos, radii, lattice, 0.0, 1.0 + 0.5 * cutoff) if lubrication else None
-        plan = HydroPlan(None, near)
+        far = plan_far_field(pos, radii, lattice, ewald_tol) if far_field else None
+        near = None
+        if lubrication:
+            reach = 1.0 + 0.5 * cutoff
+            if far is not None and far.params is not None and far.params.rcut >= 2 * reach * radii.max():
+                near = pairs_within(far.images, pos, radii, 0.0, reach)
+            else:
+                near = find_pairs(pos, radii, lattice, 0.0, reach)
+        plan = HydroPlan(far, near)
     else:
         pos = positions
     if plan.near_images is None:  # without lubrication: overlapping pairs only
@@ -294,7 +305,7 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     ValueError for deeper overlaps before the expensive work."""
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
-                                                min_gap, max_overlap, plan)
+                                                min_gap, max_overlap, plan, far_field=True, ewald_tol=ewald_tol)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
@@ -348,7 +359,7 @@ def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
     if base.plan.change is None:
-        base.plan.change = plan_far_field_change(base.positions, base.radii, lattice, ewald_tol)
+        base.plan.change = plan_far_field_change(base.positions, base.radii, lattice, ewald_tol, base.plan.far)
     out = -base.far_inverse_product(far_field_change(base.positions, moved, base.radii, base.plan.change, far_v))
     if base.plan.near_images is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
