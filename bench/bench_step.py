@@ -55,7 +55,7 @@ def time_steps(n, blocks, steps_per_block, spd):
             "cpu_ms_per_step": float(step_cpu), "cpu_cholesky_ms": float(chol_cpu),
             "cholesky_equivalents": float(step_cpu / chol_cpu),
             "steps": blocks * steps_per_block, "dt": task.dt, "phi": task.phi,
-            "ewald_tolerance": job.hydrodynamics.ewald_tolerance, "backend": getattr(real.model, "backend", None)}
+            "ewald_tolerance": job.ewald_tolerance, "backend": getattr(real.model, "backend", None)}
 
 
 def main():

@@ -73,7 +73,7 @@ def main():
             ref_drift, ref_stress = exact_difference(at, z, KT_REDUCED)
             drift, stress = linearised(at, z, KT_REDUCED)
             at.resistance.plan.change = farfield.plan_far_field(  # the change at the mobility's tolerance
-                at.positions, model.radii, Lattice(box, args.strain), job.hydrodynamics.ewald_tolerance,
+                at.positions, model.radii, Lattice(box, args.strain), job.ewald_tolerance,
                 at.resistance.plan.far.params.xi)
             tight_drift, tight_stress = linearised(at, z, KT_REDUCED)
             at.resistance.plan.change = None
@@ -83,7 +83,7 @@ def main():
                 sums[f"{key}_far_tolerance"] += [np.sum((got - tight) ** 2), np.sum(ref ** 2)]
         print(f"config {c + 1}/{args.configs}", flush=True)
     result = {"job": JOB, "n_particles": n, "phi": phi, "strain": args.strain, "configs": args.configs,
-              "samples_per_config": args.samples, "ewald_tolerance": job.hydrodynamics.ewald_tolerance,
+              "samples_per_config": args.samples, "ewald_tolerance": job.ewald_tolerance,
               "relative_rms": {k: float(math.sqrt(v[0] / v[1])) for k, v in sums.items()}}
     print(json.dumps(result["relative_rms"], indent=2))
     with open(args.out, "w") as fh:

@@ -83,7 +83,10 @@ def test_empty_file_gives_the_documented_defaults():
     assert job.ensemble.realisations == 7 and job.ensemble.ranks_per_task == 1
     assert job.solver.backend == "dense"
     h = job.hydrodynamics
-    assert (h.ewald_tolerance, h.lubrication_cutoff, h.min_gap) == (1e-6, 2.0, 1e-4)
+    assert (h.ewald_tolerance, h.lubrication_cutoff, h.min_gap) == (None, 2.0, 1e-4)
+    # absent: the Brownian default (this job is Brownian), 1e-6 for deterministic jobs
+    assert job.ewald_tolerance == 1e-4
+    assert dataclasses.replace(job, brownian=dataclasses.replace(job.brownian, enabled=False)).ewald_tolerance == 1e-6
     assert job.output.per_particle is False and job.output.checkpoint_every == 1000
     assert job.time_unit == "t_D"
 

@@ -210,7 +210,8 @@ def test_free_draining_and_far_field_models_at_a_configuration():
     e5 = np.ones((3, 5))
     assert np.allclose(fd.stresslets(u, e5), (20 / 3) * np.pi * radii[:, None] ** 3 * e5)
     assert len(fd.pairs.i) > 0  # the close pair 0-1 is in the force list
-    job = _job("hydrodynamics.model='far-field'", "system.n_particles=8", "system.phi=[0.3]",
+    job = _job("hydrodynamics.model='far-field'", "hydrodynamics.ewald_tolerance=1e-6",  # solve_mobility's
+               "system.n_particles=8", "system.phi=[0.3]",
                "interparticle.kind='repulsion'", "interparticle.f0=1.0", "interparticle.tau=300.0",
                "integration.periods=1", "integration.discard_periods=0", "integration.steps_per_period=8")
     far = hydrodynamic_model(job, radii, box).at(pos, 0.1)

@@ -30,6 +30,12 @@ START_PHI_LIMIT = 0.6
 #: Monte Carlo sweeps of a generated start: enough to melt the simple cubic lattice start
 #: (its Bragg peak decays to the fluid's structure factor) up to phi = 0.5 with margin
 START_SWEEPS = 5000
+#: hydrodynamics.ewald_tolerance when absent: Brownian jobs, whose operators change by less
+#: than 1e-4 of themselves between 1e-6 and 1e-4 (systematic part < 8e-5: R_FU^-1, drift,
+#: Brownian stresslets, eta_H; docs/performance.md), far below any stress average's
+#: sampling error; deterministic jobs, compared with exact and published numbers
+BROWNIAN_EWALD_TOLERANCE = 1e-4
+EWALD_TOLERANCE = 1e-6
 
 
 def lattice_sites_per_axis(n: int) -> int:
@@ -515,8 +521,11 @@ class Hydrodynamics:
                      "lubrication (Stokesian dynamics), far-field = the periodic far-field "
                      "(Rotne-Prager-level FTS) mobility alone, free-draining = none (Stokes drag "
                      "of isolated spheres)", allowed=Choice(("stokesian", "far-field", "free-draining")))
-    ewald_tolerance: float = key(1e-6, "float", "relative accuracy of the Ewald sums",
-                                 allowed=Range(0.0, 1e-2, lo_open=True))
+    ewald_tolerance: float | None = key(None, "float", "relative accuracy of the Ewald sums; "
+                                        "absent: 1e-4 for Brownian jobs "
+                                        "(their operators change by < 1e-4 of themselves, "
+                                        "docs/performance.md), else 1e-6",
+                                        allowed=Range(0.0, 1e-2, lo_open=True), optional=True)
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
     lubrication_cutoff: float = key(2.0, "float", "gap below which lubrication is added",
                                     unit="mean radii", allowed=Range(0.0, 10.0, lo_open=True))
@@ -623,6 +632,14 @@ class Job:
     physical: Physical = field(default_factory=Physical)
 
     # ---- derived quantities (one place for the time-step arithmetic)
+
+    @property
+    def ewald_tolerance(self) -> float:
+        """hydrodynamics.ewald_tolerance, or its default for this job (Brownian or not)."""
+        tol = self.hydrodynamics.ewald_tolerance
+        if tol is not None:
+            return tol
+        return BROWNIAN_EWALD_TOLERANCE if self.brownian.enabled else EWALD_TOLERANCE
 
     @property
     def time_unit(self) -> str:

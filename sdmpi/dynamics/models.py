@@ -359,7 +359,7 @@ def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None)
     if hyd.model == "free-draining":
         return FreeDrainingModel(radii, box, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)
     return ResistanceModel(radii, box, lubrication=hyd.model == "stokesian" and hyd.lubrication,
-                           ewald_tol=hyd.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
+                           ewald_tol=job.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
                            backend=job.solver.backend, far_field=job.solver.far_field, comm=comm,
                            tolerance=job.solver.tolerance, lanczos_tolerance=job.solver.lanczos_tolerance,
                            scheme=job.brownian.scheme, separate=separate, on_error=on_error)
