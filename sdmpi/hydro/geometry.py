@@ -246,11 +246,33 @@ def pairs_within(images, positions, radii, reach_abs, reach_rel):
     """The images (i, j, shift) of a `find_pairs` list of a larger reach (same positions and
     lattice) that lie within reach_abs + reach_rel (a_i + a_j), in their order: a second
     pair search at a shorter reach without scanning again."""
-    i, j, shift = images
-    d = positions[j] + shift - positions[i]
-    reach = reach_abs + reach_rel * (radii[i] + radii[j])
-    keep = np.einsum("pc,pc->p", d, d) < reach * reach
-    return i[keep], j[keep], shift[keep]
+    return _within(np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(radii, dtype=float),
+                   *images, float(reach_abs), float(reach_rel))
+
+
+@numba.njit(cache=True)
+def _within(pos, radii, pi, pj, shift, reach_abs, reach_rel):
+    """The images p with |x_j + shift - x_i| < reach_abs + reach_rel (a_i + a_j), in order:
+    (i, j, shift) arrays."""
+    keep = np.empty(pi.shape[0], dtype=np.bool_)
+    count = 0
+    for p in range(pi.shape[0]):
+        i, j = pi[p], pj[p]
+        r2 = 0.0
+        for c in range(3):
+            d = pos[j, c] + shift[p, c] - pos[i, c]
+            r2 += d * d
+        reach = reach_abs + reach_rel * (radii[i] + radii[j])
+        keep[p] = r2 < reach * reach
+        count += keep[p]
+    out_i, out_j, out_s = np.empty(count, np.int64), np.empty(count, np.int64), np.empty((count, 3))
+    q = 0
+    for p in range(pi.shape[0]):
+        if keep[p]:
+            out_i[q], out_j[q] = pi[p], pj[p]
+            out_s[q, 0], out_s[q, 1], out_s[q, 2] = shift[p, 0], shift[p, 1], shift[p, 2]
+            q += 1
+    return out_i, out_j, out_s
 
 
 def find_pairs(positions, radii, lattice, reach_abs, reach_rel):

@@ -1,0 +1,93 @@
+"""Benchmark: where the CPU time of a Brownian SD step goes, part by part.
+
+The setting of `bench/bench_step.py` (jobs/schaink2000_newtonian.toml, phi = 0.45, one
+rank, BLAS on one thread). Each part's functions are wrapped by a timer (process CPU time
+around each call; the wrappers cost ~1 us a call) and one realisation is stepped; a part's
+share is its time over the time of the steps, "the rest" is what no part claims (the
+integrator, the overlap and near-contact corrections, the Brownian noise, small solves and
+products, Python glue). Writes bench/step_shares.json.
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/step_shares.py
+"""
+
+import argparse
+import json
+import time
+
+from sdmpi.config import enumerate_tasks, load_job
+from sdmpi.dynamics import Realisation
+from sdmpi.hydro import farfield, resistance, solvers
+
+JOB = "jobs/schaink2000_newtonian.toml"
+
+#: part -> (module, function name) pairs whose calls it owns (disjoint call trees)
+PARTS = {
+    "Ewald real-space sum": [(farfield, "_real_space_sum")],
+    "Ewald reciprocal sum (phases, wave tensors, BLAS)": [(farfield, "_reciprocal_sum")],
+    "far-field plans (pair search, wave vectors)": [(farfield, "plan_far_field"), (resistance, "plan_far_field")],
+    "inverse of M_inf (Schur complement, potrf + potri)": [(resistance, "far_field_blocks")],
+    "lubrication blocks and their dense partitions": [(resistance, "all_pair_blocks"),
+                                                      (resistance, "lubrication_partitions")],
+    "far-field change of the random finite difference": [(resistance, "far_field_change")],
+    "lubrication change of the random finite difference": [(resistance, "lubrication_change")],
+    "Cholesky of R_FU": [(solvers.DenseSolver, "__init__")],
+    "solves and products with R": [(solvers.DenseSolver, "velocities"), (solvers.DenseSolver, "stresslets"),
+                                   (solvers.DenseSolver, "brownian_velocities")],
+}
+
+
+def instrument(totals):
+    """Wrap every part's functions so that their CPU time is added to totals[part]."""
+    for part, targets in PARTS.items():
+        totals[part] = 0.0
+        for owner, name in targets:
+            original = getattr(owner, name)
+
+            def timed(*args, _original=original, _part=part, **kwargs):
+                t0 = time.process_time()
+                try:
+                    return _original(*args, **kwargs)
+                finally:
+                    totals[_part] += time.process_time() - t0
+
+            setattr(owner, name, timed)
+
+
+def shares(n, steps, totals):
+    """The parts' shares of the CPU time of `steps` steps at N = n (totals: the
+    instrumented parts' accumulators)."""
+    job = load_job(JOB, overrides=[f"system.n_particles={n}"])
+    real = Realisation(job, enumerate_tasks(job)[0])
+    real.advance(3)  # warm-up
+    for part in totals:
+        totals[part] = 0.0
+    t0 = time.process_time()
+    real.advance(steps)
+    total = time.process_time() - t0
+    out = {part: t / total for part, t in totals.items()}
+    out["the rest (integrator, corrections, noise, glue)"] = 1.0 - sum(out.values())
+    return {"cpu_ms_per_step": 1e3 * total / steps, "steps": steps, "shares": out}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[27, 125])
+    ap.add_argument("--out", default="bench/step_shares.json")
+    args = ap.parse_args()
+    results = {"command": "python bench/step_shares.py", "job": JOB,
+               "date": time.strftime("%Y-%m-%d", time.gmtime()), "sizes": {}}
+    totals = {}
+    instrument(totals)
+    for n in args.sizes:
+        results["sizes"][str(n)] = shares(n, max(10, int(300 * (27 / n) ** 2)), totals)
+    for n, r in results["sizes"].items():
+        print(f"N = {n}: {r['cpu_ms_per_step']:.2f} ms per step")
+        for part, share in r["shares"].items():
+            print(f"  {100 * share:5.1f}%  {part}")
+    with open(args.out, "w") as fh:
+        json.dump(results, fh, indent=2)
+    print(f"written {args.out}")
+
+
+if __name__ == "__main__":
+    main()
