@@ -198,6 +198,23 @@ def test_pairs_within_a_longer_search_are_the_shorter_search(box, count):
                 assert np.array_equal(a, b)
 
 
+def test_wave_phases_are_the_cosines_and_sines_of_k_x():
+    """wave_phases (products of per-axis phases) against cos and sin of k.x directly, on
+    sheared lattices of unequal sides: equal to rounding (|k.x| up to ~50, so ~1e-14)."""
+    from sdmpi.hydro.farfield import plan_far_field, wave_phases
+
+    rng = np.random.default_rng(4)
+    box = np.array([6.0, 5.0, 7.0])
+    for strain in (0.0, 0.37, -0.5):
+        lat = Lattice(box, strain)
+        pos = lat.wrap(rng.uniform(0, 1, (20, 3)) * box)
+        plan = plan_far_field(pos, np.ones(20), lat, 1e-6)
+        assert np.allclose(plan.wave_index @ plan.wave_basis, plan.kvec, rtol=0, atol=1e-13)
+        cos, sin = wave_phases(pos, plan)
+        phase = pos @ plan.kvec.T
+        assert np.abs(cos - np.cos(phase)).max() < 1e-13 and np.abs(sin - np.sin(phase)).max() < 1e-13
+
+
 @pytest.mark.parametrize("phi", [0.1, 0.45])
 def test_pair_room_covers_a_suspension(phi):
     """find_pairs sizes its outputs by the mean count of pair images within reach

@@ -167,3 +167,24 @@ def test_block_form_equals_the_inverse_of_the_whole_far_field(lubrication):
     full = (ref @ v.ravel()).reshape(8, 11)
     assert np.abs(rigid - full[:, :6]).max() < 1e-10 * np.abs(full).max()
     assert np.abs(strain - full[:, 6:]).max() < 1e-10 * np.abs(full).max()
+
+
+def test_row_products_equal_the_matrix_rows():
+    """GrandResistance.product for each choice of rows, and with a vector that is zero on
+    the rigid-body dofs (strain_only), against the rows of the whole R (the lubrication's
+    dense partitions and the far field's block form both enter)."""
+    from sdmpi.dynamics.initial import hard_sphere_fluid
+
+    pos, side = hard_sphere_fluid(8, 0.4, np.random.default_rng(9), strain=0.3)
+    res = grand_resistance(pos, np.ones(8), np.full(3, side), 0.3)
+    assert res.lubrication is not None
+    matrix = res.matrix
+    v = np.random.default_rng(10).standard_normal((8, 11))
+    strain_v = v.copy()
+    strain_v[:, :6] = 0.0
+    for vec, strain_only in ((v, False), (strain_v, True)):
+        full = (matrix @ vec.ravel()).reshape(8, 11)
+        scale = np.abs(full).max()
+        for rows, cols in ((None, slice(0, 11)), ("rigid", slice(0, 6)), ("strain", slice(6, 11))):
+            got = res.product(vec, rows, strain_only)
+            assert np.abs(got - full[:, cols]).max() < 1e-10 * scale, (rows, strain_only)
