@@ -102,7 +102,7 @@ def test_not_positive_definite_is_a_linalg_error():
     from sdmpi.hydro.solvers import make_solver
 
     res = grand_resistance(np.array([[0.0, 0, 0], [3.0, 0, 0]]), np.ones(2))
-    res.r_fu[0, 0] = -1.0
+    res.s_inverse[0, 0] = -10.0  # R_FU = S^-1 + L_FU then has a negative diagonal entry
     with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
         make_solver("petsc-dense", res)
 

@@ -36,7 +36,7 @@ def test_dense_job_too_big_for_memory(job_file, tmp_path, capsys):
     big = ["--set", "system.n_particles=125000"]
     assert main(["validate", str(job_file), *big]) == 0  # may run elsewhere: a warning
     out = capsys.readouterr().out
-    assert "memory: about 41.3 TiB per rank" in out  # 3 (11 N)^2 doubles + 300 MiB
+    assert "memory: about 55 TiB per rank" in out  # 4 (11 N)^2 doubles + 300 MiB
     assert "WARNING: system.n_particles = 125000: the job needs about" in out
     res = ens.sdmpi("run", job_file, "-o", tmp_path / "run.h5", *big)
     assert res.returncode == 2 and "system.n_particles = 125000" in res.stderr, res.stderr
@@ -46,7 +46,7 @@ def test_dense_job_too_big_for_memory(job_file, tmp_path, capsys):
 
 def test_free_draining_needs_no_dense_matrices(job_file):
     """Free draining solves nothing: a 125000-sphere job needs the base memory and its
-    start's cell list, not the 41 TiB of a dense one."""
+    start's cell list, not the 55 TiB of a dense one."""
     job = load_job(job_file, overrides=["system.n_particles=125000", 'hydrodynamics.model="free-draining"'])
     assert resources.memory_per_rank(job, "dense") < 2 ** 30
 

@@ -134,12 +134,22 @@ def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
         _resolve_table(table, cls, section, st, st.context[section])
         if section == "physical":
             _apply_physical(raw, st)
-    job = Job(**{s: cls(**st.context[s]) for s, cls in SECTIONS})
+    job = _with_derived_defaults(Job(**{s: cls(**st.context[s]) for s, cls in SECTIONS}))
     for deps, check in CROSS_CHECKS:
         if not any(d in st.invalid or d.split(".")[0] in st.invalid for d in deps):
             problems.extend(check(job))
     problems[:] = [_mark_derived(p, st.derived) for p in problems]
     return job
+
+
+def _with_derived_defaults(job: Job) -> Job:
+    """The job with the keys whose default depends on other keys filled in, so that its
+    canonical text states the value used: hydrodynamics.ewald_tolerance
+    (`Job.ewald_tolerance`: Brownian or not)."""
+    hyd = job.hydrodynamics
+    if hyd.ewald_tolerance is not None:
+        return job
+    return dataclasses.replace(job, hydrodynamics=dataclasses.replace(hyd, ewald_tolerance=job.ewald_tolerance))
 
 
 def _resolve_table(table, cls, prefix, st: _Pass, out: dict) -> dict:

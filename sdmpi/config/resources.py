@@ -27,7 +27,11 @@ import shutil
 from .problems import Problem
 from .tasks import enumerate_tasks
 
-DENSE_MATRICES = 3          # 11N x 11N matrices alive at once (peak of a dense solve)
+# 11N x 11N matrices alive at once, rounded up (a dense evaluation holds 218 N^2 doubles:
+# S^-1, X, U_b, the lubrication's dense partitions and R_FU's factor; assembling one
+# peaks at 242 N^2; the midpoint scheme holds one evaluation while it assembles another:
+# 460 N^2 = 3.8 (11N)^2)
+DENSE_MATRICES = 4
 BASE_BYTES = 300 * 2 ** 20  # interpreter, libraries, compiled kernels
 MEMORY_SHARE = 0.9          # of the available memory that a run may plan to use
 MAX_CELL_BYTES = 2 ** 30    # largest start cell list accepted on any machine

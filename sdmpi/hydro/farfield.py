@@ -37,7 +37,7 @@ import numpy as np
 from scipy.special import gamma as gamma_function
 
 from .basis import BASIS
-from .geometry import Lattice, find_pairs, pairs_within
+from .geometry import Lattice, find_pairs, pairs_in_reach
 from .workspace import work_array
 
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
@@ -899,6 +899,11 @@ class FarFieldPlan:
     volume: float
     wave_terms: tuple | None = None  # (radii, their `_wave_terms`), built on first use
 
+    @property
+    def real_space_reach(self):
+        """(images, r_c) of a periodic plan, for `geometry.pairs_in_reach` (None: unbounded)."""
+        return None if self.params is None else (self.images, self.params.rcut)
+
 
 @functools.lru_cache(maxsize=16)
 def _cached_radial_table(xi):
@@ -937,7 +942,7 @@ class RadialGrid:
 def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=None, candidates=None):
     """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid).
     candidates: a periodic plan for the same positions and lattice; where its real-space
-    cut-off covers this plan's, its images are filtered (`geometry.pairs_within`) instead
+    cut-off covers this plan's, its images are filtered (`geometry.pairs_in_reach`) instead
     of searched again."""
     if lattice is None:
         images = find_pairs(positions, radii, None, np.inf, 0.0)
@@ -946,10 +951,8 @@ def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=Non
                             RadialGrid.build(0.0, 0.0, tol),
                             {a: self_mobility(a) for a in np.unique(radii)}, np.inf)
     par = EwaldParameters.choose(lattice, tol=tol, xi=xi)
-    if candidates is not None and candidates.params is not None and candidates.params.rcut >= par.rcut:
-        images = pairs_within(candidates.images, positions, radii, par.rcut, 0.0)
-    else:
-        images = find_pairs(positions, radii, lattice, par.rcut, 0.0)
+    images = pairs_in_reach(positions, radii, lattice, par.rcut, 0.0,
+                            None if candidates is None else candidates.real_space_reach)
     # the grid reaches past r_c for the small displacements a plan is reused for
     grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
     return FarFieldPlan(par, images, *lattice.wave_vectors(par.kcut), lattice.wave_basis, _cached_radial_table(par.xi),

@@ -242,6 +242,15 @@ def _expected_pairs(n, lattice, reach):
     return int(1.1 * mean) + 16 * n
 
 
+def pairs_in_reach(positions, radii, lattice, reach_abs, reach_rel, candidates=None):
+    """`find_pairs`, or, when candidates = (images, reach) holds a `find_pairs` list of
+    these positions and lattice to an absolute reach covering this one, that list filtered
+    (`pairs_within`): one search serves several reaches."""
+    if candidates is not None and candidates[1] >= reach_abs + 2.0 * reach_rel * float(np.max(radii)):
+        return pairs_within(candidates[0], positions, radii, reach_abs, reach_rel)
+    return find_pairs(positions, radii, lattice, reach_abs, reach_rel)
+
+
 def pairs_within(images, positions, radii, reach_abs, reach_rel):
     """The images (i, j, shift) of a `find_pairs` list of a larger reach (same positions and
     lattice) that lie within reach_abs + reach_rel (a_i + a_j), in their order: a second

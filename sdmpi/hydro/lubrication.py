@@ -84,13 +84,19 @@ class PairList:
         return float(self.gap.min()) if len(self.gap) else np.inf
 
 
+def lubrication_reach(cutoff):
+    """The pair search's relative reach for a gap cut-off (mean radii): centres closer than
+    (1 + cutoff/2) (a_i + a_j)."""
+    return 1.0 + 0.5 * cutoff
+
+
 def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP, images=None):
     """All pairs (with periodic images when a lattice is given) within the cut-off, or
     the given images (i, j, shift) re-evaluated at these positions (so that a slightly
     displaced configuration keeps the same pair set). Separations are regularised to the
     minimum gap and counted."""
     if images is None:
-        images = find_pairs(positions, radii, lattice, 0.0, 1.0 + 0.5 * cutoff)
+        images = find_pairs(positions, radii, lattice, 0.0, lubrication_reach(cutoff))
     i, j, shift = images
     if len(i) == 0:
         return PairList(i, j, np.zeros((0, 3)), shift, np.zeros(0), 0, np.zeros(0))

@@ -180,7 +180,7 @@ class PetscDenseSolver:
         dense = PETSc.Mat().createDense([m, m], comm=self.comm)
         dense.setUp()
         r0, r1 = dense.getOwnershipRange()
-        rows = resistance.r_fu[r0:r1]  # R_FU in this rank's rows
+        rows = resistance.r_fu_rows(r0, r1)  # R_FU in this rank's rows
         dense.getDenseArray()[:] = rows
         dense.assemble()
         factor = dense.convert("scalapack")  # in place (petsc4py: no `out`)

@@ -31,10 +31,10 @@ from scipy.linalg import blas, lapack
 
 from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, far_field_mobility, plan_far_field,
                        plan_far_field_change)
-from .geometry import Lattice, find_pairs, pairs_within
+from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
-                          lubrication_change, lubrication_sparse)
+                          lubrication_change, lubrication_reach, lubrication_sparse)
 
 
 @dataclass
@@ -49,14 +49,14 @@ class HydroPlan:
 @dataclass
 class GrandResistance:
     """R = M_inf^-1 + L at one configuration, in the block form of the module docstring:
-    R_FU = S^-1 + L_FU (6N x 6N, dofs particle by particle), S^-1 = [M^-1]_aa, the upper
+    S^-1 = [M^-1]_aa (6N x 6N, dofs particle by particle; R_FU = S^-1 + L_FU is formed when
+    asked for, `r_fu_rows`), the upper
     Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b) and X = M_ab U_b^-1 (6N x 5N,
     Fortran-ordered); the lubrication as its pair blocks (pair_i, pair_j, blocks (P, 22,
     22)) and as dense partitions (L_FU, L_FE, L_SE) (`lubrication_partitions`); its close
     pairs, the plan it was built with, the (wrapped) positions it was built at and the
     radii."""
 
-    r_fu: np.ndarray
     s_inverse: np.ndarray
     x_ab: np.ndarray
     chol_bb: np.ndarray
@@ -73,6 +73,19 @@ class GrandResistance:
     @property
     def n_particles(self):
         return self.positions.shape[0]
+
+    def r_fu_rows(self, start=0, stop=None):
+        """Rows start:stop of R_FU = S^-1 + L_FU (a fresh C-ordered array; all 6N rows by
+        default)."""
+        rows = slice(start, stop)
+        if self.lubrication_dense is None:
+            return self.s_inverse[rows].copy()
+        return self.s_inverse[rows] + self.lubrication_dense[0][rows]
+
+    @property
+    def r_fu(self):
+        """R_FU = S^-1 + L_FU (6N x 6N, a fresh array)."""
+        return self.r_fu_rows()
 
     def far_inverse_product(self, v, rows=None):
         """M_inf^-1 v (N, 11) for v (N, 11): with z = U_b^-T v_b, y_a = S^-1 (v_a - X z)
@@ -151,10 +164,10 @@ class GrandResistance:
         inv_ab = -self.s_inverse @ x.T
         inv_bb = _chol_solve(self.chol_bb, np.eye(5 * n)) + x @ self.s_inverse @ x.T
         if self.lubrication_dense is None:
-            return self.r_fu.copy(), inv_ab, inv_ab.T, inv_bb
+            return self.r_fu, inv_ab, inv_ab.T, inv_bb
         _, l_fe, l_se = self.lubrication_dense
         r_fe = inv_ab + l_fe
-        return self.r_fu.copy(), r_fe, r_fe.T, inv_bb + l_se
+        return self.r_fu, r_fe, r_fe.T, inv_bb + l_se
 
     @property
     def matrix(self):
@@ -279,11 +292,8 @@ def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap,
         far = plan_far_field(pos, radii, lattice, ewald_tol) if far_field else None
         near = None
         if lubrication:
-            reach = 1.0 + 0.5 * cutoff
-            if far is not None and far.params is not None and far.params.rcut >= 2 * reach * radii.max():
-                near = pairs_within(far.images, pos, radii, 0.0, reach)
-            else:
-                near = find_pairs(pos, radii, lattice, 0.0, reach)
+            near = pairs_in_reach(pos, radii, lattice, 0.0, lubrication_reach(cutoff),
+                                  None if far is None else far.real_space_reach)
         plan = HydroPlan(far, near)
     else:
         pos = positions
@@ -323,11 +333,10 @@ def lubrication_blocks(radii, pairs):
 
 def from_blocks(far, lub, pairs, plan, positions, radii):
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
-    lubrication blocks lub (`lubrication_blocks`, None: none): R_FU = S^-1 + L_FU."""
+    lubrication blocks lub (`lubrication_blocks`, None: none)."""
     s_inverse, x_ab, chol_bb = far
     dense = None if lub is None else lubrication_partitions(lub, len(positions))
-    r_fu = s_inverse.copy() if dense is None else s_inverse + dense[0]
-    return GrandResistance(r_fu, s_inverse, x_ab, chol_bb, lub, dense, pairs, plan, positions, radii)
+    return GrandResistance(s_inverse, x_ab, chol_bb, lub, dense, pairs, plan, positions, radii)
 
 
 def far_field_blocks(mob):

@@ -34,8 +34,8 @@ AUTO_KRYLOV_MIN_N = 300
 
 
 class DenseSolver:
-    """Cholesky factorisation of R_FU (LAPACK potrf/potrs via scipy, on a copy of the
-    resistance's R_FU, finite by construction); R_FE, R_SU, R_SE act through the
+    """Cholesky factorisation of R_FU (LAPACK potrf/potrs via scipy, in the memory of the
+    resistance's freshly formed R_FU, finite by construction); R_FE, R_SU, R_SE act through the
     resistance's block form (`resistance.GrandResistance`)."""
 
     name = "dense"
@@ -43,9 +43,9 @@ class DenseSolver:
     def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
         self.resistance = resistance
         self.n = resistance.n_particles
-        # R_FU is symmetric: the transpose of a C-ordered copy is it in Fortran order; its
-        # upper factor U (R_FU = U^T U) overwrites it, and U.T is the lower factor C
-        upper, info = lapack.dpotrf(resistance.r_fu.copy().T, lower=False, clean=True, overwrite_a=True)
+        # R_FU is symmetric: the transpose of the (fresh, C-ordered) r_fu is it in Fortran
+        # order; its upper factor U (R_FU = U^T U) overwrites it, and U.T is the lower factor C
+        upper, info = lapack.dpotrf(resistance.r_fu.T, lower=False, clean=True, overwrite_a=True)
         if info != 0:
             raise np.linalg.LinAlgError(f"R_FU is not positive definite (potrf info {info})")
         self._upper = upper
