@@ -522,9 +522,9 @@ class Hydrodynamics:
                      "(Rotne-Prager-level FTS) mobility alone, free-draining = none (Stokes drag "
                      "of isolated spheres)", allowed=Choice(("stokesian", "far-field", "free-draining")))
     ewald_tolerance: float | None = key(None, "float", "relative accuracy of the Ewald sums; "
-                                        "absent: 1e-4 for Brownian jobs "
-                                        "(their operators change by < 1e-4 of themselves, "
-                                        "docs/performance.md), else 1e-6",
+                                        f"absent: {_num(BROWNIAN_EWALD_TOLERANCE)} for Brownian "
+                                        "jobs (their operators change by < 1e-4 of themselves, "
+                                        f"docs/performance.md), else {_num(EWALD_TOLERANCE)}",
                                         allowed=Range(0.0, 1e-2, lo_open=True), optional=True)
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
     lubrication_cutoff: float = key(2.0, "float", "gap below which lubrication is added",
