@@ -635,14 +635,17 @@ def _wave_tensors(b, cos_entries, sin_entries, ksq, scale, a2, row_c, tcos, tsin
     the wave vectors' b (`_wave_amplitudes`); with a2 >= 0 (all radii equal, a^2) times the
     radius factors f_r(a) f_c(a), f = 1 - row_c a^2 |k|^2 (ksq), of the entry's row and
     column."""
+    factor = np.empty(row_c.shape[0])
     for kk in range(b.shape[0]):
+        for a in range(row_c.shape[0]):
+            factor[a] = 1 - row_c[a] * a2 * ksq[kk]
         for half in range(2):
             entries, out = (cos_entries, tcos) if half == 0 else (sin_entries, tsin)
             for e in range(entries.shape[0]):
                 r, c = entries[e, 0], entries[e, 1]
                 val = (b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]) * scale
                 if a2 >= 0.0:
-                    val *= (1 - row_c[r] * a2 * ksq[kk]) * (1 - row_c[c] * a2 * ksq[kk])
+                    val *= factor[r] * factor[c]
                 out[kk, e] = val
 
 

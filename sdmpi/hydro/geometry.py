@@ -31,12 +31,13 @@ class Lattice:
 
     def __init__(self, box, strain=0.0):
         box = check_box(box)
-        if not np.isfinite(strain):
+        strain = float(strain)
+        if not math.isfinite(strain):
             raise ValueError(f"strain must be finite, got {strain}")
-        lx, ly, lz = box
+        lx, ly, lz = box.tolist()
         period = lx / ly
         self.box = box
-        self.strain = float(strain) - np.round(float(strain) / period) * period
+        self.strain = strain - round(strain / period) * period  # round half to even
         #: rows are the lattice vectors L1, L2, L3
         self.vectors = np.array([[lx, 0.0, 0.0], [self.strain * ly, ly, 0.0], [0.0, 0.0, lz]])
         #: rows b_i with b_i . L_j = delta_ij (reciprocal vectors without the 2 pi)
