@@ -1,14 +1,17 @@
 """Benchmark: ms per Brownian SD step of one realisation, in Cholesky equivalents.
 
 The seed study's setting (jobs/schaink2000_newtonian.toml: phi = 0.45, dt = 5e-4 t_D,
-Brownian, oscillatory shear, dense solver, ewald_tolerance 1e-4, and again at 1e-6 in
-"single_ewald_1e-6"), one rank, BLAS on one
-thread (the Makefile pins it), for N = 27, 64, 125. A step includes both hydrodynamic
-evaluations of the midpoint scheme, the overlap correction, the drift and the Brownian
-stresslets (`Realisation.advance`). Each size is timed in blocks of steps interleaved
-with blocks of one 297 x 297 LAPACK Cholesky (dpotrf) in the same process; the medians
-of their CPU times give "Cholesky-equivalents per step", a figure that carries across
-machines and loads (wall-clock ms are recorded too; on an idle machine they agree).
+Brownian, oscillatory shear, dense solver, the rfd drift scheme, ewald_tolerance 1e-4,
+and again at 1e-6 in "single_ewald_1e-6"), one rank, BLAS on one thread (the Makefile
+pins it), for N = 8, 27, 64, 125 (N = 8 is mostly the part of a step that does not grow
+with N: the interpreter's and numpy's per-call work, which is what stepping realisations
+in lockstep could share). A step includes its hydrodynamic evaluation, the resistance
+change of the random finite difference, the overlap and near-contact corrections, the
+drift and the Brownian stresslets (`Realisation.advance`). Each size is timed in blocks
+of steps interleaved with blocks of one 297 x 297 LAPACK Cholesky (dpotrf) in the same
+process; the medians of their CPU times give "Cholesky-equivalents per step", a figure
+that holds up under other load and carries roughly across machines (wall-clock ms are
+recorded too; on an idle machine they agree).
 Writes bench/step.json.
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/bench_step.py
@@ -61,14 +64,14 @@ def time_steps(n, blocks, steps_per_block, spd, overrides=()):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sizes", type=int, nargs="+", default=[27, 64, 125])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[8, 27, 64, 125])
     ap.add_argument("--blocks", type=int, default=7)
     ap.add_argument("--seconds", type=float, default=3.0, help="rough stepping time per block and size")
     ap.add_argument("--out", default="bench/step.json")
     args = ap.parse_args()
     a = np.random.default_rng(0).standard_normal((297, 297))
     spd = a @ a.T + 297 * np.eye(297)
-    guess_ms = {27: 7.0, 64: 45.0, 125: 150.0}
+    guess_ms = {8: 2.5, 27: 7.0, 64: 45.0, 125: 150.0}
     results = {"command": "make bench (python bench/bench_step.py)", "job": JOB,
                "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
                "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),

@@ -28,7 +28,7 @@ PARTS = {
     "inverse of M_inf (Schur complement, potrf + potri)": [(resistance, "far_field_blocks")],
     "lubrication blocks and their dense partitions": [(resistance, "all_pair_blocks"),
                                                       (resistance, "lubrication_partitions")],
-    "far-field change of the random finite difference": [(resistance, "far_field_change")],
+    "far-field change of the random finite difference": [(resistance, "far_field_product")],
     "lubrication change of the random finite difference": [(resistance, "lubrication_change")],
     "Cholesky of R_FU": [(solvers.DenseSolver, "__init__")],
     "solves and products with R": [(solvers.DenseSolver, "velocities"), (solvers.DenseSolver, "stresslets"),

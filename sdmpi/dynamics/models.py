@@ -49,7 +49,8 @@ dx = [... + kT div R_FU^-1] dt + sqrt(2 kT dt) R_FU^-1/2 dW:
   RFD_STEP min_gap) of the 16 digits: ~6 remain relative to the drift at min_gap = 1e-4.
   The displaced configuration is not assembled, inverted and factorised again: with
   R(x + epsilon m) = R + Delta R and Delta R (m, 0) from `hydro.resistance.resistance_change`
-  (the far-field change by its own Ewald sums, the lubrication pair by pair), both
+  (the far-field change as M_inf(x + epsilon m) applied to one vector by the Ewald sums of
+  x's own plan, the lubrication pair by pair), both
   differences are taken to first order in Delta R,
 
       R_FU^-1(x + epsilon m) F - m                ~ dm = -R_FU^-1 (Delta R_FU m),
@@ -57,8 +58,7 @@ dx = [... + kT div R_FU^-1] dt + sqrt(2 kT dt) R_FU^-1/2 dW:
 
   The terms dropped are quadratic in Delta R, so cubic in z: zero mean, and the mean is
   still the divergence to O(epsilon^2); per sample they are ~2e-4 of the drift at N = 27,
-  phi = 0.45, and the far-field change's looser Ewald tolerance (`farfield.
-  plan_far_field_change`) adds ~5e-5 (bench/rfd_accuracy.py, docs/performance.md).
+  phi = 0.45 (bench/rfd_accuracy.py, docs/performance.md).
 * ``midpoint``: Fixman's midpoint scheme as used for SD by Banchio & Brady, J. Chem. Phys.
   118, 10323 (2003): x* = x + (dt/2) R_FU^-1(x) F_B, then R_FU^-1(x*) F_B, whose mean is
   kT div R_FU^-1 to O(dt); the Brownian stresslet -[(R_SU R_FU^-1)(x*) - (R_SU R_FU^-1)(x)] F_B.
@@ -291,8 +291,7 @@ class ResistanceModel:
     def resistance_change(self, evaluation, positions, vector):
         """[R(positions) - R] v (N, 11) about the configuration of `evaluation`, to first
         order (`hydro.resistance.resistance_change`)."""
-        return resistance_change(evaluation.resistance, positions, vector, Lattice(self.box, evaluation.strain),
-                                 self._hydro["ewald_tol"], self.min_gap)
+        return resistance_change(evaluation.resistance, positions, vector, self.min_gap)
 
     def displaced(self, evaluation, positions, separate):
         """The solver at displaced positions with the pair sets of `evaluation` (and its

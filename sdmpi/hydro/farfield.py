@@ -378,42 +378,36 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
 
 
 @numba.njit(cache=True)
-def _real_space_change(pos, moved, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, w, out):
-    """Adds [M_r(moved) - M_r(pos)] w into out (N, 11): the change of the real-space sum of
-    `_real_space_sum` (same images) between two configurations, applied to w (N, 11),
-    block by block (no matrix is formed)."""
+def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, w, out):
+    """Adds M_r w into out (N, 11) for w (N, 11): the real-space sum of `_real_space_sum`
+    (same images, same radial values) applied to a vector block by block, no matrix formed:
+    each image block B adds B w_j to particle i and B^T w_i to particle j (a self-image,
+    i = j, both: its +-n pair). Consecutive images of one pair are summed first."""
     bounds = _power_bounds(table)
     pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
     v = np.empty((4, 5))
-    new, old = np.zeros((NDOF, NDOF)), np.zeros((NDOF, NDOF))
+    block = np.zeros((NDOF, NDOF))
     rvec = np.empty(3)
     n_img = pi.shape[0]
     for p in range(n_img):
         i, j = pi[p], pj[p]
         for c in range(3):
-            rvec[c] = moved[i, c] - moved[j, c] - shift[p, c]
-        r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
-        _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
-        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, new)
-        for c in range(3):
             rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
         r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
         _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
-        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, old)
+        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, block)
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
-        for a in range(NDOF):  # M_ij += D, M_ji += D^T with D = new - old
+        for a in range(NDOF):  # (M w)_i += B w_j, (M w)_j += B^T w_i
             acc_i = 0.0
             for b in range(NDOF):
-                d = new[a, b] - old[a, b]
-                acc_i += d * w[j, b]
-                out[j, b] += d * w[i, a]
+                acc_i += block[a, b] * w[j, b]
+                out[j, b] += block[a, b] * w[i, a]
             out[i, a] += acc_i
-        new[:, :] = 0.0
-        old[:, :] = 0.0
+        block[:, :] = 0.0
 
 
-# Elementwise loops over the (t, k) pairs of `_reciprocal_change`, one output and at most
+# Elementwise loops over the (t, k) pairs of `_reciprocal_product`, one output and at most
 # four inputs each: LLVM vectorises a loop only when its runtime check that the arrays do
 # not overlap stays small.
 
@@ -461,27 +455,27 @@ def _bracket_row(c, g, s, h, out):
 
 
 @numba.njit(cache=True, inline="never")
-def _scaled_difference_row(scale, f, x, y, out):
-    """out = scale f (x - y) elementwise."""
+def _scaled_row(scale, f, x, out):
+    """out = scale f x elementwise."""
     for m in range(out.shape[0]):
-        out[m] = scale * f[m] * (x[m] - y[m])
+        out[m] = scale * f[m] * x[m]
 
 
 @numba.njit(cache=True)
-def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, ksq, scale, w, out):
-    """Adds the reciprocal part of [M_k(moved) - M_k(pos)] w into out (N, 11), w (N, 11).
-    Arrays run over the M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector
-    k, m = t n_k + k: b (11, M) the wave amplitudes b_a(k) q_t (`_wave_amplitudes`); the
-    cosines and sines of k.x_j (cos_old, ... (N, n_k)) and |k|^2 (ksq (n_k,)) serve both t.
-    With raw (3, N, M) = sum over the U, Omega and E rows a of b_a(m) w_ja for each particle
-    j and f_a(a_j) = 1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows, 0 on Omega, 1/10 on E), the
-    sums P_c,s = sum_j (c_j, s_j) f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E)
+def _reciprocal_product(cos, sin, radii, b, ksq, scale, w, out):
+    """Adds the reciprocal part of M_k w into out (N, 11) for w (N, 11). Arrays run over the
+    M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector k, m = t n_k + k:
+    b (11, M) the wave amplitudes b_a(k) q_t (`_wave_amplitudes`); the cosines and sines of
+    k.x_j (cos, sin (N, n_k)) and |k|^2 (ksq (n_k,)) serve both t. With raw (3, N, M) =
+    sum over the U, Omega and E rows a of b_a(m) w_ja for each particle j and f_a(a_j) =
+    1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows, 0 on Omega, 1/10 on E), the sums
+    P_c,s = sum_j (c_j, s_j) f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E)
     give (M w)_ia = scale f_a(a_i) b_a(m) [c_i (P_c - Q_s) + s_i (P_s + Q_c)] on the U rows
     and scale f_a(a_i) b_a(m) [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the others, summed over
-    m, scale = 2/V; the brackets' change between the two configurations is taken per m.
-    O(N n_k) operations, no pair loop: every loop over m is contiguous (vectorised), and the
+    m, scale = 2/V (the pair form of `_reciprocal_sum` summed over j first). O(N n_k)
+    operations, no pair loop: every loop over m is contiguous (vectorised), and the
     projections onto b and the sums over m are BLAS products."""
-    n, nk = cos_old.shape
+    n, nk = cos.shape
     nm = 2 * nk
     k6, k10 = np.empty(nm), np.empty(nm)
     for m in range(nm):
@@ -493,68 +487,66 @@ def _reciprocal_change(cos_old, sin_old, cos_new, sin_new, radii, b, ksq, scale,
         raw[part] = np.dot(np.ascontiguousarray(w[:, lo:hi]), b[lo:hi])
     f_u, f_e = np.empty((n, nm)), np.empty((n, nm))
     proj_u, proj_o = np.empty(nm), np.empty(nm)
-    sums = np.zeros((8, nm))  # P_c, P_s, Q_c, Q_s at the moved configuration, then at the start
+    sums = np.zeros((4, nm))  # P_c, P_s, Q_c, Q_s
     for j in range(n):
         a2 = radii[j] * radii[j]
         _faxen_row(a2, k6, f_u[j])
         _faxen_row(a2, k10, f_e[j])
         _product_row(f_u[j], raw[0, j], proj_u)
         _add_product_row(raw[1, j], f_e[j], raw[2, j], proj_o)
-        for side in range(2):
-            c, s = (cos_new[j], sin_new[j]) if side == 0 else (cos_old[j], sin_old[j])
-            for t in range(2):
-                h = slice(t * nk, (t + 1) * nk)
-                _accumulate_row(sums[4 * side + 0, h], c, proj_u[h])
-                _accumulate_row(sums[4 * side + 1, h], s, proj_u[h])
-                _accumulate_row(sums[4 * side + 2, h], c, proj_o[h])
-                _accumulate_row(sums[4 * side + 3, h], s, proj_o[h])
-    # per side: P_c - Q_s, P_s + Q_c (U rows), Q_c + P_s, Q_s - P_c (Omega, E rows)
-    g = np.empty((8, nm))
-    for side in range(2):
-        pc, ps, qc, qs = sums[4 * side], sums[4 * side + 1], sums[4 * side + 2], sums[4 * side + 3]
-        _combine_row(pc, -1.0, qs, g[4 * side])
-        _combine_row(ps, 1.0, qc, g[4 * side + 1])
-        _combine_row(qc, 1.0, ps, g[4 * side + 2])
-        _combine_row(qs, -1.0, pc, g[4 * side + 3])
+        for t in range(2):
+            h = slice(t * nk, (t + 1) * nk)
+            _accumulate_row(sums[0, h], cos[j], proj_u[h])
+            _accumulate_row(sums[1, h], sin[j], proj_u[h])
+            _accumulate_row(sums[2, h], cos[j], proj_o[h])
+            _accumulate_row(sums[3, h], sin[j], proj_o[h])
+    # P_c - Q_s, P_s + Q_c (U rows), Q_c + P_s, Q_s - P_c (Omega, E rows)
+    g = np.empty((4, nm))
+    _combine_row(sums[0], -1.0, sums[3], g[0])
+    _combine_row(sums[1], 1.0, sums[2], g[1])
+    _combine_row(sums[2], 1.0, sums[1], g[2])
+    _combine_row(sums[3], -1.0, sums[0], g[3])
     d = np.empty((3, n, nm))
-    u_new, u_old, o_new, o_old = np.empty(nm), np.empty(nm), np.empty(nm), np.empty(nm)
+    u, o = np.empty(nm), np.empty(nm)
     for i in range(n):
         for t in range(2):
             h = slice(t * nk, (t + 1) * nk)
-            _bracket_row(cos_new[i], g[0, h], sin_new[i], g[1, h], u_new[h])
-            _bracket_row(cos_old[i], g[4, h], sin_old[i], g[5, h], u_old[h])
-            _bracket_row(cos_new[i], g[2, h], sin_new[i], g[3, h], o_new[h])
-            _bracket_row(cos_old[i], g[6, h], sin_old[i], g[7, h], o_old[h])
-        _scaled_difference_row(scale, f_u[i], u_new, u_old, d[0, i])
-        _scaled_difference_row(scale, f_e[i], o_new, o_old, d[2, i])
+            _bracket_row(cos[i], g[0, h], sin[i], g[1, h], u[h])
+            _bracket_row(cos[i], g[2, h], sin[i], g[3, h], o[h])
+        _scaled_row(scale, f_u[i], u, d[0, i])
+        _scaled_row(scale, f_e[i], o, d[2, i])
         for m in range(nm):
-            d[1, i, m] = scale * (o_new[m] - o_old[m])
+            d[1, i, m] = scale * o[m]
     for part in range(3):
         lo, hi = rows[part]
         out[:, lo:hi] += np.dot(d[part], np.ascontiguousarray(b[lo:hi].T))
 
 
-def far_field_change(positions, moved, radii, plan, w):
-    """[M_inf(moved) - M_inf(positions)] w (N, 11) for w (N, 11): the change of the far-field
-    mobility between two configurations with the pair images and wave vectors of the plan
-    (from `plan_far_field` at positions; moved a small displacement of it), applied to one
-    vector without forming either matrix. The self blocks do not change. Each sum is
-    evaluated at both configurations with the same terms, so the difference carries the
-    Ewald truncation error of the plan relative to itself (~tol of the change)."""
+def far_field_product(positions, radii, plan, w):
+    """M_inf w (N, 11) for w (N, 11) at the positions (used as given), with the pair images
+    and wave vectors of the plan (`plan_far_field`, made at these or nearby positions),
+    without forming M_inf: the real-space images block by block (`_real_space_product`),
+    the reciprocal sum in O(N n_k) (`_reciprocal_product`) and the self blocks. Equal to
+    `far_field_mobility(positions, radii, plan=plan) @ w` up to rounding; at positions
+    displaced from the plan's by a small step it carries the same truncation, so that its
+    difference to M_inf w at the plan's positions is the change of M_inf to ~tol of the
+    change (the random finite difference of `resistance.resistance_change`)."""
     pos = np.ascontiguousarray(positions, dtype=float)
-    moved = np.ascontiguousarray(moved, dtype=float)
     radii = np.ascontiguousarray(radii, dtype=float)
     w = np.ascontiguousarray(w, dtype=float)
     out = np.zeros_like(w)
     xi = 0.0 if plan.params is None else plan.params.xi
     grid = plan.grid
-    _real_space_change(pos, moved, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
+    _real_space_product(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
     if plan.params is not None:
         # the pairs m = (normal direction t, wave vector k), t-major
         amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
         b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
-        _reciprocal_change(*wave_phases(pos, plan), *wave_phases(moved, plan), radii, b,
-                           np.einsum("ij,ij->i", plan.kvec, plan.kvec), 2.0 / plan.volume, w, out)
+        _reciprocal_product(*wave_phases(pos, plan), radii, b, np.einsum("ij,ij->i", plan.kvec, plan.kvec),
+                            2.0 / plan.volume, w, out)
+    for a, block in plan.self_blocks.items():  # diagonal 11x11 blocks
+        rows = radii == a
+        out[rows] += w[rows] * np.diagonal(block)
     return out
 
 
@@ -871,11 +863,14 @@ class EwaldParameters:
     kcut: float
 
     @classmethod
-    def choose(cls, lattice, tol=DEFAULT_EWALD_TOL, xi=None, cost_ratio=25.0):
+    def choose(cls, lattice, tol=DEFAULT_EWALD_TOL, xi=None, cost_ratio=45.0):
         """Parameters for relative accuracy tol. Unless given, xi balances the
         real-space cost (pairs within r_c ~ N^2 r_c^3 / V, each a numba kernel) against
         the reciprocal cost (N^2 k_c^3 V, each a BLAS rank update); cost_ratio is the
-        measured ratio of one kernel evaluation to one rank-update element."""
+        ratio of the two per term, measured on a Brownian step, where the real-space
+        images serve the assembly and a matrix-free product (`far_field_product`): at
+        N = 27 and 64 a step is ~7% faster at 45 than at 25 (the optimum of the assembly
+        alone, which is flat over 25-45)."""
         s = _truncation_parameter(tol)
         if xi is None:
             xi = (2 * math.pi ** 3 * cost_ratio) ** (1 / 6) / lattice.volume ** (1 / 3)
@@ -960,28 +955,6 @@ def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=Non
     grid = RadialGrid.build(par.xi, par.rcut + 1.0, tol)
     return FarFieldPlan(par, images, *lattice.wave_vectors(par.kcut), lattice.wave_basis, _cached_radial_table(par.xi),
                         grid, {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
-
-
-#: the far-field change (`far_field_change`) of a random finite difference is summed to this
-#: many times the Ewald tolerance of the mobility (at most CHANGE_TOL_MAX): it is a ~2% part
-#: of the Brownian drift (the many-body far field; lubrication carries the rest), so its
-#: relative error enters the drift ~50 times smaller (docs/numerics.md)
-CHANGE_TOL_FACTOR = 100.0
-CHANGE_TOL_MAX = 1e-4
-#: its splitting parameter, relative to `EwaldParameters.choose`'s: the change costs two
-#: real-space kernels per image but only O(N) operations per wave vector, so fewer images
-#: and more wave vectors than the assembly's balance are cheaper (measured optimum 1.3)
-CHANGE_XI_FACTOR = 1.3
-
-
-def plan_far_field_change(positions, radii, lattice, tol=DEFAULT_EWALD_TOL, candidates=None):
-    """The FarFieldPlan of `far_field_change` about (wrapped) positions for a mobility of
-    Ewald tolerance tol: tolerance min(CHANGE_TOL_FACTOR tol, CHANGE_TOL_MAX), splitting
-    parameter CHANGE_XI_FACTOR times the assembly's choice; candidates as in
-    `plan_far_field` (e.g. the assembly's plan)."""
-    tol = min(CHANGE_TOL_FACTOR * tol, CHANGE_TOL_MAX)
-    xi = None if lattice is None else CHANGE_XI_FACTOR * EwaldParameters.choose(lattice, tol).xi
-    return plan_far_field(positions, radii, lattice, tol, xi, candidates)
 
 
 def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD_TOL, xi=None, plan=None):

@@ -29,8 +29,7 @@ import numpy as np
 import scipy.sparse
 from scipy.linalg import blas, lapack
 
-from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_change, far_field_mobility, plan_far_field,
-                       plan_far_field_change)
+from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, far_field_product, plan_far_field
 from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
@@ -43,7 +42,6 @@ class HydroPlan:
 
     far: FarFieldPlan | None  # built on first use
     near_images: tuple | None  # (i, j, shift) of the lubrication pairs, None: no lubrication
-    change: FarFieldPlan | None = None  # the sums of `resistance_change`, built on first use
 
 
 @dataclass
@@ -353,23 +351,23 @@ def far_field_blocks(mob):
     return _spd_inverse_of_upper(schur).T, x, chol_bb
 
 
-def resistance_change(base, moved, vector, lattice, ewald_tol, min_gap):
+def resistance_change(base, moved, vector, min_gap):
     """[R(moved) - R(base)] v (N, 11) for one vector v (N, 11), to first order in the
     displacement moved - base.positions (small, e.g. a random finite difference), with the
     pair sets of base (its plan) and without assembling or inverting anything at moved:
 
-        Delta R v = -M^-1 [Delta M_inf (M^-1 v)] + L(moved) v - L(base) v,
+        Delta R v = -M^-1 [M_inf(moved) w - v] + L(moved) v - L(base) v,   w = M^-1 v,
 
-    M^-1 from base's block form, Delta M_inf w by `farfield.far_field_change` (on its own
-    plan, `plan_far_field_change` for a mobility of tolerance ewald_tol, in the lattice of
-    base's strain), L(moved) v - L(base) v pair by pair (`lubrication.lubrication_change`,
-    separations floored at min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M
-    M^-1 v, is second order in the displacement."""
+    M^-1 from base's block form (so M_inf w = v, to the solve's residual, ~1e-9 of the
+    change at a displacement of 1e-5), M_inf(moved) w by `farfield.far_field_product` with
+    base's far-field plan (the same images and wave vectors as base's M_inf, so that the
+    difference carries the Ewald truncation of the change, not of M_inf), L(moved) v -
+    L(base) v pair by pair (`lubrication.lubrication_change`, separations floored at
+    min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M M^-1 v, is
+    second order in the displacement."""
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
-    if base.plan.change is None:
-        base.plan.change = plan_far_field_change(base.positions, base.radii, lattice, ewald_tol, base.plan.far)
-    out = -base.far_inverse_product(far_field_change(base.positions, moved, base.radii, base.plan.change, far_v))
+    out = -base.far_inverse_product(far_field_product(moved, base.radii, base.plan.far, far_v) - vector)
     if base.plan.near_images is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
         if base.lubrication is not None:
