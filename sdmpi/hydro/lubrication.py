@@ -21,7 +21,7 @@ tensors of d), with 44 scalars D(s; lam) in the Jeffrey-Onishi normalisation (sc
 invariant). Per distinct size ratio lam = a_small/a_big (<= 1; a pair is ordered small
 sphere second, i.e. its particles swapped and dx negated when a1 > a2) they are computed
 once by the exact path (pair_resistance minus the inverted 22x22 far-field pair mobility)
-at d = e_z and projected onto the 44 tensor patterns of `two_sphere._fill_pair_work`,
+at d = e_z and projected onto the 44 tensor patterns of `two_sphere._fill_pair_columns`,
 on the uniform grid u_k = k h, h = 1/64, of u = log(xi), xi = s - 2, as
 xi/(1 + xi) D (the factor removes the 1/xi lubrication singularity; the log terms become
 smooth in u). Lookup: 8-point Lagrange interpolation in u. The table covers
@@ -50,7 +50,7 @@ import scipy.sparse
 from .basis import BASIS
 from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
 from .geometry import find_pairs
-from .two_sphere import _basis5, _fill_pair_columns, _fill_pair_work, pair_resistance
+from .two_sphere import FILL_SCRATCH, _fill_pair_columns, pair_resistance
 from .workspace import work_array
 
 #: default lubrication cut-off: gap in units of the pair's mean radius
@@ -355,7 +355,7 @@ def all_pair_blocks(radii, pairs, keep_setup=False):
 
 @numba.njit(cache=True)
 def _tables_cover(dx, a1, a2, tab, k_lo, n_rows):
-    """Whether every pair's interpolation (`_interpolated_block`) at separations dx reads
+    """Whether every pair's interpolation (`_interpolate`) at separations dx reads
     rows inside its table (no clamp; one row of margin) and has a gap in the tables'
     range."""
     half = _TAB_NPT // 2
@@ -456,20 +456,20 @@ def _lagrange_denominators(npt):
     return np.array([np.prod([m - l for l in nodes if l != m]) for m in nodes], dtype=float)
 
 
-_TAB_DENOM = _lagrange_denominators(_TAB_NPT)
+#: 1 / the denominators of the Lagrange weights
+_TAB_INV_DENOM = 1.0 / _lagrange_denominators(_TAB_NPT)
 
 
 def _tensor_patterns(lam):
-    """(44, 484): the 22x22 matrix of `_fill_pair_work` at d = e_z, a1 = 1, a2 = lam for
-    each unit scalar (block b, function f) -> row 11 b + f."""
-    bm = _basis5()
+    """(44, 484): the 22x22 matrix of `two_sphere._fill_pair_columns` at d = e_z, a1 = 1,
+    a2 = lam for each unit scalar (block b, function f) -> row 11 b + f."""
     d = np.array([0.0, 0.0, 1.0])
     pat = np.zeros((4 * NDOF, 2 * NDOF, 2 * NDOF))
-    work = np.empty((8, 5, 5))
+    work = np.empty(FILL_SCRATCH)
     for k in range(4 * NDOF):
         sc = np.zeros((4, NDOF))
         sc.flat[k] = 1.0
-        _fill_pair_work(d, 1.0, lam, sc, bm, pat[k], work)
+        _fill_pair_columns(d, 1.0, lam, sc, pat[k], work, False)
     return pat.reshape(4 * NDOF, -1)
 
 
@@ -609,22 +609,21 @@ def _grid_range(xi):
 
 @numba.njit(cache=True)
 def _tabulated_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, res):
-    """res[p] = R_2B - R_2B,inf of every pair (`_interpolated_block`)."""
-    bm = _basis5()
+    """res[p] = R_2B - R_2B,inf of every pair (`_interpolate`, `two_sphere._fill_pair_columns`)."""
     sc = np.empty((4, NDOF))
     w = np.empty(_TAB_NPT)
     d = np.empty(3)
-    work = np.empty((8, 5, 5))
+    work = np.empty(FILL_SCRATCH)
     for p in range(dx.shape[0]):
-        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res[p])
+        _interpolate(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d)
+        _fill_pair_columns(d, a1[p], a2[p], sc, res[p], work, False)
 
 
 @numba.njit(cache=True, inline="always")
-def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res,
-                        rigid_columns=False):
-    """res (22, 22) = R_2B - R_2B,inf of pair p (interpolated scalars sc (4, 11) with the
-    Lagrange weights w (npt,) and unit vector d (3,) as scratch, `_fill_pair_work` tensors;
-    rigid_columns: only the rigid-body columns, `two_sphere._fill_pair_columns`)."""
+def _interpolate(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d):
+    """The scalars sc (4, 11) of R_2B - R_2B,inf of pair p, by Lagrange interpolation in its
+    table, and the unit vector d (3,) of its separation; w (npt,): scratch for the weights
+    (times the factor (1 + xi)/xi that undoes the table's scaling)."""
     npt = _TAB_NPT
     half = npt // 2
     r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
@@ -638,23 +637,22 @@ def _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d
     # clamp (never active when the table covers the pair, see _TableStore.lookup)
     k = min(max(k, k_lo[t] + half - 1), k_lo[t] + n_rows[t] - half - 1)
     frac = x - k
+    unscale = (1.0 + xi) / xi
     for m in range(npt):
-        acc = 1.0
+        acc = _TAB_INV_DENOM[m] * unscale
         for l in range(npt):
             if l != m:
                 acc *= frac - (l - half + 1)
-        w[m] = acc / _TAB_DENOM[m]
+        w[m] = acc
     row = offset[t] + k - k_lo[t] - half + 1
-    unscale = (1.0 + xi) / xi
-    flat = sc.ravel()  # (44,): the scalars, accumulated over the points in ascending order
-    flat[:] = 0.0
-    for m in range(npt):
-        wm = w[m]
-        for col in range(4 * NDOF):
-            flat[col] += wm * data[row + m, col]
-    for col in range(4 * NDOF):
-        flat[col] *= unscale
-    _fill_pair_columns(d, a1[p], a2[p], sc, bm, res, work, rigid_columns)
+    # the _TAB_NPT = 8 weights as scalars, each scalar one sum over the points (kept in registers)
+    w0, w1, w2, w3, w4, w5, w6, w7 = w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]
+    for b in range(4):
+        for f in range(NDOF):
+            col = NDOF * b + f
+            sc[b, f] = (w0 * data[row, col] + w1 * data[row + 1, col] + w2 * data[row + 2, col]
+                        + w3 * data[row + 3, col] + w4 * data[row + 4, col] + w5 * data[row + 5, col]
+                        + w6 * data[row + 6, col] + w7 * data[row + 7, col])
 
 
 @numba.njit(cache=True)
@@ -662,15 +660,15 @@ def _tabulated_change_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj
     """out[(i, j)] += (res_p - old[p]) (v_i, v_j) for every pair p = (pi[p], pj[p]), res_p
     its block R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory);
     rigid_columns: v is zero on the strain dofs (their columns are neither formed nor used)."""
-    bm = _basis5()
     sc = np.empty((4, NDOF))
     w = np.empty(_TAB_NPT)
     d = np.empty(3)
-    work = np.empty((8, 5, 5))
+    work = np.empty(FILL_SCRATCH)
     res = np.empty((2 * NDOF, 2 * NDOF))
     ncol = 6 if rigid_columns else NDOF
     for p in range(dx.shape[0]):
-        _interpolated_block(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d, bm, work, res, rigid_columns)
+        _interpolate(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d)
+        _fill_pair_columns(d, a1[p], a2[p], sc, res, work, rigid_columns)
         old_p = old[p]
         i, j = pi[p], pj[p]
         for u in range(2):

@@ -620,165 +620,140 @@ def _scalars_kernel(r, a1, a2, lidx, rem, gg, par, pref):
 
 
 @nb.njit(cache=True)
-def _basis5():
-    bm = np.zeros((5, 3, 3))
-    bm[0, 0, 0] = 1.0 / _SQ2
-    bm[0, 1, 1] = -1.0 / _SQ2
-    bm[1, 0, 0] = -1.0 / _SQ6
-    bm[1, 1, 1] = -1.0 / _SQ6
-    bm[1, 2, 2] = 2.0 / _SQ6
-    bm[2, 0, 1] = 1.0 / _SQ2
-    bm[2, 1, 0] = 1.0 / _SQ2
-    bm[3, 0, 2] = 1.0 / _SQ2
-    bm[3, 2, 0] = 1.0 / _SQ2
-    bm[4, 1, 2] = 1.0 / _SQ2
-    bm[4, 2, 1] = 1.0 / _SQ2
-    return bm
-
-
-def _basis_products():
-    """B^m : B^n (5, 5) of `_basis5`, summed over i then j as `_fill_pair_work` did per pair
-    (the same floating-point values)."""
-    bm = _basis5()
-    out = np.empty((5, 5))
-    for m in range(5):
-        for n in range(5):
-            acc = 0.0
-            for i in range(3):
-                for j in range(3):
-                    acc += float(bm[m, i, j]) * float(bm[n, i, j])
-            out[m, n] = acc
-    return out
-
-
-_BASIS_PRODUCTS = _basis_products()
-
-
-@nb.njit(cache=True)
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@nb.njit(cache=True)
-def _fill_pair(d, a1, a2, sc, bm, R):
-    """Assemble the 22x22 dimensional pair matrix from the scalars sc (4, 11)."""
-    _fill_pair_work(d, a1, a2, sc, bm, R, np.empty((8, 5, 5)))
+#: B^m entries of `basis.BASIS`: 1/sqrt2 and 1/sqrt6
+_R2 = 1.0 / _SQ2
+_R6 = 1.0 / _SQ6
+#: length of the scratch array of `_fill_pair_columns`
+FILL_SCRATCH = 140
 
 
-@nb.njit(cache=True)
-def _fill_pair_work(d, a1, a2, sc, bm, R, pat):
-    """`_fill_pair` with caller-provided scratch pat (8, 5, 5) (no allocation; shared with
-    the tabulated near-field kernel of `lubrication`). The tensors of d are formed once
-    and combined with the scalars of the four blocks. Every entry of R is written (none
-    accumulated), so R needs no zeroing between pairs."""
-    _fill_pair_columns(d, a1, a2, sc, bm, R, pat, False)
-
-
-@nb.njit(cache=True)
-def _fill_pair_columns(d, a1, a2, sc, bm, R, pat, rigid_columns):
-    """`_fill_pair_work`; with rigid_columns only the columns of the rigid-body dofs (U,
-    Omega of either sphere: 0-5, 11-16) are written (for products with vectors that are
-    zero on the strain dofs), the others are left as they were."""
-    # patterns of d: pat[0][k, i] = (e_k x d)_i; G: pat[1] (XG), pat[2] (YG), H: pat[3]
-    # (YH) as [m, k] in the 5-basis; M: pat[4..6][m, n] = B^m : d^(0,1,2) : B^n
-    bv = pat[0]
-    for k in range(3):
-        k1, k2 = (k + 1) % 3, (k + 2) % 3
-        bv[k, k] = 0.0
-        bv[k, k1] = -d[k2]   # (e_k x d)_{k+1} = -d_{k+2}
-        bv[k, k2] = d[k1]    # (e_k x d)_{k+2} = d_{k+1}
-    bd = pat[7]  # bd[m, :3] = B^m d, bd[m, 3] = d.B^m.d, bd[m, 4] = tr B^m
+@nb.njit(cache=True, inline="always")
+def _fill_pair_columns(d, a1, a2, sc, R, pat, rigid_columns):
+    """The 22x22 pair matrix R from the scalars sc (4, 11) and the unit vector d (tensor
+    forms of the module docstring), with caller-provided scratch pat (FILL_SCRATCH,): the
+    tensors of d are formed once, each distinct entry of a block is computed once and
+    written to its mirror positions as well. Every entry is written (none accumulated),
+    so R needs no zeroing between pairs. rigid_columns: only the columns of the
+    rigid-body dofs (U, Omega of either sphere: 0-5, 11-16) are written (for products
+    with vectors that are zero on the strain dofs), the others are left as they were."""
+    d0, d1, d2 = d[0], d[1], d[2]
+    # bd[3 m + i] = (B^m d)_i (basis.BASIS), e[m] = d.B^m.d
+    bd, e = pat[0:15], pat[15:20]
+    bd[0], bd[1], bd[2] = _R2 * d0, -_R2 * d1, 0.0
+    bd[3], bd[4], bd[5] = -_R6 * d0, -_R6 * d1, 2.0 * _R6 * d2
+    bd[6], bd[7], bd[8] = _R2 * d1, _R2 * d0, 0.0
+    bd[9], bd[10], bd[11] = _R2 * d2, 0.0, _R2 * d0
+    bd[12], bd[13], bd[14] = 0.0, _R2 * d2, _R2 * d1
     for m in range(5):
-        acc = 0.0
-        for i in range(3):
-            bd[m, i] = bm[m, i, 0] * d[0] + bm[m, i, 1] * d[1] + bm[m, i, 2] * d[2]
-            acc += d[i] * bd[m, i]
-        bd[m, 3] = acc
-        bd[m, 4] = bm[m, 0, 0] + bm[m, 1, 1] + bm[m, 2, 2]
+        e[m] = d0 * bd[3 * m] + d1 * bd[3 * m + 1] + d2 * bd[3 * m + 2]
+    # [3 m + k] of G = XG p1 + YG p2 and H = YH p3: B^m_ij (d_i d_j - delta_ij/3) d_k,
+    # B^m_ij (d_i delta_jk + d_j delta_ik - 2 d_i d_j d_k), B^m_ij (v_i d_j + v_j d_i) with
+    # v = e_k x d (B^m traceless)
+    p1, p2, p3 = pat[20:35], pat[35:50], pat[50:65]
     for m in range(5):
-        dBd = bd[m, 3]
+        b0, b1, b2 = bd[3 * m], bd[3 * m + 1], bd[3 * m + 2]
         for k in range(3):
-            # sum_ij B^m_ij (d_i d_j - delta_ij/3) d_k ;  sum_ij B^m_ij (d_i e_kj + d_j e_ki - 2 d_i d_j d_k)
-            pat[1, m, k] = (dBd - bd[m, 4] / 3.0) * d[k]
-            pat[2, m, k] = 2.0 * bd[m, k] - 2.0 * dBd * d[k]
-            # sum_ij B^m_ij (v_i d_j + v_j d_i), v = e_k x d
-            pat[3, m, k] = 2.0 * (bv[k, 0] * bd[m, 0] + bv[k, 1] * bd[m, 1] + bv[k, 2] * bd[m, 2])
-        if rigid_columns:
-            continue
-        for n in range(5):
-            bb = _BASIS_PRODUCTS[m, n]  # B^m : B^n of bm = _basis5(), a constant
-            cross = bd[m, 0] * bd[n, 0] + bd[m, 1] * bd[n, 1] + bd[m, 2] * bd[n, 2]
-            dBdn = bd[n, 3]
-            # t0 = 1.5 (d_i d_j - delta_ij/3) dBd_n
-            pat[4, m, n] = 1.5 * (dBd - bd[m, 4] / 3.0) * dBdn
-            # t1 = d_i v_j + d_j v_i - 2 d_i d_j dBd_n, v = B^n d
-            pat[5, m, n] = 2.0 * cross - 2.0 * dBd * dBdn
-            # t2 = B^n_ij + 1/2 delta_ij dBd_n - d_i v_j - d_j v_i + 1/2 d_i d_j dBd_n
-            pat[6, m, n] = bb + 0.5 * bd[m, 4] * dBdn - 2.0 * cross + 0.5 * dBd * dBdn
-    rad = (a1, a2)
+            p1[3 * m + k] = e[m] * d[k]
+            p2[3 * m + k] = 2.0 * (bd[3 * m + k] - e[m] * d[k])
+        p3[3 * m] = 2.0 * (d1 * b2 - d2 * b1)
+        p3[3 * m + 1] = 2.0 * (d2 * b0 - d0 * b2)
+        p3[3 * m + 2] = 2.0 * (d0 * b1 - d1 * b0)
+    # [5 m + n] (m <= n) of M = XM p4 + YM p5 + ZM p6: B^m : d^(0,1,2) : B^n, with
+    # q = (d.B^m.d)(d.B^n.d), c = (B^m d).(B^n d) and B^m : B^n = delta_mn
+    p4, p5, p6 = pat[65:90], pat[90:115], pat[115:140]
+    if not rigid_columns:
+        for m in range(5):
+            for n in range(m, 5):
+                q = e[m] * e[n]
+                c = bd[3 * m] * bd[3 * n] + bd[3 * m + 1] * bd[3 * n + 1] + bd[3 * m + 2] * bd[3 * n + 2]
+                p4[5 * m + n] = 1.5 * q
+                p5[5 * m + n] = 2.0 * (c - q)
+                p6[5 * m + n] = (1.0 if m == n else 0.0) - 2.0 * c + 0.5 * q
+    dd00, dd11, dd22 = d0 * d0, d1 * d1, d2 * d2
+    dd01, dd02, dd12 = d0 * d1, d0 * d2, d1 * d2
     for ia in range(2):
         for ib in range(2):
             blk = 2 * ia + ib
-            asum = rad[ia] + rad[ib]
+            asum = (a1 if ia == 0 else a2) + (a1 if ib == 0 else a2)
             pA = 3.0 * math.pi * asum
-            pB = math.pi * asum * asum
-            pC = math.pi * asum ** 3
-            pG = math.pi * asum * asum
-            pH = math.pi * asum ** 3
-            pM = 5.0 / 6.0 * math.pi * asum ** 3
-            XA = pA * sc[blk, 0]
-            YA = pA * sc[blk, 1]
+            pB = math.pi * asum * asum  # B and G
+            pC = pB * asum  # C and H
+            pM = 5.0 / 6.0 * pC
+            r0 = 11 * ia
+            c0 = 11 * ib
+            # A (offset 0) and C (offset 3): X d_i d_j + Y (delta_ij - d_i d_j)
+            for o, X, Y in ((0, pA * sc[blk, 0], pA * sc[blk, 1]), (3, pC * sc[blk, 3], pC * sc[blk, 4])):
+                Z = X - Y
+                v01, v02, v12 = Z * dd01, Z * dd02, Z * dd12
+                R[r0 + o, c0 + o] = Y + Z * dd00
+                R[r0 + o, c0 + o + 1] = v01
+                R[r0 + o, c0 + o + 2] = v02
+                R[r0 + o + 1, c0 + o] = v01
+                R[r0 + o + 1, c0 + o + 1] = Y + Z * dd11
+                R[r0 + o + 1, c0 + o + 2] = v12
+                R[r0 + o + 2, c0 + o] = v02
+                R[r0 + o + 2, c0 + o + 1] = v12
+                R[r0 + o + 2, c0 + o + 2] = Y + Z * dd22
+            # B^{ab}: L_a = B U_b = YB (U x d), (r0 + 3 + i, c0 + k) = YB (e_k x d)_i; Bt^{ba} = (B^{ab})^T
             YB = pB * sc[blk, 2]
-            XC = pC * sc[blk, 3]
-            YC = pC * sc[blk, 4]
-            XG = pG * sc[blk, 5]
-            YG = pG * sc[blk, 6]
-            YH = pH * sc[blk, 7]
+            b0, b1, b2 = YB * d0, YB * d1, YB * d2
+            R[r0 + 3, c0] = 0.0
+            R[r0 + 3, c0 + 1] = b2
+            R[r0 + 3, c0 + 2] = -b1
+            R[r0 + 4, c0] = -b2
+            R[r0 + 4, c0 + 1] = 0.0
+            R[r0 + 4, c0 + 2] = b0
+            R[r0 + 5, c0] = b1
+            R[r0 + 5, c0 + 1] = -b0
+            R[r0 + 5, c0 + 2] = 0.0
+            R[c0, r0 + 3] = 0.0
+            R[c0, r0 + 4] = -b2
+            R[c0, r0 + 5] = b1
+            R[c0 + 1, r0 + 3] = b2
+            R[c0 + 1, r0 + 4] = 0.0
+            R[c0 + 1, r0 + 5] = -b0
+            R[c0 + 2, r0 + 3] = -b1
+            R[c0 + 2, r0 + 4] = b0
+            R[c0 + 2, r0 + 5] = 0.0
+            # G^{ab}: S_a = G U_b ; H^{ab}: S_a = H Omega_b ; transposes for Gt, Ht
+            XG = pB * sc[blk, 5]
+            YG = pB * sc[blk, 6]
+            YH = pC * sc[blk, 7]
+            for m in range(5):
+                for k in range(3):
+                    g = XG * p1[3 * m + k] + YG * p2[3 * m + k]
+                    h = YH * p3[3 * m + k]
+                    R[r0 + 6 + m, c0 + k] = g
+                    R[r0 + 6 + m, c0 + 3 + k] = h
+                    if not rigid_columns:
+                        R[c0 + k, r0 + 6 + m] = g
+                        R[c0 + 3 + k, r0 + 6 + m] = h
+            if rigid_columns:
+                continue
+            # M^{ab}: S_a = M : E_b, in the 5-basis (symmetric)
             XM = pM * sc[blk, 8]
             YM = pM * sc[blk, 9]
             ZM = pM * sc[blk, 10]
-            r0 = 11 * ia
-            c0 = 11 * ib
-            for i in range(3):
-                for j in range(3):
-                    dd = d[i] * d[j]
-                    dl = 1.0 if i == j else 0.0
-                    R[r0 + i, c0 + j] = XA * dd + YA * (dl - dd)          # A
-                    R[r0 + 3 + i, c0 + 3 + j] = XC * dd + YC * (dl - dd)  # C
-            # B^{ab}: L_a = B U_b = YB (U x d); Bt^{ba} = (B^{ab})^T
-            for k in range(3):
-                for i in range(3):
-                    val = YB * bv[k, i]
-                    R[r0 + 3 + i, c0 + k] = val
-                    R[c0 + k, r0 + 3 + i] = val
-            # G^{ab}: S_a = G U_b ; H^{ab}: S_a = H Omega_b ; transposes for Gt, Ht
-            for k in range(3):
-                for m in range(5):
-                    val = XG * pat[1, m, k] + YG * pat[2, m, k]
-                    R[r0 + 6 + m, c0 + k] = val
-                    if not rigid_columns:
-                        R[c0 + k, r0 + 6 + m] = val
-                    val = YH * pat[3, m, k]
-                    R[r0 + 6 + m, c0 + 3 + k] = val
-                    if not rigid_columns:
-                        R[c0 + 3 + k, r0 + 6 + m] = val
-            if rigid_columns:
-                continue
-            # M^{ab}: S_a = M : E_b, in the 5-basis
             for m in range(5):
-                for n in range(5):
-                    R[r0 + 6 + m, c0 + 6 + n] = XM * pat[4, m, n] + YM * pat[5, m, n] + ZM * pat[6, m, n]
+                for n in range(m, 5):
+                    val = XM * p4[5 * m + n] + YM * p5[5 * m + n] + ZM * p6[5 * m + n]
+                    R[r0 + 6 + m, c0 + 6 + n] = val
+                    R[r0 + 6 + n, c0 + 6 + m] = val
 
 
 @nb.njit(cache=True)
 def _pair_kernel(dx, a1, a2, lidx, rem, gg, par, pref):
     n = dx.shape[0]
     out = np.zeros((n, 22, 22))
-    bm = _basis5()
     sc = np.zeros((4, 11))
     d = np.zeros(3)
+    pat = np.empty(FILL_SCRATCH)
     for p in range(n):
         r = math.sqrt(dx[p, 0] ** 2 + dx[p, 1] ** 2 + dx[p, 2] ** 2)
         for i in range(3):
@@ -786,7 +761,7 @@ def _pair_kernel(dx, a1, a2, lidx, rem, gg, par, pref):
         li = lidx[p]
         _scalars_one(r, a1[p], a2[p], rem[li:li + 1], gg[li:li + 1], par[li:li + 1],
                      pref[li:li + 1], sc)
-        _fill_pair(d, a1[p], a2[p], sc, bm, out[p])
+        _fill_pair_columns(d, a1[p], a2[p], sc, out[p], pat, False)
     return out
 
 
