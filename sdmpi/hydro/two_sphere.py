@@ -633,7 +633,7 @@ _R6 = 1.0 / _SQ6
 FILL_SCRATCH = 140
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _fill_pair_columns(d, a1, a2, sc, R, pat, rigid_columns):
     """The 22x22 pair matrix R from the scalars sc (4, 11) and the unit vector d (tensor
     forms of the module docstring), with caller-provided scratch pat (FILL_SCRATCH,): the
