@@ -27,17 +27,19 @@ def _displacement(scale, seed=0):
 
 
 @pytest.mark.parametrize("strain", [0.0, STRAIN])
-def test_far_field_product_is_the_assembled_mobility_times_the_vector(strain):
+@pytest.mark.parametrize("radii", [RADII, np.ones(len(RADII))], ids=["unequal", "equal"])
+def test_far_field_product_is_the_assembled_mobility_times_the_vector(strain, radii):
     """M_inf w by the matrix-free sums equals the assembled matrix (same plan) times w, at
-    the plan's positions and displaced from them; unequal radii, a sheared box. Both are
-    sums of the same terms in other orders: tolerance 1e-13 of the largest entry."""
+    the plan's positions and displaced from them; unequal radii (the Faxen factors
+    expanded) and equal ones (folded), a sheared box. Both are sums of the same terms in
+    other orders: tolerance 1e-13 of the largest entry."""
     lattice = Lattice(BOX, strain)
     pos = lattice.wrap(CONFIG)
-    plan = plan_far_field(pos, RADII, lattice, 1e-6)
+    plan = plan_far_field(pos, radii, lattice, 1e-6)
     w = np.random.default_rng(1).standard_normal((len(pos), 11))
     for x in (pos, pos + _displacement(1e-2)):
-        ref = far_field_mobility(x, RADII, plan=plan) @ w.ravel()
-        got = far_field_product(x, RADII, plan, w).ravel()
+        ref = far_field_mobility(x, radii, plan=plan) @ w.ravel()
+        got = far_field_product(x, radii, plan, w).ravel()
         assert np.abs(got - ref).max() < 1e-13 * np.abs(ref).max()
 
 

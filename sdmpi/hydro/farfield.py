@@ -407,121 +407,6 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         block[:, :] = 0.0
 
 
-# Elementwise loops over the (t, k) pairs of `_reciprocal_product`, one output and at most
-# four inputs each: LLVM vectorises a loop only when its runtime check that the arrays do
-# not overlap stays small.
-
-
-@numba.njit(cache=True, inline="never")
-def _faxen_row(a2, kc, out):
-    """out[m] = 1 - a2 kc[m] (a Faxen factor 1 - c a^2 k^2 per wave vector)."""
-    for m in range(out.shape[0]):
-        out[m] = 1.0 - a2 * kc[m]
-
-
-@numba.njit(cache=True, inline="never")
-def _product_row(x, y, out):
-    """out = x y elementwise."""
-    for m in range(out.shape[0]):
-        out[m] = x[m] * y[m]
-
-
-@numba.njit(cache=True, inline="never")
-def _add_product_row(x, y, z, out):
-    """out = x + y z elementwise."""
-    for m in range(out.shape[0]):
-        out[m] = x[m] + y[m] * z[m]
-
-
-@numba.njit(cache=True, inline="never")
-def _accumulate_row(acc, x, y):
-    """acc += x y elementwise."""
-    for m in range(acc.shape[0]):
-        acc[m] += x[m] * y[m]
-
-
-@numba.njit(cache=True, inline="never")
-def _combine_row(x, sx, y, out):
-    """out = x + sx y elementwise (sx = +-1)."""
-    for m in range(out.shape[0]):
-        out[m] = x[m] + sx * y[m]
-
-
-@numba.njit(cache=True, inline="never")
-def _bracket_row(c, g, s, h, out):
-    """out = c g + s h elementwise."""
-    for m in range(out.shape[0]):
-        out[m] = c[m] * g[m] + s[m] * h[m]
-
-
-@numba.njit(cache=True, inline="never")
-def _scaled_row(scale, f, x, out):
-    """out = scale f x elementwise."""
-    for m in range(out.shape[0]):
-        out[m] = scale * f[m] * x[m]
-
-
-@numba.njit(cache=True)
-def _reciprocal_product(cos, sin, radii, b, ksq, scale, w, out):
-    """Adds the reciprocal part of M_k w into out (N, 11) for w (N, 11). Arrays run over the
-    M = 2 n_k pairs m = (t, k) of a normal direction t and a wave vector k, m = t n_k + k:
-    b (11, M) the wave amplitudes b_a(k) q_t (`_wave_amplitudes`); the cosines and sines of
-    k.x_j (cos, sin (N, n_k)) and |k|^2 (ksq (n_k,)) serve both t. With raw (3, N, M) =
-    sum over the U, Omega and E rows a of b_a(m) w_ja for each particle j and f_a(a_j) =
-    1 - c_a a_j^2 k^2 (c_a = 1/6 on the U rows, 0 on Omega, 1/10 on E), the sums
-    P_c,s = sum_j (c_j, s_j) f_U raw_U and Q_c,s = sum_j (c_j, s_j) (raw_Omega + f_E raw_E)
-    give (M w)_ia = scale f_a(a_i) b_a(m) [c_i (P_c - Q_s) + s_i (P_s + Q_c)] on the U rows
-    and scale f_a(a_i) b_a(m) [c_i (Q_c + P_s) + s_i (Q_s - P_c)] on the others, summed over
-    m, scale = 2/V (the pair form of `_reciprocal_sum` summed over j first). O(N n_k)
-    operations, no pair loop: every loop over m is contiguous (vectorised), and the
-    projections onto b and the sums over m are BLAS products."""
-    n, nk = cos.shape
-    nm = 2 * nk
-    k6, k10 = np.empty(nm), np.empty(nm)
-    for m in range(nm):
-        k6[m], k10[m] = ksq[m % nk] / 6.0, ksq[m % nk] / 10.0
-    rows = ((0, 3), (3, 6), (6, NDOF))
-    raw = np.empty((3, n, nm))
-    for part in range(3):
-        lo, hi = rows[part]
-        raw[part] = np.dot(np.ascontiguousarray(w[:, lo:hi]), b[lo:hi])
-    f_u, f_e = np.empty((n, nm)), np.empty((n, nm))
-    proj_u, proj_o = np.empty(nm), np.empty(nm)
-    sums = np.zeros((4, nm))  # P_c, P_s, Q_c, Q_s
-    for j in range(n):
-        a2 = radii[j] * radii[j]
-        _faxen_row(a2, k6, f_u[j])
-        _faxen_row(a2, k10, f_e[j])
-        _product_row(f_u[j], raw[0, j], proj_u)
-        _add_product_row(raw[1, j], f_e[j], raw[2, j], proj_o)
-        for t in range(2):
-            h = slice(t * nk, (t + 1) * nk)
-            _accumulate_row(sums[0, h], cos[j], proj_u[h])
-            _accumulate_row(sums[1, h], sin[j], proj_u[h])
-            _accumulate_row(sums[2, h], cos[j], proj_o[h])
-            _accumulate_row(sums[3, h], sin[j], proj_o[h])
-    # P_c - Q_s, P_s + Q_c (U rows), Q_c + P_s, Q_s - P_c (Omega, E rows)
-    g = np.empty((4, nm))
-    _combine_row(sums[0], -1.0, sums[3], g[0])
-    _combine_row(sums[1], 1.0, sums[2], g[1])
-    _combine_row(sums[2], 1.0, sums[1], g[2])
-    _combine_row(sums[3], -1.0, sums[0], g[3])
-    d = np.empty((3, n, nm))
-    u, o = np.empty(nm), np.empty(nm)
-    for i in range(n):
-        for t in range(2):
-            h = slice(t * nk, (t + 1) * nk)
-            _bracket_row(cos[i], g[0, h], sin[i], g[1, h], u[h])
-            _bracket_row(cos[i], g[2, h], sin[i], g[3, h], o[h])
-        _scaled_row(scale, f_u[i], u, d[0, i])
-        _scaled_row(scale, f_e[i], o, d[2, i])
-        for m in range(nm):
-            d[1, i, m] = scale * o[m]
-    for part in range(3):
-        lo, hi = rows[part]
-        out[:, lo:hi] += np.dot(d[part], np.ascontiguousarray(b[lo:hi].T))
-
-
 def far_field_product(positions, radii, plan, w):
     """M_inf w (N, 11) for w (N, 11) at the positions (used as given), with the pair images
     and wave vectors of the plan (`plan_far_field`, made at these or nearby positions),
@@ -539,11 +424,7 @@ def far_field_product(positions, radii, plan, w):
     grid = plan.grid
     _real_space_product(pos, radii, *plan.images, plan.table, grid.values, grid.r0, grid.h, xi, BASIS, w, out)
     if plan.params is not None:
-        # the pairs m = (normal direction t, wave vector k), t-major
-        amp = wave_amplitudes(plan.kvec, xi)  # (nk, 11, 2)
-        b = np.ascontiguousarray(amp.transpose(1, 2, 0)).reshape(NDOF, -1)  # (11, 2 nk)
-        _reciprocal_product(*wave_phases(pos, plan), radii, b, np.einsum("ij,ij->i", plan.kvec, plan.kvec),
-                            2.0 / plan.volume, w, out)
+        out += _reciprocal_product(np.hstack(wave_phases(pos, plan)), radii, *plan.amplitudes, 2.0 / plan.volume, w)
     for a, block in plan.self_blocks.items():  # diagonal 11x11 blocks
         rows = radii == a
         out[rows] += w[rows] * np.diagonal(block)
@@ -642,6 +523,94 @@ def _wave_tensors(b, cos_entries, sin_entries, ksq, scale, a2, row_c, tcos, tsin
 
 
 @numba.njit(cache=True, inline="never")
+def _bracket_row(c, g, s, h, out):
+    """out = c g + s h elementwise (one loop: LLVM vectorises it when its runtime check
+    that the arrays do not overlap stays small, as for at most four inputs)."""
+    for m in range(out.shape[0]):
+        out[m] = c[m] * g[m] + s[m] * h[m]
+
+
+@numba.njit(cache=True)
+def _reciprocal_weights(proj, b, ksq, row_c, a2, out):
+    """The wave-vector side of `_reciprocal_product`. proj (2 n_k, W): rows k of
+    sum_j cos(k.x_j) w_j and then rows k of sum_j sin(k.x_j) w_j, columns the 11 dofs a of
+    w (W = 11) or of w and a_j^2 w (W = 22, unequal radii); b (n_k, 11, 2) the unit-radius
+    amplitudes b_a(k, t) (`_wave_amplitudes`), ksq (n_k,) |k|^2, row_c (11,) the Faxen
+    coefficients c_a, a2 the common radius squared (all radii equal) or -1. With
+    f_a(a) = 1 - c_a a^2 |k|^2, per (k, t):
+
+        P_c,s = sum_{a in U} b_a (c, s)-projection of f_a w_a,
+        Q_c,s = sum_{a in Omega, E} b_a (c, s)-projection of f_a w_a,
+        g0 = P_c - Q_s,  g1 = P_s + Q_c,
+
+    and out (2 n_k, W) rows k: Y_c[k, a] = sum_t b_a(k, t) h_c, then Y_s[k, a] likewise with
+    h_s, where (h_c, h_s) = (g0, g1) on the U rows and (g1, -g0) on the Omega and E rows; with
+    W = 22 the columns 11..21 hold |k|^2 Y (for the receivers' Faxen factors); with equal
+    radii f_a(a) is folded into Y."""
+    nk = ksq.shape[0]
+    nw = proj.shape[1]
+    fw = np.empty(NDOF)
+    cw, sw = np.empty(NDOF), np.empty(NDOF)
+    for k in range(nk):
+        for a in range(NDOF):
+            fw[a] = 1.0 - row_c[a] * a2 * ksq[k] if a2 >= 0.0 else 1.0
+            if nw == NDOF:
+                cw[a], sw[a] = fw[a] * proj[k, a], fw[a] * proj[nk + k, a]
+            else:
+                cw[a] = proj[k, a] - row_c[a] * ksq[k] * proj[k, NDOF + a]
+                sw[a] = proj[nk + k, a] - row_c[a] * ksq[k] * proj[nk + k, NDOF + a]
+        for a in range(nw):
+            out[k, a] = 0.0
+            out[nk + k, a] = 0.0
+        for t in range(2):
+            pc = ps = qc = qs = 0.0
+            for a in range(3):
+                pc += b[k, a, t] * cw[a]
+                ps += b[k, a, t] * sw[a]
+            for a in range(3, NDOF):
+                qc += b[k, a, t] * cw[a]
+                qs += b[k, a, t] * sw[a]
+            g0, g1 = pc - qs, ps + qc
+            for a in range(NDOF):
+                bat = b[k, a, t] * fw[a]
+                if a < 3:
+                    out[k, a] += bat * g0
+                    out[nk + k, a] += bat * g1
+                else:
+                    out[k, a] += bat * g1
+                    out[nk + k, a] -= bat * g0
+        if nw > NDOF:
+            for a in range(NDOF):
+                out[k, NDOF + a] = ksq[k] * out[k, a]
+                out[nk + k, NDOF + a] = ksq[k] * out[nk + k, a]
+
+
+def _reciprocal_product(phases, radii, b, ksq, scale, w):
+    """The reciprocal part of M_k w (N, 11) for w (N, 11), in O(N n_k), no pair loop.
+    phases (N, 2 n_k): cos(k.x_j) and then sin(k.x_j); b (n_k, 11, 2), ksq: the plan's
+    amplitudes and |k|^2 (`FarFieldPlan.amplitudes`); scale = 2/V. The pair form of
+    `_reciprocal_sum` summed over the sources j first: with the projections
+    sum_j (cos, sin)(k.x_j) f_a(a_j) w_ja (one BLAS product (2 n_k x N) @ (N x W)), the
+    per-wave-vector weights Y of `_reciprocal_weights`, and the receivers
+
+        (M_k w)_ia = scale f_a(a_i) sum_k [cos(k.x_i) Y_c[k, a] + sin(k.x_i) Y_s[k, a]]
+
+    (a second product (N x 2 n_k) @ (2 n_k x W)); f_a(a) = 1 - c_a a^2 |k|^2 is folded into Y
+    when all radii are equal (W = 11), else expanded (W = 22: the columns of a_j^2 w and of
+    |k|^2 Y)."""
+    equal = bool(np.all(radii == radii[0]))
+    a2 = radii * radii
+    src = w if equal else np.hstack([w, a2[:, None] * w])
+    proj = phases.T @ src
+    weights = np.empty_like(proj)
+    _reciprocal_weights(proj, b, ksq, _ROW_C, float(a2[0]) if equal else -1.0, weights)
+    got = phases @ weights
+    if equal:
+        return scale * got
+    return scale * (got[:, :NDOF] - (a2[:, None] * _ROW_C) * got[:, NDOF:])
+
+
+@numba.njit(cache=True, inline="never")
 def _sin_difference_row(re_i, im_i, re_j, im_j, out):
     """out = sin(a_i - a_j) = im_i re_j - re_i im_j from exp(i a) (one pair, all k)."""
     for k in range(out.shape[0]):
@@ -721,18 +690,18 @@ def wave_phases(positions, plan):
     return cos, sin
 
 
-def _wave_terms(radii, kvec, xi, volume):
+def _wave_terms(radii, plan):
     """What the reciprocal sum needs besides the positions: the cosine and sine tensors
-    of every wave vector (scaled by 2/V, with the radius factors folded in when all radii
-    are equal), |k|^2 (nk, 1), the Faxen coefficients of their rows and columns, and
+    of the plan's wave vectors (scaled by 2/V, with the radius factors folded in when all
+    radii are equal), |k|^2 (nk, 1), the Faxen coefficients of their rows and columns, and
     whether the radii are equal."""
-    nk = len(kvec)
+    b, ksq = plan.amplitudes
+    nk = len(ksq)
     tcos, tsin = np.empty((nk, len(_COS_ENTRIES))), np.empty((nk, len(_SIN_ENTRIES)))
-    ksq = np.einsum("ij,ij->i", kvec, kvec)
     equal = bool(np.all(radii == radii[0]))
     # all radii equal: f_a(a) f_b(a) folded into the tensors (one product per part)
     a2 = float(radii[0]) ** 2 if equal else -1.0
-    _wave_tensors(wave_amplitudes(kvec, xi), _COS_ENTRIES, _SIN_ENTRIES, ksq, 2.0 / volume, a2, _ROW_C, tcos, tsin)
+    _wave_tensors(b, _COS_ENTRIES, _SIN_ENTRIES, ksq, 2.0 / plan.volume, a2, _ROW_C, tcos, tsin)
     return {"cos": tcos, "sin": tsin}, ksq[:, None], _ENTRY_ROW_C, _ENTRY_COL_C, equal
 
 
@@ -742,7 +711,7 @@ def _reciprocal_sum(pos, radii, plan, mob, both=True):
     (`_scatter_pairs`). The wave vectors' tensors are kept in the plan for its radii."""
     n, nk = len(pos), len(plan.kvec)
     if plan.wave_terms is None or not np.array_equal(plan.wave_terms[0], radii):
-        plan.wave_terms = (radii.copy(), _wave_terms(radii, plan.kvec, plan.params.xi, plan.volume))
+        plan.wave_terms = (radii.copy(), _wave_terms(radii, plan))
     tensors, ksq, c_row, c_col, equal = plan.wave_terms[1]
     phase_re, phase_im = wave_phases(pos, plan)
     pi, pj = _upper_pairs(n)
@@ -896,6 +865,13 @@ class FarFieldPlan:
     self_blocks: dict
     volume: float
     wave_terms: tuple | None = None  # (radii, their `_wave_terms`), built on first use
+
+    @functools.cached_property
+    def amplitudes(self):
+        """(b (nk, 11, 2), |k|^2 (nk,)): the wave vectors' unit-radius amplitudes
+        (`_wave_amplitudes`) and squared lengths, computed once per plan (the assembly and
+        the products of a step share them)."""
+        return wave_amplitudes(self.kvec, self.params.xi), np.einsum("ij,ij->i", self.kvec, self.kvec)
 
     @property
     def real_space_reach(self):
