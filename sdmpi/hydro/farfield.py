@@ -714,11 +714,14 @@ def _reciprocal_sum(pos, radii, plan, mob, both=True):
         plan.wave_terms = (radii.copy(), _wave_terms(radii, plan))
     tensors, ksq, c_row, c_col, equal = plan.wave_terms[1]
     phase_re, phase_im = wave_phases(pos, plan)
-    pi, pj = _upper_pairs(n)
     if equal:
+        pi, pj = _upper_pairs(n, 1)
         _reciprocal_equal(phase_re, phase_im, pi, pj, tensors["cos"], tensors["sin"], _COS_ENTRIES, _SIN_ENTRIES,
                           _PAIR_CHUNK, mob, both)
+        # the self pairs (r = 0: cos 1, sin 0), one block for every particle
+        _add_diagonal_blocks(mob, _symmetric_block(tensors["cos"].sum(axis=0), _COS_ENTRIES))
         return
+    pi, pj = _upper_pairs(n, 0)
     for start in range(0, len(pi), _PAIR_CHUNK):
         ci, cj = pi[start:start + _PAIR_CHUNK], pj[start:start + _PAIR_CHUNK]
         cos_k, sin_k = work_array("cos_k", (len(ci), nk)), work_array("sin_k", (len(ci), nk))
@@ -727,9 +730,6 @@ def _reciprocal_sum(pos, radii, plan, mob, both=True):
         for part, trig, sign in (("cos", cos_k, 1.0), ("sin", sin_k, -1.0)):
             t = tensors[part]
             g0 = np.matmul(trig, t, out=work_array(part, (len(ci), t.shape[1])))
-            if equal:
-                vals += [g0, g0 if sign > 0 else np.negative(g0, out=work_array("-sin", g0.shape))]
-                continue
             # f_a(a_i) f_b(a_j) = 1 - (c_a a_i^2 + c_b a_j^2) k^2 + c_a c_b a_i^2 a_j^2 k^4
             g1, g2 = trig @ (ksq * t), trig @ (ksq * ksq * t)
             ai2, aj2 = radii[ci, None] ** 2, radii[cj, None] ** 2
@@ -761,12 +761,21 @@ def _reciprocal_equal(phase_re, phase_im, pi, pj, tcos, tsin, cos_entries, sin_e
 
 
 @functools.lru_cache(maxsize=8)
-def _upper_pairs(n):
-    """np.triu_indices(n) (the pairs i <= j), cached read-only."""
-    pi, pj = np.triu_indices(n)
+def _upper_pairs(n, offset):
+    """np.triu_indices(n, offset) (the pairs i <= j for offset 0, i < j for 1), cached
+    read-only."""
+    pi, pj = np.triu_indices(n, offset)
     pi.flags.writeable = False
     pj.flags.writeable = False
     return pi, pj
+
+
+def _symmetric_block(values, entries):
+    """The symmetric 11x11 block with values[e] at (a, b) and (b, a) for entries[e] = (a, b)."""
+    block = np.zeros((NDOF, NDOF))
+    block[entries[:, 0], entries[:, 1]] = values
+    block[entries[:, 1], entries[:, 0]] = values
+    return block
 
 
 def _gauss_moment(p, xi):
