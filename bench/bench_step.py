@@ -12,7 +12,10 @@ of steps interleaved with blocks of one 297 x 297 LAPACK Cholesky (dpotrf) in th
 process; the medians of their CPU times give "Cholesky-equivalents per step", a figure
 that holds up under other load and carries roughly across machines (wall-clock ms are
 recorded too; on an idle machine they agree).
-Writes bench/step.json.
+Also times the first step of a realisation from an empty numba cache, in a fresh process
+("cold_first_step_s": the kernels' compile time, which every new installation and every
+cluster node without a shared cache pays once; `--no-cold` skips it). Writes
+bench/step.json.
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/bench_step.py
 """
@@ -21,6 +24,9 @@ import argparse
 import json
 import os
 import platform
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -62,12 +68,34 @@ def time_steps(n, blocks, steps_per_block, spd, overrides=()):
             "ewald_tolerance": job.ewald_tolerance, "backend": getattr(real.model, "backend", None)}
 
 
+COLD_SCRIPT = """
+import time
+t0 = time.perf_counter()
+from sdmpi.config import enumerate_tasks, load_job
+from sdmpi.dynamics import Realisation
+job = load_job({job!r}, overrides=["system.n_particles=27"])
+Realisation(job, enumerate_tasks(job)[0]).advance(1)
+print(time.perf_counter() - t0)
+"""
+
+
+def cold_first_step_seconds():
+    """Wall seconds of imports, set-up and the first step at N = 27 in a fresh process with an
+    empty numba cache (every kernel compiled)."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        out = subprocess.run([sys.executable, "-c", COLD_SCRIPT.format(job=JOB)], env=env, check=True,
+                             capture_output=True, text=True)
+    return float(out.stdout.split()[-1])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[8, 27, 64, 125])
     ap.add_argument("--blocks", type=int, default=7)
     ap.add_argument("--seconds", type=float, default=3.0, help="rough stepping time per block and size")
     ap.add_argument("--out", default="bench/step.json")
+    ap.add_argument("--no-cold", action="store_true", help="skip the first step from an empty numba cache")
     args = ap.parse_args()
     a = np.random.default_rng(0).standard_normal((297, 297))
     spd = a @ a.T + 297 * np.eye(297)
@@ -86,6 +114,9 @@ def main():
             print(f"{n:5d} {r['ewald_tolerance']:6.0e} {r['ms_per_step']:9.2f} {r['cholesky_ms']:9.3f} "
                   f"{r['cpu_ms_per_step']:9.2f} {r['cpu_cholesky_ms']:9.3f} {r['cholesky_equivalents']:9.1f}",
                   flush=True)
+    if not args.no_cold:
+        results["cold_first_step_s"] = cold_first_step_seconds()
+        print(f"first step from an empty numba cache: {results['cold_first_step_s']:.0f} s", flush=True)
     results["load_average"] = os.getloadavg()  # other work on the machine while it ran
     with open(args.out, "w") as fh:
         json.dump(results, fh, indent=2)
