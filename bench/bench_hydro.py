@@ -37,7 +37,7 @@ def one_solve(pos, side, timings):
     far = resistance.far_field_blocks(mob)
     t3 = time.perf_counter()
     pairs = lubrication.close_pairs(pos, radii, lattice)
-    res = resistance.from_blocks(far, resistance.lubrication_blocks(radii, pairs), pairs, None, pos, radii)
+    res = resistance.from_blocks(far, lubrication.lubrication_partitions(radii, pairs, n), pairs, None, pos, radii)
     t4 = time.perf_counter()
     solver = solvers.DenseSolver(res)
     e5 = np.broadcast_to(to_five(np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])), (n, 5))

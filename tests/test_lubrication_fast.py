@@ -162,3 +162,67 @@ def test_rigid_cholesky_matches_lapack_and_reports_the_bad_pair():
     bad = res.copy()
     bad[17, 3, 3] = -1.0  # an inner diagonal entry of the rigid block
     assert lub._rigid_cholesky(bad, out) == 17
+
+
+def _partitions_of(matrix, n):
+    """The FU, FE, SE partitions of an (11N, 11N) matrix (dofs particle by particle)."""
+    idx = np.arange(lub.NDOF * n).reshape(n, lub.NDOF)
+    rigid, strain = idx[:, :6].ravel(), idx[:, 6:].ravel()
+    return matrix[np.ix_(rigid, rigid)], matrix[np.ix_(rigid, strain)], matrix[np.ix_(strain, strain)]
+
+
+def _bidisperse_periodic(n=40, seed=2, odd_radius=None):
+    """n spheres (every third of radius 0.5, else 1; with odd_radius, sphere 5 has that radius: a
+    size ratio with too few pairs for a table) in a sheared periodic box, one pair touching."""
+    rng = np.random.default_rng(seed)
+    radii = np.where(np.arange(n) % 3 == 0, 0.5, 1.0)
+    if odd_radius is not None:
+        radii[5] = odd_radius
+    lattice = Lattice([7.0] * 3, 0.1)
+    pos = rng.uniform(0, 7.0, (n, 3))
+    pos[1] = pos[0] + [radii[0] + radii[1], 0, 0]
+    pos = lattice.wrap(pos)
+    return pos, radii, lub.close_pairs(pos, radii, lattice, cutoff=4.0)
+
+
+@pytest.mark.parametrize("odd_radius", [None, 0.77])
+def test_partitions_equal_the_matrix(odd_radius):
+    """`lubrication_partitions` (each pair's block added straight into the dense partitions)
+    against the partitions of `lubrication_matrix` (the same blocks, summed in the same pair
+    order): equal to rounding (1e-14 of the largest entry); with a size ratio on the exact
+    path (odd_radius) no setup is returned."""
+    pos, radii, pairs = _bidisperse_periodic(odd_radius=odd_radius)
+    n = len(pos)
+    dense, setup = lub.lubrication_partitions(radii, pairs, n)
+    assert (setup is None) == (odd_radius is not None)
+    ref = _partitions_of(lub.lubrication_matrix(pos, radii, pairs), n)
+    for got, want in zip(dense, ref):
+        assert got.shape == want.shape
+        assert np.abs(got - want).max() <= 1e-14 * np.abs(want).max()
+    none = np.zeros(0, dtype=np.int64)
+    assert lub.lubrication_partitions(radii, lub.close_pairs(pos, radii, images=(none, none, np.zeros((0, 3)))),
+                                      n) is None
+
+
+@pytest.mark.parametrize("odd_radius", [None, 0.77])
+def test_product_equals_the_matrix(odd_radius):
+    """`lubrication_product` pair by pair, with and without the setup of
+    `lubrication_partitions`, at the pairs' own and at displaced positions (same images),
+    for a general vector and one without strain part (only the rigid-body columns formed),
+    against the assembled matrix times the vector: 1e-13 of the largest entry."""
+    pos, radii, pairs = _bidisperse_periodic(odd_radius=odd_radius)
+    n = len(pos)
+    _, setup = lub.lubrication_partitions(radii, pairs, n)
+    rng = np.random.default_rng(7)
+    images = (pairs.i, pairs.j, pairs.shift)
+    moved = lub.close_pairs(pos + 1e-6 * rng.standard_normal(pos.shape), radii, images=images)
+    v = rng.standard_normal((n, lub.NDOF))
+    rigid = v.copy()
+    rigid[:, 6:] = 0.0
+    for at, where in ((pairs, pos), (moved, None)):
+        matrix = lub.lubrication_matrix(pos, radii, at)
+        for vec in (v, rigid):
+            ref = (matrix @ vec.ravel()).reshape(n, lub.NDOF)
+            for s in (None, setup):
+                got = lub.lubrication_product(radii, at, vec, s)
+                assert np.abs(got - ref).max() < 1e-13 * np.abs(ref).max()

@@ -12,7 +12,8 @@ from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.dynamics.realisation import KT_REDUCED
 from sdmpi.hydro.farfield import far_field_mobility, far_field_product, plan_far_field
 from sdmpi.hydro.geometry import Lattice
-from sdmpi.hydro.lubrication import close_pairs, lubrication_matrix, lubrication_product
+from sdmpi.hydro.lubrication import (close_pairs, lubrication_matrix, lubrication_partitions, lubrication_product,
+                                     pair_corrections)
 from sdmpi.hydro.resistance import grand_resistance, resistance_change
 
 BOX = np.array([7.0, 7.0, 7.0])
@@ -20,6 +21,7 @@ BOX = np.array([7.0, 7.0, 7.0])
 CONFIG = np.array([[1.0, 1.2, 0.8], [3.01, 1.2, 0.8], [2.0, 3.9, 3.5], [4.5, 3.0, 5.5], [5.6, 5.5, 2.0]])
 RADII = np.array([1.0, 1.0, 0.8, 1.0, 0.7])
 STRAIN = 0.15
+EPS = np.finfo(float).eps
 
 
 def _displacement(scale, seed=0):
@@ -101,3 +103,54 @@ def test_rfd_drift_matches_the_difference_of_two_full_evaluations():
         drift = terms.velocities - math.sqrt(2 * KT_REDUCED) * m
         assert np.linalg.norm(drift - ref_drift) < 2e-3 * np.linalg.norm(ref_drift)
         assert np.linalg.norm(terms.stresslets - ref_stress) < 2e-3 * np.linalg.norm(ref_stress)
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+@pytest.mark.parametrize("small", [1.0, 0.6173])
+def test_lubrication_change_round_off_near_contact(small):
+    """The lubrication part of the change, L(moved) v pair by pair minus L(base) v by the
+    dense partitions, against the same pair blocks' differences applied in extended
+    precision, for a chain of seven spheres at gaps 1e-4 (the floor) to 0.1 mean radii
+    (entries of L up to ~1e5) and displacements of 1e-7 to 1e-5 (the rfd's ~1e-6). The
+    difference of the two products carries a round-off of ~eps max|L v| (measured up to
+    2.4 eps, 8.8e-13 of the change at displacements of 1e-7); tolerance 8 eps max|L v| and
+    1e-10 of the change. small: the radius of sphere 4 (0.6173: size ratios on the exact path)."""
+    radii = np.array([1.0, 1.0, 1.0, 1.0, small, 1.0, 1.0])
+    chain = [(0, 1, [1, 0.3, 0.1], 1.5e-4), (1, 2, [0.2, 1, -0.3], 3e-4), (0, 3, [-0.4, 0.2, 1], 1e-3),
+             (2, 4, [0.3, 0.4, 1], 1e-2), (3, 5, [-1, 0.5, 0.2], 1e-4), (5, 6, [0.1, -1, 0.4], 0.1)]
+    pos = np.zeros((7, 3))
+    pos[0] = 4.0
+    for i, j, d, gap in chain:
+        pos[j] = pos[i] + _unit(d) * (1.0 + 0.5 * gap) * (radii[i] + radii[j])
+    n = len(pos)
+    lattice = Lattice(np.full(3, 12.0), STRAIN)
+    pos = lattice.wrap(pos)
+    pairs = close_pairs(pos, radii, lattice, min_gap=1e-4)
+    assert (pairs.gap / (0.5 * pairs.radii_sum)).min() < 1.1e-4
+    dense, setup = lubrication_partitions(radii, pairs, n)
+    assert (setup is None) == (small != 1.0)
+    l_fu, l_fe, _ = dense
+    images = (pairs.i, pairs.j, pairs.shift)
+    a1, a2 = radii[pairs.i], radii[pairs.j]
+    base_blocks = pair_corrections(pairs.dx, a1, a2).astype(np.longdouble)
+    rng = np.random.default_rng(0)
+    for scale in (1e-7, 1e-6, 1e-5, 1e-6):
+        v = np.zeros((n, 11))
+        v[:, :6] = rng.standard_normal((n, 6))
+        moved = close_pairs(pos + scale * rng.standard_normal((n, 3)), radii, None, min_gap=1e-4, images=images)
+        base_product = np.hstack([(l_fu @ v[:, :6].ravel()).reshape(n, 6),
+                                  (l_fe.T @ v[:, :6].ravel()).reshape(n, 5)])
+        got = lubrication_product(radii, moved, v, setup) - base_product
+        diff = pair_corrections(moved.dx, a1, a2).astype(np.longdouble) - base_blocks
+        ref = np.zeros((n, 11), dtype=np.longdouble)
+        for p, (i, j) in enumerate(zip(pairs.i, pairs.j)):
+            y = diff[p] @ np.concatenate([v[i], v[j]]).astype(np.longdouble)
+            ref[i] += y[:11]
+            ref[j] += y[11:]
+        err = float(np.abs(got - ref).max())
+        assert err < 8 * EPS * np.abs(base_product).max()
+        assert err < 1e-10 * float(np.abs(ref).max())

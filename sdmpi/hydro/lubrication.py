@@ -195,13 +195,36 @@ def lubrication_matrix(positions, radii, pairs, out=None):
     return out
 
 
-def lubrication_product(radii, pairs, vector):
+def lubrication_product(radii, pairs, vector, setup=None):
     """L v (N, 11) for v (N, 11): the near-field correction of `lubrication_matrix` applied
-    to one vector pair by pair, without forming the matrix."""
+    to one vector pair by pair, each tabulated pair's block formed in scratch memory
+    (`_tabulated_product`; only its rigid-body columns when v is zero on the strain dofs),
+    without forming the matrix. setup: the one of `lubrication_partitions` for the same
+    images (e.g. at a nearby configuration), which spares the pairs' ordering and table
+    look-up when the tables cover these separations (the same values)."""
     vector = np.ascontiguousarray(vector, dtype=float)
     out = np.zeros_like(vector)
-    for pi, pj, res in pair_blocks(radii, pairs):
-        pair_products(pi, pj, res, vector, out)
+    if len(pairs.i) == 0:
+        return out
+    rigid = not vector[:, 6:].any()
+    if setup is not None:
+        swap, a1, a2, tab, tables = setup
+        if len(a1) == len(pairs.i):
+            pi, pj = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
+            dx = np.ascontiguousarray(pairs.dx, dtype=float)
+            if swap is not None:
+                pi, pj = np.where(swap, pj, pi), np.where(swap, pi, pj)
+                dx = np.ascontiguousarray(np.where(swap[:, None], -dx, dx))
+            if _tables_cover(dx, a1, a2, tab, tables[2], tables[3]):
+                _tabulated_product(dx, a1, a2, tab, *tables, pi, pj, vector, rigid, out)
+                return out
+    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
+    if len(slow) == 0:
+        _tabulated_product(dx, a1, a2, tab, *tables, pi, pj, vector, rigid, out)
+        return out
+    if len(sel):
+        _tabulated_product(dx[sel], a1[sel], a2[sel], tab[sel], *tables, pi[sel], pj[sel], vector, rigid, out)
+    pair_products(pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow]), vector, out)
     return out
 
 
@@ -288,10 +311,10 @@ _CHUNK = 2048
 
 
 def _pair_setup(radii, pairs):
-    """What `pair_blocks` and `lubrication_change` share: the pairs ordered big sphere first
-    (pi, pj, a1, a2, dx), each pair's table (-1: exact path) and the tables' snapshot
-    (`_TableStore.lookup`), the tabulated pairs' indices (fast) and the exact ones (slow),
-    and the pairs as given (pi0, pj0, a10, a20, dx0)."""
+    """What `pair_blocks`, `lubrication_partitions` and `lubrication_product` share: the
+    pairs ordered big sphere first (pi, pj, a1, a2, dx), each pair's table (-1: exact path)
+    and the tables' snapshot (`_TableStore.lookup`), the tabulated pairs' indices (fast)
+    and the exact ones (slow), and the pairs as given (pi0, pj0, a10, a20, dx0)."""
     radii = np.asarray(radii, dtype=float)
     pi0, pj0 = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
     dx0 = np.ascontiguousarray(pairs.dx, dtype=float)
@@ -333,24 +356,27 @@ def pair_blocks(radii, pairs):
         yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
 
 
-def all_pair_blocks(radii, pairs, keep_setup=False):
-    """(pi, pj, res (P, 22, 22)): every pair's block as `pair_blocks` gives them, in one
-    fresh array (the tabulated pairs written into it directly), or None without pairs.
-    keep_setup: return (blocks, setup), setup the pairs' orientation, radii and tables for
-    `lubrication_change` at displaced separations (None when some pair is exact)."""
+def lubrication_partitions(radii, pairs, n):
+    """The near-field correction of `lubrication_matrix` for n particles as dense partitions
+    (L_FU (6N x 6N), L_FE (6N x 5N), L_SE (5N x 5N), dofs particle by particle within each:
+    rows and columns of the rigid-body dofs U, Omega (6 per particle) and of the strain dofs
+    E (5 per particle); L_SU = L_FE^T is not stored), and the pairs' setup: their
+    orientation, radii and tables for `lubrication_product` at displaced separations (None
+    when some pair takes the exact path). The tabulated pairs' 22x22 blocks are formed one
+    at a time in scratch memory and added into the partitions (`_tabulated_partitions`).
+    None without pairs."""
     if len(pairs.i) == 0:
-        return (None, None) if keep_setup else None
+        return None
     (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
-    res = np.empty((len(sel) + len(slow), 2 * NDOF, 2 * NDOF))
+    dense = np.zeros((6 * n, 6 * n)), np.zeros((6 * n, 5 * n)), np.zeros((5 * n, 5 * n))
     if len(slow) == 0:
-        _tabulated_kernel(dx, a1, a2, tab, *tables, res)
-        blocks = pi.copy(), pj.copy(), res
+        _tabulated_partitions(dx, a1, a2, tab, *tables, pi, pj, *dense)
         swap = None if pi is pi0 else pi != pi0
-        return (blocks, (swap, a1, a2, tab, tables)) if keep_setup else blocks
-    _tabulated_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, res[:len(sel)])
-    res[len(sel):] = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
-    blocks = np.concatenate([pi[sel], pi0[slow]]), np.concatenate([pj[sel], pj0[slow]]), res
-    return (blocks, None) if keep_setup else blocks
+        return dense, (swap, a1, a2, tab, tables)
+    if len(sel):
+        _tabulated_partitions(dx[sel], a1[sel], a2[sel], tab[sel], *tables, pi[sel], pj[sel], *dense)
+    _scatter_partitions(pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow]), *dense)
+    return dense, None
 
 
 @numba.njit(cache=True)
@@ -370,47 +396,6 @@ def _tables_cover(dx, a1, a2, tab, k_lo, n_rows):
         if k - 1 < k_lo[t] + half - 1 or k + 1 > k_lo[t] + n_rows[t] - half - 1:
             return False
     return True
-
-
-def lubrication_change(radii, pairs, blocks, vector, setup=None):
-    """[L(pairs) - L_0] v (N, 11) for v (N, 11), pair by pair: L(pairs) the near-field
-    correction at the pairs' separations (as `lubrication_product`) and L_0 the one given
-    by its pair blocks, blocks = (pi, pj, res (P, 22, 22)) in the order of `pair_blocks`
-    for the same pair set (e.g. the blocks of a nearby configuration with the same
-    images). Each pair's block at the new separations is formed in scratch memory and
-    its difference to the old one applied to v; no (P, 22, 22) array is written. Falls back
-    to the two products when the pair order differs. setup: the blocks' own (from
-    `all_pair_blocks(..., keep_setup=True)` for the same images), which spares the pairs'
-    ordering and table look-up when the tables cover the new separations (the same
-    values)."""
-    vector = np.ascontiguousarray(vector, dtype=float)
-    out = np.zeros_like(vector)
-    bi, bj, old = blocks
-    if len(pairs.i) == 0:
-        pair_products(bi, bj, old, -vector, out)
-        return out
-    rigid = not vector[:, 6:].any()
-    if setup is not None and len(pairs.i) == len(bi):
-        swap, a1, a2, tab, tables = setup
-        dx = np.ascontiguousarray(pairs.dx, dtype=float)
-        if swap is not None:
-            dx = np.ascontiguousarray(np.where(swap[:, None], -dx, dx))
-        if _tables_cover(dx, a1, a2, tab, tables[2], tables[3]):
-            _tabulated_change_kernel(dx, a1, a2, tab, *tables, bi, bj, old, vector, rigid, out)
-            return out
-    (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
-    n_fast = len(sel)
-    if (len(bi) != len(pi) or not np.array_equal(bi[:n_fast], pi[sel]) or not np.array_equal(bj[:n_fast], pj[sel])
-            or not np.array_equal(bi[n_fast:], pi0[slow]) or not np.array_equal(bj[n_fast:], pj0[slow])):
-        out = lubrication_product(radii, pairs, vector)
-        pair_products(bi, bj, old, -vector, out)
-        return out
-    if n_fast:
-        _tabulated_change_kernel(dx[sel], a1[sel], a2[sel], tab[sel], *tables, bi, bj, old, vector, rigid, out)
-    if len(slow):
-        new = pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
-        pair_products(bi[n_fast:], bj[n_fast:], new - old[n_fast:], vector, out)
-    return out
 
 
 def pair_corrections(dx, a1, a2):
@@ -656,31 +641,83 @@ def _interpolate(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d):
 
 
 @numba.njit(cache=True)
-def _tabulated_change_kernel(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, old, v, rigid_columns, out):
-    """out[(i, j)] += (res_p - old[p]) (v_i, v_j) for every pair p = (pi[p], pj[p]), res_p
-    its block R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory);
-    rigid_columns: v is zero on the strain dofs (their columns are neither formed nor used)."""
+def _tabulated_partitions(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, l_fu, l_fe, l_se):
+    """Adds every pair's R_2B - R_2B,inf (as `_tabulated_kernel`, formed in scratch memory)
+    into the dense partitions L_FU, L_FE, L_SE (`_add_partitions`)."""
     sc = np.empty((4, NDOF))
     w = np.empty(_TAB_NPT)
     d = np.empty(3)
     work = np.empty(FILL_SCRATCH)
     res = np.empty((2 * NDOF, 2 * NDOF))
+    flat = res.reshape(-1)
+    n = l_fu.shape[0] // 6
+    fu, fe, se = l_fu.reshape(-1), l_fe.reshape(-1), l_se.reshape(-1)
+    for p in range(dx.shape[0]):
+        _interpolate(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d)
+        _fill_pair_columns(d, a1[p], a2[p], sc, res, work, False)
+        _add_partitions(pi[p], pj[p], flat, fu, fe, se, n)
+
+
+@numba.njit(cache=True)
+def _scatter_partitions(pi, pj, blocks, l_fu, l_fe, l_se):
+    """Adds each pair's 22x22 block blocks[p] into the dense partitions (`_add_partitions`)."""
+    n = l_fu.shape[0] // 6
+    fu, fe, se = l_fu.reshape(-1), l_fe.reshape(-1), l_se.reshape(-1)
+    for p in range(pi.shape[0]):
+        _add_partitions(pi[p], pj[p], blocks[p].reshape(-1), fu, fe, se, n)
+
+
+@numba.njit(cache=True)
+def _add_partitions(i, j, pair, fu, fe, se, n):
+    """Adds a pair's 22x22 matrix (flattened, C order; rows and columns: i's 11 dofs, j's
+    11 dofs) into the dense partitions L_FU (6N x 6N), L_FE (6N x 5N) and L_SE (5N x 5N),
+    given flattened (C order), n = N. The indices are unsigned, so that numba adds no
+    negative-index wraparound to every access."""
+    u64 = numba.uint64
+    for u in range(2):
+        row = i if u == 0 else j
+        for v in range(2):
+            col = i if v == 0 else j
+            r0, c0 = NDOF * u, NDOF * v
+            for a in range(6):
+                k_fu = u64((6 * row + a) * 6 * n + 6 * col)
+                k_fe = u64((6 * row + a) * 5 * n + 5 * col)
+                k_p = u64((r0 + a) * 2 * NDOF + c0)
+                for b in range(6):
+                    fu[k_fu + u64(b)] += pair[k_p + u64(b)]
+                for b in range(5):
+                    fe[k_fe + u64(b)] += pair[k_p + u64(6 + b)]
+            for a in range(5):
+                k_se = u64((5 * row + a) * 5 * n + 5 * col)
+                k_p = u64((r0 + 6 + a) * 2 * NDOF + c0 + 6)
+                for b in range(5):
+                    se[k_se + u64(b)] += pair[k_p + u64(b)]
+
+
+@numba.njit(cache=True)
+def _tabulated_product(dx, a1, a2, tab, data, offset, k_lo, n_rows, pi, pj, v, rigid_columns, out):
+    """out[(i, j)] += res_p (v_i, v_j) for every pair p = (pi[p], pj[p]), res_p its block
+    R_2B - R_2B,inf at dx[p] (as `_tabulated_kernel`, in scratch memory); rigid_columns: v
+    is zero on the strain dofs (their columns are neither formed nor used)."""
+    sc = np.empty((4, NDOF))
+    w = np.empty(_TAB_NPT)
+    d = np.empty(3)
+    work = np.empty(FILL_SCRATCH)
+    res = np.empty((2 * NDOF, 2 * NDOF))
+    acc = np.empty(2 * NDOF)
     ncol = 6 if rigid_columns else NDOF
     for p in range(dx.shape[0]):
         _interpolate(p, dx, a1, a2, tab, data, offset, k_lo, n_rows, sc, w, d)
         _fill_pair_columns(d, a1[p], a2[p], sc, res, work, rigid_columns)
-        old_p = old[p]
         i, j = pi[p], pj[p]
-        for u in range(2):
-            row = i if u == 0 else j
-            for a in range(NDOF):
-                ra = NDOF * u + a
-                acc = 0.0
-                for b in range(ncol):
-                    acc += (res[ra, b] - old_p[ra, b]) * v[i, b]
-                for b in range(ncol):
-                    acc += (res[ra, NDOF + b] - old_p[ra, NDOF + b]) * v[j, b]
-                out[row, a] += acc
+        acc[:] = 0.0
+        for b in range(ncol):
+            vi, vj = v[i, b], v[j, b]
+            for r in range(2 * NDOF):
+                acc[r] += res[r, b] * vi + res[r, NDOF + b] * vj
+        for a in range(NDOF):
+            out[i, a] += acc[a]
+            out[j, a] += acc[NDOF + a]
 
 
 @numba.njit(cache=True)

@@ -15,11 +15,10 @@ Van Loan, Matrix Computations, sec. 3.2)
 Only S^-1 (6N x 6N) is formed, by Cholesky (LAPACK potrf/potri): R_FU = S^-1 + L_FU must be
 a matrix (it is factorised), while the far-field parts of R_FE, R_SU and R_SE only act on
 vectors, through X and triangular solves with U_b. This costs about half the flops of
-inverting the whole (11N)^2 M_inf. The lubrication L is kept both as its pair blocks (for
-`resistance_change`) and scattered into dense partitions L_FU, L_FE, L_SE (its products
-are then BLAS matrix-vector products: a pair list within the lubrication cut-off of 2
-radii holds about as many entries as the dense partitions up to N ~ 50, and the dense
-products stream them several times faster).
+inverting the whole (11N)^2 M_inf. The lubrication L is added pair by pair into dense
+partitions L_FU, L_FE, L_SE (its products are then BLAS matrix-vector products: a pair
+list within the lubrication cut-off of 2 radii holds about as many entries as the dense
+partitions up to N ~ 50, and the dense products stream them several times faster).
 """
 
 from dataclasses import dataclass
@@ -32,8 +31,8 @@ from scipy.linalg import blas, lapack
 from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, far_field_product, plan_far_field
 from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator
-from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, all_pair_blocks, close_pairs,
-                          lubrication_change, lubrication_reach, lubrication_sparse)
+from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
+                          lubrication_product, lubrication_reach, lubrication_sparse)
 
 
 @dataclass
@@ -50,22 +49,20 @@ class GrandResistance:
     S^-1 = [M^-1]_aa (6N x 6N, dofs particle by particle; R_FU = S^-1 + L_FU is formed when
     asked for, `r_fu_rows`), the upper
     Cholesky factor U_b of M_bb (5N x 5N, M_bb = U_b^T U_b) and X = M_ab U_b^-1 (6N x 5N,
-    Fortran-ordered); the lubrication as its pair blocks (pair_i, pair_j, blocks (P, 22,
-    22)) and as dense partitions (L_FU, L_FE, L_SE) (`lubrication_partitions`); its close
-    pairs, the plan it was built with, the (wrapped) positions it was built at and the
-    radii."""
+    Fortran-ordered); the lubrication as dense partitions (L_FU, L_FE, L_SE)
+    (`lubrication.lubrication_partitions`); its close pairs, the plan it was built with,
+    the (wrapped) positions it was built at and the radii."""
 
     s_inverse: np.ndarray
     x_ab: np.ndarray
     chol_bb: np.ndarray
-    lubrication: tuple | None
     lubrication_dense: tuple | None
     pairs: PairList
     plan: HydroPlan
     positions: np.ndarray
     radii: np.ndarray
-    #: the lubrication pairs' orientation and tables (`lubrication.all_pair_blocks`), for
-    #: `lubrication.lubrication_change`; None: looked up again
+    #: the lubrication pairs' orientation and tables (`lubrication.lubrication_partitions`),
+    #: for `lubrication.lubrication_product` at displaced positions; None: looked up again
     lubrication_setup: tuple | None = None
 
     @property
@@ -198,35 +195,6 @@ def _chol_solve(upper, rhs):
 
 
 @numba.njit(cache=True)
-def _scatter_partitions(pi, pj, blocks, l_fu, l_fe, l_se):
-    """Adds each pair's 22x22 block (rows and columns: pi's 11 dofs, pj's 11) into the dense
-    partitions L_FU (6N x 6N), L_FE (6N x 5N) and L_SE (5N x 5N); L_SU = L_FE^T is not
-    stored."""
-    for p in range(pi.shape[0]):
-        for u in range(2):
-            row = pi[p] if u == 0 else pj[p]
-            for v in range(2):
-                col = pi[p] if v == 0 else pj[p]
-                block = blocks[p, NDOF * u : NDOF * (u + 1), NDOF * v : NDOF * (v + 1)]
-                for a in range(6):
-                    for b in range(6):
-                        l_fu[6 * row + a, 6 * col + b] += block[a, b]
-                    for b in range(5):
-                        l_fe[6 * row + a, 5 * col + b] += block[a, 6 + b]
-                for a in range(5):
-                    for b in range(5):
-                        l_se[5 * row + a, 5 * col + b] += block[6 + a, 6 + b]
-
-
-def lubrication_partitions(lub, n):
-    """The lubrication pair blocks lub = (pair_i, pair_j, blocks (P, 22, 22)) as dense
-    partitions (L_FU (6N x 6N), L_FE (6N x 5N), L_SE (5N x 5N)), dofs particle by particle."""
-    dense = np.zeros((6 * n, 6 * n)), np.zeros((6 * n, 5 * n)), np.zeros((5 * n, 5 * n))
-    _scatter_partitions(*lub, *dense)
-    return dense
-
-
-@numba.njit(cache=True)
 def _partition(matrix, r_fu, r_fe, r_se):
     """Copies the rigid-body (6 per particle) and strain (5 per particle) rows and
     columns of an (11N, 11N) matrix into its FU, FE and SE partitions."""
@@ -317,24 +285,17 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
     far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
-    lub, setup = all_pair_blocks(radii, pairs, keep_setup=True) if plan.near_images is not None else (None, None)
-    res = from_blocks(far, lub, pairs, plan, pos, radii)
-    res.lubrication_setup = setup
-    return res
-
-
-def lubrication_blocks(radii, pairs):
-    """(pair_i, pair_j, blocks (P, 22, 22)) of the lubrication pairs (`lubrication.pair_blocks`
-    gathered: `lubrication.all_pair_blocks`), or None without pairs."""
-    return all_pair_blocks(radii, pairs)
+    lub = lubrication_partitions(radii, pairs, len(pos)) if plan.near_images is not None else None
+    return from_blocks(far, lub, pairs, plan, pos, radii)
 
 
 def from_blocks(far, lub, pairs, plan, positions, radii):
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
-    lubrication blocks lub (`lubrication_blocks`, None: none)."""
+    lubrication lub: (dense partitions, setup) from `lubrication.lubrication_partitions`
+    (None: none)."""
     s_inverse, x_ab, chol_bb = far
-    dense = None if lub is None else lubrication_partitions(lub, len(positions))
-    return GrandResistance(s_inverse, x_ab, chol_bb, lub, dense, pairs, plan, positions, radii)
+    dense, setup = (None, None) if lub is None else lub
+    return GrandResistance(s_inverse, x_ab, chol_bb, dense, pairs, plan, positions, radii, setup)
 
 
 def far_field_blocks(mob):
@@ -361,17 +322,19 @@ def resistance_change(base, moved, vector, min_gap):
     M^-1 from base's block form (so M_inf w = v, to the solve's residual, ~1e-9 of the
     change at a displacement of 1e-5), M_inf(moved) w by `farfield.far_field_product` with
     base's far-field plan (the same images and wave vectors as base's M_inf, so that the
-    difference carries the Ewald truncation of the change, not of M_inf), L(moved) v -
-    L(base) v pair by pair (`lubrication.lubrication_change`, separations floored at
-    min_gap as in `close_pairs`). The dropped term, M^-1 Delta M M^-1 Delta M M^-1 v, is
-    second order in the displacement."""
+    difference carries the Ewald truncation of the change, not of M_inf), L(moved) v pair
+    by pair with base's pair images and tables (`lubrication.lubrication_product`,
+    separations floored at min_gap as in `close_pairs`) and L(base) v by base's dense
+    partitions. The lubrication difference carries a round-off of ~eps max|L v| (eps =
+    2.2e-16), as the entries of L do (tests/test_resistance_change.py). The dropped term,
+    M^-1 Delta M M^-1 Delta M M^-1 v, is second order in the displacement."""
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
     out = -base.far_inverse_product(far_field_product(moved, base.radii, base.plan.far, far_v) - vector)
-    if base.plan.near_images is not None:
+    if base.plan.near_images is not None and base.lubrication_dense is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
-        if base.lubrication is not None:
-            out += lubrication_change(base.radii, pairs, base.lubrication, vector, base.lubrication_setup)
+        out += lubrication_product(base.radii, pairs, vector, base.lubrication_setup)
+        out -= base.lubrication_product(vector)
     return out
 
 
