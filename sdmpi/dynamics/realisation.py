@@ -52,7 +52,7 @@ import math
 import numpy as np
 
 from ..config.stresses import CONTRIBUTIONS
-from ..hydro.basis import from_five, to_five
+from ..hydro.basis import BASIS, to_five
 from ..hydro.geometry import Lattice
 from .collisions import Collisions, default_rule, separate
 from .contacts import contact_model
@@ -69,10 +69,13 @@ KT_REDUCED = 6 * math.pi
 COMPONENTS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
+#: the 6-vector components (COMPONENTS) of the basis tensors: (6, 5), BASIS[m][a, b]
+_SIX_OF_FIVE = np.array([[BASIS[m, a, b] for m in range(5)] for a, b in COMPONENTS])
+
+
 def bulk_stress(tensors, volume):
     """(1/V) sum of (N, 5) 5-basis tensors, as a 6-vector xx yy zz xy xz yz."""
-    total = from_five(tensors.sum(axis=0))
-    return np.array([total[a, b] for a, b in COMPONENTS]) / volume
+    return _SIX_OF_FIVE @ tensors.sum(axis=0) / volume
 
 
 def symmetric_six(matrix):
