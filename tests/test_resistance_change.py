@@ -53,6 +53,33 @@ def test_far_field_product_unbounded():
     assert np.abs(far_field_product(CONFIG, RADII, plan, w).ravel() - ref).max() < 1e-13 * np.abs(ref).max()
 
 
+
+@pytest.mark.parametrize("strain", [0.0, 0.3])
+def test_real_space_product_is_the_real_space_blocks_times_the_vector(strain):
+    """The real-space Ewald product in tensor form (`_real_space_product`) against the
+    11x11 image blocks assembled into a matrix (`_real_space_sum`) times w: four spheres of
+    three radii (unequal and equal pairs) in a box of side 4.5, small enough that every
+    sphere sees its own images (self-images) and pairs have several consecutive images.
+    Tolerance 1e-13 of the largest entry."""
+    from sdmpi.hydro.farfield import BASIS, NDOF, _real_space_product, _real_space_sum
+
+    lattice = Lattice(np.full(3, 4.5), strain)
+    pos = lattice.wrap(np.array([[0.4, 0.6, 0.5], [2.5, 1.2, 2.9], [1.3, 3.4, 2.4], [3.3, 3.9, 4.3]]))
+    radii = np.array([1.0, 0.6, 1.3, 1.0])
+    plan = plan_far_field(pos, radii, lattice, 1e-6)
+    pi, pj, _ = plan.images
+    assert np.any(pi == pj) and np.any((pi[1:] == pi[:-1]) & (pj[1:] == pj[:-1]) & (pi[1:] != pj[1:]))
+    w = np.random.default_rng(2).standard_normal((len(pos), NDOF))
+    args = (*plan.images, plan.table, plan.grid.values, plan.grid.r0, plan.grid.h, plan.params.xi, BASIS)
+    for x in (pos, pos + 1e-2 * np.random.default_rng(3).standard_normal(pos.shape)):
+        mob = np.zeros((NDOF * len(pos), NDOF * len(pos)))
+        _real_space_sum(x, radii, *args, mob, True)
+        ref = mob @ w.ravel()
+        got = np.zeros_like(w)
+        _real_space_product(x, radii, *args, w, got)
+        assert np.abs(got.ravel() - ref).max() < 1e-13 * np.abs(ref).max()
+
+
 def test_lubrication_product_is_the_matrix_times_the_vector():
     lattice = Lattice(BOX, STRAIN)
     pos = lattice.wrap(CONFIG)

@@ -380,37 +380,211 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
 @numba.njit(cache=True)
 def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, w, out):
     """Adds M_r w into out (N, 11) for w (N, 11): the real-space sum of `_real_space_sum`
-    (same images, same radial values) applied to a vector block by block, no matrix formed:
-    each image block B adds B w_j to particle i and B^T w_i to particle j (a self-image,
-    i = j, both: its +-n pair). Consecutive images of one pair are summed first."""
+    (same images, radial values and coefficients as `_block_from_radial`, DBB 1987) applied
+    to the vectors in tensor form, without forming the 11x11 blocks.
+
+    For an image at r = x_i - x_j - shift, e = r/|r|, and the source's force F, torque L
+    and strain tensor W = sum_n S_n B^n (formed once per particle), g = W e, s = e.W.e,
+    the block M_ij adds to the receiver i
+      U     += d_F F + f_ul e x L + c2 g + (c1 s - a_F e.F) e          (UF, UL, US),
+      Omega += d_L L + a_L (e.L) e + e x (f_of F - h g)               (Omega-L, -F, -S),
+      E_m   += c_d S_m + B^m : (e P^T),
+               P = -c2' F + h' e x L + c_w g + (d_1 s - c1' e.F) e     (EF, EL, ES),
+    since sum_n S_n B^n e = g, sum_n S_n q_n = s (q_n = e.B^n.e), (B^m e).P = B^m : (e P^T)
+    and B^m : W = S_m. (c1, c2) are the U-S coefficients of (a_i^2/6, a_j^2/10), (c1', c2')
+    the E-F ones of (a_i^2/10, a_j^2/6), h (a_j^2/10) and h' (a_i^2/10) those of Omega-S and
+    E-L; for equal radii each primed coefficient equals the unprimed one. M_ji = M_ij^T adds
+    the same to particle j with e -> -e and the radii exchanged (the odd terms change sign);
+    a self-image (i = j) adds both, its +-n pair. sym(e P^T) is gathered per particle and
+    projected on the basis at the end; the e-independent d_F, d_L, c_d of a pair's
+    consecutive images are summed before being applied."""
     bounds = _power_bounds(table)
-    pw, e, be, q = np.empty(_NPOW), np.empty(3), np.empty((5, 3)), np.empty(5)
+    pw = np.empty(_NPOW)
     v = np.empty((4, 5))
-    block = np.zeros((NDOF, NDOF))
-    rvec = np.empty(3)
+    n = w.shape[0]
+    # W = sum_n S_n B^n as (xx, yy, zz, xy, xz, yz); tacc: e P^T + P e^T, same order
+    ta = (0, 1, 2, 0, 0, 1)
+    tb = (0, 1, 2, 1, 2, 2)
+    wt = np.zeros((n, 6))
+    for k in range(n):
+        for c in range(6):
+            for m in range(5):
+                wt[k, c] += w[k, 6 + m] * basis[m, ta[c], tb[c]]
+    tacc = np.zeros((n, 6))
+    alpha, beta = radii * radii / 6.0, radii * radii / 10.0  # Faxen coefficients a^2/6, a^2/10
     n_img = pi.shape[0]
+    ui0 = ui1 = ui2 = oi0 = oi1 = oi2 = 0.0
+    uj0 = uj1 = uj2 = oj0 = oj1 = oj2 = 0.0
+    ti0 = ti1 = ti2 = ti3 = ti4 = ti5 = 0.0
+    tj0 = tj1 = tj2 = tj3 = tj4 = tj5 = 0.0
+    sum_df = sum_dl = sum_cd = 0.0
     for p in range(n_img):
         i, j = pi[p], pj[p]
-        for c in range(3):
-            rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
-        r = math.sqrt(rvec[0] ** 2 + rvec[1] ** 2 + rvec[2] ** 2)
+        r0 = pos[i, 0] - pos[j, 0] - shift[p, 0]
+        r1 = pos[i, 1] - pos[j, 1] - shift[p, 1]
+        r2 = pos[i, 2] - pos[j, 2] - shift[p, 2]
+        r = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
         _radial_lookup(grid, grid_r0, grid_h, table, bounds, xi, r, pw, v)
-        _block_from_radial(rvec, r, v, radii[i], radii[j], basis, e, be, q, block)
+        ir = 1.0 / r
+        e0, e1, e2 = r0 * ir, r1 * ir, r2 * ir
+        ai, aj = radii[i], radii[j]
+        al_i, al_j = alpha[i], alpha[j]
+        be_i, be_j = beta[i], beta[j]
+        v01, v02, v03, v04 = v[0, 1], v[0, 2], v[0, 3], v[0, 4]
+        v10, v11, v12, v13, v14 = v[1, 0], v[1, 1], v[1, 2], v[1, 3], v[1, 4]
+        v20, v21, v22, v23, v24 = v[2, 0], v[2, 1], v[2, 2], v[2, 3], v[2, 4]
+        v30, v31, v32 = v[3, 0], v[3, 1], v[3, 2]
+        ir2 = ir * ir
+        ir3 = ir2 * ir
+
+        # scalar coefficients, as in _block_from_radial
+        s1, s2 = al_i + al_j, al_i * al_j
+        d1 = v01 + s1 * v11 + s2 * v21
+        a_f = v02 + s1 * v12 + s2 * v22 - d1 * ir
+        d_f = v10 + s1 * v20 + s2 * v30 - d1 * ir
+        f_ul = 0.5 * (v11 + al_i * v21)
+        f_of = 0.5 * (v11 + al_j * v21)
+        a_l = 0.25 * (v12 - v11 * ir)
+        d_l = 0.25 * (v11 * ir - v20)
+        t1, t2 = al_i + be_j, al_i * be_j  # U_i-S_j and E_j-F_i
+        g1 = v11 + t1 * v21 + t2 * v31
+        f1 = v01 + t1 * v11 + t2 * v21
+        f2 = v02 + t1 * v12 + t2 * v22
+        f3 = v03 + t1 * v13 + t2 * v23
+        c1a = f3 - 3 * f2 * ir + 3 * f1 * ir2
+        c2a = 2 * (f2 * ir - f1 * ir2) - g1
+        h_j = 0.5 * (v12 + be_j * v22 - (v11 + be_j * v21) * ir)  # Omega_i-S_j and E_j-L_i
+        if ai == aj:
+            c1b, c2b, h_i = c1a, c2a, h_j
+        else:
+            t1, t2 = be_i + al_j, be_i * al_j  # E_i-F_j and U_j-S_i
+            g1 = v11 + t1 * v21 + t2 * v31
+            f1 = v01 + t1 * v11 + t2 * v21
+            f2 = v02 + t1 * v12 + t2 * v22
+            f3 = v03 + t1 * v13 + t2 * v23
+            c1b = f3 - 3 * f2 * ir + 3 * f1 * ir2
+            c2b = 2 * (f2 * ir - f1 * ir2) - g1
+            h_i = 0.5 * (v12 + be_i * v22 - (v11 + be_i * v21) * ir)
+        u1, u2 = be_i + be_j, be_i * be_j
+        h1 = v11 + u1 * v21 + u2 * v31
+        h2 = v12 + u1 * v22 + u2 * v32
+        f1 = v01 + u1 * v11 + u2 * v21
+        f2 = v02 + u1 * v12 + u2 * v22
+        f3 = v03 + u1 * v13 + u2 * v23
+        f4 = v04 + u1 * v14 + u2 * v24
+        dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir2 - 15 * f1 * ir3
+        cw = 4 * (f3 * ir - 3 * f2 * ir2 + 3 * f1 * ir3) - (h2 - h1 * ir)
+        sum_cd += 2 * (f2 * ir2 - f1 * ir3) - h1 * ir
+        sum_df += d_f
+        sum_dl += d_l
+
+        # receiver i, source j
+        fx, fy, fz = w[j, 0], w[j, 1], w[j, 2]
+        lx, ly, lz = w[j, 3], w[j, 4], w[j, 5]
+        gx = wt[j, 0] * e0 + wt[j, 3] * e1 + wt[j, 4] * e2
+        gy = wt[j, 3] * e0 + wt[j, 1] * e1 + wt[j, 5] * e2
+        gz = wt[j, 4] * e0 + wt[j, 5] * e1 + wt[j, 2] * e2
+        s = e0 * gx + e1 * gy + e2 * gz
+        ef = e0 * fx + e1 * fy + e2 * fz
+        el = e0 * lx + e1 * ly + e2 * lz
+        cx, cy, cz = e1 * lz - e2 * ly, e2 * lx - e0 * lz, e0 * ly - e1 * lx  # e x L
+        k = c1a * s - a_f * ef
+        ui0 += f_ul * cx + c2a * gx + k * e0
+        ui1 += f_ul * cy + c2a * gy + k * e1
+        ui2 += f_ul * cz + c2a * gz + k * e2
+        mx, my, mz = f_of * fx - h_j * gx, f_of * fy - h_j * gy, f_of * fz - h_j * gz
+        k = a_l * el
+        oi0 += e1 * mz - e2 * my + k * e0
+        oi1 += e2 * mx - e0 * mz + k * e1
+        oi2 += e0 * my - e1 * mx + k * e2
+        k = dd1 * s - c1b * ef
+        px = h_i * cx + cw * gx - c2b * fx + k * e0
+        py = h_i * cy + cw * gy - c2b * fy + k * e1
+        pz = h_i * cz + cw * gz - c2b * fz + k * e2
+        ti0 += e0 * px
+        ti1 += e1 * py
+        ti2 += e2 * pz
+        ti3 += e0 * py + e1 * px
+        ti4 += e0 * pz + e2 * px
+        ti5 += e1 * pz + e2 * py
+
+        # receiver j, source i (e -> -e, radii exchanged)
+        fx, fy, fz = w[i, 0], w[i, 1], w[i, 2]
+        lx, ly, lz = w[i, 3], w[i, 4], w[i, 5]
+        gx = wt[i, 0] * e0 + wt[i, 3] * e1 + wt[i, 4] * e2
+        gy = wt[i, 3] * e0 + wt[i, 1] * e1 + wt[i, 5] * e2
+        gz = wt[i, 4] * e0 + wt[i, 5] * e1 + wt[i, 2] * e2
+        s = e0 * gx + e1 * gy + e2 * gz
+        ef = e0 * fx + e1 * fy + e2 * fz
+        el = e0 * lx + e1 * ly + e2 * lz
+        cx, cy, cz = e1 * lz - e2 * ly, e2 * lx - e0 * lz, e0 * ly - e1 * lx
+        k = -c1b * s - a_f * ef
+        uj0 += k * e0 - f_of * cx - c2b * gx
+        uj1 += k * e1 - f_of * cy - c2b * gy
+        uj2 += k * e2 - f_of * cz - c2b * gz
+        mx, my, mz = f_ul * fx + h_i * gx, f_ul * fy + h_i * gy, f_ul * fz + h_i * gz
+        k = a_l * el
+        oj0 += k * e0 - (e1 * mz - e2 * my)
+        oj1 += k * e1 - (e2 * mx - e0 * mz)
+        oj2 += k * e2 - (e0 * my - e1 * mx)
+        k = dd1 * s + c1a * ef
+        px = h_j * cx + cw * gx + c2a * fx + k * e0
+        py = h_j * cy + cw * gy + c2a * fy + k * e1
+        pz = h_j * cz + cw * gz + c2a * fz + k * e2
+        tj0 += e0 * px
+        tj1 += e1 * py
+        tj2 += e2 * pz
+        tj3 += e0 * py + e1 * px
+        tj4 += e0 * pz + e2 * px
+        tj5 += e1 * pz + e2 * py
+
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
-        for a in range(NDOF):  # (M w)_i += B w_j, (M w)_j += B^T w_i
-            acc_i = 0.0
-            for b in range(NDOF):
-                acc_i += block[a, b] * w[j, b]
-                out[j, b] += block[a, b] * w[i, a]
-            out[i, a] += acc_i
-        block[:, :] = 0.0
+        out[i, 0] += ui0 + sum_df * w[j, 0]
+        out[i, 1] += ui1 + sum_df * w[j, 1]
+        out[i, 2] += ui2 + sum_df * w[j, 2]
+        out[i, 3] += oi0 + sum_dl * w[j, 3]
+        out[i, 4] += oi1 + sum_dl * w[j, 4]
+        out[i, 5] += oi2 + sum_dl * w[j, 5]
+        out[j, 0] += uj0 + sum_df * w[i, 0]
+        out[j, 1] += uj1 + sum_df * w[i, 1]
+        out[j, 2] += uj2 + sum_df * w[i, 2]
+        out[j, 3] += oj0 + sum_dl * w[i, 3]
+        out[j, 4] += oj1 + sum_dl * w[i, 4]
+        out[j, 5] += oj2 + sum_dl * w[i, 5]
+        for m in range(5):
+            out[i, 6 + m] += sum_cd * w[j, 6 + m]
+            out[j, 6 + m] += sum_cd * w[i, 6 + m]
+        tacc[i, 0] += ti0
+        tacc[i, 1] += ti1
+        tacc[i, 2] += ti2
+        tacc[i, 3] += ti3
+        tacc[i, 4] += ti4
+        tacc[i, 5] += ti5
+        tacc[j, 0] += tj0
+        tacc[j, 1] += tj1
+        tacc[j, 2] += tj2
+        tacc[j, 3] += tj3
+        tacc[j, 4] += tj4
+        tacc[j, 5] += tj5
+        ui0 = ui1 = ui2 = oi0 = oi1 = oi2 = 0.0
+        uj0 = uj1 = uj2 = oj0 = oj1 = oj2 = 0.0
+        ti0 = ti1 = ti2 = ti3 = ti4 = ti5 = 0.0
+        tj0 = tj1 = tj2 = tj3 = tj4 = tj5 = 0.0
+        sum_df = sum_dl = sum_cd = 0.0
+    # E_m += B^m : sym(T): tacc holds the diagonal and T_ab + T_ba (a < b)
+    for k in range(n):
+        for m in range(5):
+            acc = 0.0
+            for c in range(6):
+                acc += basis[m, ta[c], tb[c]] * tacc[k, c]
+            out[k, 6 + m] += acc
 
 
 def far_field_product(positions, radii, plan, w):
     """M_inf w (N, 11) for w (N, 11) at the positions (used as given), with the pair images
     and wave vectors of the plan (`plan_far_field`, made at these or nearby positions),
-    without forming M_inf: the real-space images block by block (`_real_space_product`),
+    without forming M_inf: the real-space images in tensor form (`_real_space_product`),
     the reciprocal sum in O(N n_k) (`_reciprocal_product`) and the self blocks. Equal to
     `far_field_mobility(positions, radii, plan=plan) @ w` up to rounding; at positions
     displaced from the plan's by a small step it carries the same truncation, so that its
