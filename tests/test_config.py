@@ -73,8 +73,8 @@ def test_demo_is_tiny():
 def test_empty_file_gives_the_documented_defaults():
     job = parse_job("")
     # every key at its schema default; the Ewald tolerance, whose default depends on the
-    # job, resolved (a Brownian job: 1e-4)
-    assert job.hydrodynamics.ewald_tolerance == 1e-4
+    # job, resolved (a Brownian job: 1e-3)
+    assert job.hydrodynamics.ewald_tolerance == 1e-3
     assert dataclasses.replace(job, hydrodynamics=dataclasses.replace(job.hydrodynamics, ewald_tolerance=None)) == Job()
     assert job.system.n_particles == 27 and job.system.phi == (0.45,)
     assert job.medium.kind == "newtonian" and job.medium.modes is None
@@ -89,8 +89,8 @@ def test_empty_file_gives_the_documented_defaults():
     assert (h.lubrication_cutoff, h.min_gap) == (2.0, 1e-4)
     # absent: the Brownian default, written into the job (its canonical text and hash are
     # those of the same job with the value given); 1e-6 for deterministic jobs
-    assert h.ewald_tolerance == job.ewald_tolerance == 1e-4
-    assert job_hash(job) == job_hash(parse_job("[hydrodynamics]\newald_tolerance = 1e-4\n"))
+    assert h.ewald_tolerance == job.ewald_tolerance == 1e-3
+    assert job_hash(job) == job_hash(parse_job("[hydrodynamics]\newald_tolerance = 1e-3\n"))
     assert parse_job("[brownian]\nenabled = false\n").hydrodynamics.ewald_tolerance == 1e-6
     assert job.output.per_particle is False and job.output.checkpoint_every == 1000
     assert job.time_unit == "t_D"
