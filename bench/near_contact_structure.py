@@ -5,10 +5,13 @@ then --mc-configs samples --mc-every sweeps apart): the pair distribution g in s
 surface gap near contact, and the high-frequency viscosity eta_H
 (`sdmpi.hydro.bulk.hydrodynamic_viscosity`) of the evolved configurations. The first
 --discard of the run's steps (the relaxation from its Monte Carlo start) are left out.
-Errors: one standard error over 20 blocks (of the run; of the chain).
+Errors: one standard error over 20 blocks (of the run; of the chain); with several
+--seeds (independent runs, --workers processes at a time), the dynamics' error is the
+standard error of the runs' means (which also holds when structural fluctuations outlast
+a block).
 
     python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
-        [--collisions separate|reflect] [--symmetric] [--dt 5e-4] [--seed 11]
+        [--collisions separate|reflect] [--symmetric] [--dt 5e-4] [--seeds 11 ...] [--workers 1]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
 the near-contact correction of `sdmpi.dynamics.models` off (for comparison); --collisions
@@ -19,8 +22,10 @@ line, appended to bench/near_contact_structure.json (docs/physics.md quotes it).
 """
 
 import argparse
+import functools
 import json
 import math
+import multiprocessing
 import time
 from pathlib import Path
 
@@ -122,7 +127,8 @@ def main():
     parser.add_argument("--mc-sweeps", type=int, default=5000)
     parser.add_argument("--mc-every", type=int, default=5)
     parser.add_argument("--discard", type=float, default=0.2)
-    parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[11])
+    parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--uncorrected", action="store_true")
     parser.add_argument("--collisions", choices=RULES)
     parser.add_argument("--symmetric", action="store_true")
@@ -136,20 +142,31 @@ def main():
         Realisation._separate = lambda self, pos, strain, reflect=False, mobility=None: symmetric(
             self, pos, strain, reflect)
     start = time.perf_counter()
-    g_sd, eta_sd = dynamics(args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions, args.seed)
+    runs = functools.partial(dynamics, args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions)
+    with multiprocessing.Pool(args.workers) as pool:
+        per_seed = pool.map(runs, args.seeds)
     skip = int(args.discard * args.steps)
     g_mc, eta_mc = monte_carlo(args.n, args.phi, args.mc_configs, max(args.mc_configs // 100, 1),
                                args.mc_sweeps, args.mc_every)
-    (g1, e1), (g2, e2) = summary(g_sd[skip:], blocks=20), summary(g_mc, blocks=20)
-    (h1, f1), (h2, f2) = summary(eta_sd[skip // 100:], blocks=16), summary(eta_mc, blocks=20)
+    if len(per_seed) == 1:
+        g_sd, eta_sd = per_seed[0]
+        (g1, e1), (h1, f1) = summary(g_sd[skip:], blocks=20), summary(eta_sd[skip // 100:], blocks=16)
+    else:  # the runs' means as independent samples
+        (g1, e1) = summary(np.array([g[skip:].mean(axis=0) for g, _ in per_seed]))
+        (h1, f1) = summary(np.array([eta[skip // 100:].mean() for _, eta in per_seed]))
+    (g2, e2), (h2, f2) = summary(g_mc, blocks=20), summary(eta_mc, blocks=20)
     row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
-           "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip, "seed": args.seed,
+           "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip,
+           **({"seed": args.seeds[0]} if len(args.seeds) == 1 else {"seeds": args.seeds}),
            "collisions": args.collisions or default_rule(args.model),
            "collision_moves": "symmetric" if args.symmetric else "through the mobility",
            "mc_configs": args.mc_configs,
            "mc_start_sweeps": args.mc_sweeps, "mc_every_sweeps": args.mc_every,
            "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
-           "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [h1, f1], "eta_h_mc": [h2, f2],
+           "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [float(h1), float(f1)],
+           "eta_h_mc": [float(h2), float(f2)],
+           **({} if len(per_seed) == 1 else
+              {"g_dynamics_per_seed": [g[skip:].mean(axis=0).tolist() for g, _ in per_seed]}),
            "seconds": round(time.perf_counter() - start)}
     print(json.dumps(row))
     with open(args.out, "a") as out:
