@@ -197,6 +197,30 @@ _ISQ2 = 1.0 / math.sqrt(2.0)
 _ISQ6 = 1.0 / math.sqrt(6.0)
 
 
+@numba.njit(cache=True, inline="always")
+def _stresslet_coefficients(v, ir, alpha, beta):
+    """(c1, c2, h): the U-S and Omega-S couplings of a receiver sphere (Faxen coefficient
+    alpha = a^2/6) to a source sphere's stresslet column W = sum_n w_n B^n (beta = a^2/10)
+    at r = x_receiver - x_source, e = r/|r|, from the radial values
+    v[p, m] = d^m/dr^m lap^p chi_r at r (ir = 1/r):
+      U     = (grad^3 Gamma - I.grad lap Gamma) : W = c2 W e + c1 (e.W.e) e,
+              Gamma = (1 + alpha lap)(1 + beta lap) chi_r,
+              c1 = G3 - 3 G2/r + 3 G1/r^2,  c2 = 2 (G2/r - G1/r^2) - (lap Gamma)_1,
+      Omega = -h e x (W e),  h = (1/2) (P2 - P1/r),  Phi = (1 + beta lap) lap chi_r,
+    with G_m, P_m, (.)_m the m-th r-derivatives of Gamma, Phi, (.). The E-F and E-L
+    couplings are these transposed with the spheres exchanged (M_ji = M_ij^T, DBB 1987)."""
+    ir2 = ir * ir
+    t1, t2 = alpha + beta, alpha * beta
+    g1 = v[1, 1] + t1 * v[2, 1] + t2 * v[3, 1]
+    f1 = v[0, 1] + t1 * v[1, 1] + t2 * v[2, 1]
+    f2 = v[0, 2] + t1 * v[1, 2] + t2 * v[2, 2]
+    f3 = v[0, 3] + t1 * v[1, 3] + t2 * v[2, 3]
+    c1 = f3 - 3 * f2 * ir + 3 * f1 * ir2
+    c2 = 2 * (f2 * ir - f1 * ir2) - g1
+    h = 0.5 * (v[1, 2] + beta * v[2, 2] - (v[1, 1] + beta * v[2, 1]) * ir)
+    return c1, c2, h
+
+
 @numba.njit(cache=True)
 def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
@@ -272,20 +296,17 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     for n in range(5):
         q[n] = e0 * be[n, 0] + e1 * be[n, 1] + e2 * be[n, 2]
 
-    # U-S:  -I.grad lap Gamma + grad^3 Gamma, Gamma = (1 + al_i lap)(1 + be_j lap) chi_r
-    # E-F:  same with (be_i, al_j), transposed (the same values when a_i = a_j)
+    # U-S and Omega-S: `_stresslet_coefficients` of (alpha, beta) = (al_i, be_j); E-F and E-L:
+    # theirs with the spheres exchanged, (al_j, be_i), transposed (the same when a_i = a_j)
     equal = ai == aj
+    c1a, c2a, ha = _stresslet_coefficients(v, ir, al_i, be_j)
+    if equal:
+        c1b, c2b, hb = c1a, c2a, ha
+    else:
+        c1b, c2b, hb = _stresslet_coefficients(v, ir, al_j, be_i)
+    # U-S and E-F:  c2 B e + c1 (e.B.e) e
     for side in range(1 if equal else 2):
-        if side == 0:
-            t1, t2 = al_i + be_j, al_i * be_j
-        else:
-            t1, t2 = be_i + al_j, be_i * al_j
-        g1 = v11 + t1 * v21 + t2 * v31
-        f1 = v01 + t1 * v11 + t2 * v21
-        f2 = v02 + t1 * v12 + t2 * v22
-        f3 = v03 + t1 * v13 + t2 * v23
-        c1 = f3 - 3 * f2 * ir + 3 * f1 * ir * ir
-        c2 = 2 * (f2 * ir - f1 * ir * ir) - g1
+        c1, c2 = (c1a, c2a) if side == 0 else (c1b, c2b)
         for n in range(5):
             cq = c1 * q[n]
             x0 = c2 * be[n, 0] + cq * e0
@@ -300,14 +321,11 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
                 out[6 + n, 1] -= x1
                 out[6 + n, 2] -= x2
 
-    # Omega-S and E-L:  -(1/2) A2 (e x B e)  and  (1/2) A2 (B e x e)
+    # Omega-S and E-L:  -h (e x B e)
     for side in range(1 if equal else 2):
-        bb = be_j if side == 0 else be_i
-        f1 = v11 + bb * v21
-        f2 = v12 + bb * v22
-        h = 0.5 * (f2 - f1 * ir)
+        h = ha if side == 0 else hb
         for n in range(5):
-            x0 = h * (e1 * be[n, 2] - e2 * be[n, 1])  # (1/2) A2 (e x B e)
+            x0 = h * (e1 * be[n, 2] - e2 * be[n, 1])  # h (e x B e)
             x1 = h * (e2 * be[n, 0] - e0 * be[n, 2])
             x2 = h * (e0 * be[n, 1] - e1 * be[n, 0])
             if side == 0:
@@ -377,6 +395,34 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         block[:, :] = 0.0
 
 
+@numba.njit(cache=True, inline="always")
+def _source_moments(w, wt, k, e0, e1, e2):
+    """(g, s, e.F, e.L, e x L) of the source particle k along the unit vector e: g = W e and
+    s = e.W.e with W = wt[k] its strain tensor (xx, yy, zz, xy, xz, yz), F = w[k, 0:3] its
+    force and L = w[k, 3:6] its torque; g and e x L as components."""
+    lx, ly, lz = w[k, 3], w[k, 4], w[k, 5]
+    gx = wt[k, 0] * e0 + wt[k, 3] * e1 + wt[k, 4] * e2
+    gy = wt[k, 3] * e0 + wt[k, 1] * e1 + wt[k, 5] * e2
+    gz = wt[k, 4] * e0 + wt[k, 5] * e1 + wt[k, 2] * e2
+    s = e0 * gx + e1 * gy + e2 * gz
+    ef = e0 * w[k, 0] + e1 * w[k, 1] + e2 * w[k, 2]
+    el = e0 * lx + e1 * ly + e2 * lz
+    cx, cy, cz = e1 * lz - e2 * ly, e2 * lx - e0 * lz, e0 * ly - e1 * lx
+    return gx, gy, gz, s, ef, el, cx, cy, cz
+
+
+#: a zero symmetric tensor in the layout of `_add_symmetric_outer`
+_ZERO_SYMMETRIC = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _add_symmetric_outer(acc, e0, e1, e2, p0, p1, p2):
+    """acc + (e P^T + P e^T) for acc a 6-tuple (xx, yy, zz, xy, xz, yz), the diagonal
+    halved (e_a P_a)."""
+    return (acc[0] + e0 * p0, acc[1] + e1 * p1, acc[2] + e2 * p2,
+            acc[3] + (e0 * p1 + e1 * p0), acc[4] + (e0 * p2 + e2 * p0), acc[5] + (e1 * p2 + e2 * p1))
+
+
 @numba.njit(cache=True)
 def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi, basis, w, out):
     """Adds M_r w into out (N, 11) for w (N, 11): the real-space sum of `_real_space_sum`
@@ -393,11 +439,13 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
     since sum_n S_n B^n e = g, sum_n S_n q_n = s (q_n = e.B^n.e), (B^m e).P = B^m : (e P^T)
     and B^m : W = S_m. (c1, c2) are the U-S coefficients of (a_i^2/6, a_j^2/10), (c1', c2')
     the E-F ones of (a_i^2/10, a_j^2/6), h (a_j^2/10) and h' (a_i^2/10) those of Omega-S and
-    E-L; for equal radii each primed coefficient equals the unprimed one. M_ji = M_ij^T adds
-    the same to particle j with e -> -e and the radii exchanged (the odd terms change sign);
-    a self-image (i = j) adds both, its +-n pair. sym(e P^T) is gathered per particle and
-    projected on the basis at the end; the e-independent d_F, d_L, c_d of a pair's
-    consecutive images are summed before being applied."""
+    E-L (`_stresslet_coefficients`); for equal radii each primed coefficient equals the
+    unprimed one. M_ji = M_ij^T adds the same to particle j with e -> -e and the radii
+    exchanged (the odd terms change sign); a self-image (i = j) adds both, its +-n pair.
+    Both directions take their source's g, s, e.F, e.L, e x L from `_source_moments`.
+    sym(e P^T) is gathered per particle (`_add_symmetric_outer`) and projected on the basis
+    at the end; the e-independent d_F, d_L, c_d of a pair's consecutive images are summed
+    before being applied."""
     bounds = _power_bounds(table)
     pw = np.empty(_NPOW)
     v = np.empty((4, 5))
@@ -415,8 +463,7 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
     n_img = pi.shape[0]
     ui0 = ui1 = ui2 = oi0 = oi1 = oi2 = 0.0
     uj0 = uj1 = uj2 = oj0 = oj1 = oj2 = 0.0
-    ti0 = ti1 = ti2 = ti3 = ti4 = ti5 = 0.0
-    tj0 = tj1 = tj2 = tj3 = tj4 = tj5 = 0.0
+    t_i = t_j = _ZERO_SYMMETRIC  # a pair's e P^T + P e^T over its images, receivers i and j
     sum_df = sum_dl = sum_cd = 0.0
     for p in range(n_img):
         i, j = pi[p], pj[p]
@@ -446,25 +493,11 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         f_of = 0.5 * (v11 + al_j * v21)
         a_l = 0.25 * (v12 - v11 * ir)
         d_l = 0.25 * (v11 * ir - v20)
-        t1, t2 = al_i + be_j, al_i * be_j  # U_i-S_j and E_j-F_i
-        g1 = v11 + t1 * v21 + t2 * v31
-        f1 = v01 + t1 * v11 + t2 * v21
-        f2 = v02 + t1 * v12 + t2 * v22
-        f3 = v03 + t1 * v13 + t2 * v23
-        c1a = f3 - 3 * f2 * ir + 3 * f1 * ir2
-        c2a = 2 * (f2 * ir - f1 * ir2) - g1
-        h_j = 0.5 * (v12 + be_j * v22 - (v11 + be_j * v21) * ir)  # Omega_i-S_j and E_j-L_i
+        c1a, c2a, h_j = _stresslet_coefficients(v, ir, al_i, be_j)  # U_i-S_j, Omega_i-S_j; E_j-F_i, E_j-L_i
         if ai == aj:
             c1b, c2b, h_i = c1a, c2a, h_j
         else:
-            t1, t2 = be_i + al_j, be_i * al_j  # E_i-F_j and U_j-S_i
-            g1 = v11 + t1 * v21 + t2 * v31
-            f1 = v01 + t1 * v11 + t2 * v21
-            f2 = v02 + t1 * v12 + t2 * v22
-            f3 = v03 + t1 * v13 + t2 * v23
-            c1b = f3 - 3 * f2 * ir + 3 * f1 * ir2
-            c2b = 2 * (f2 * ir - f1 * ir2) - g1
-            h_i = 0.5 * (v12 + be_i * v22 - (v11 + be_i * v21) * ir)
+            c1b, c2b, h_i = _stresslet_coefficients(v, ir, al_j, be_i)  # U_j-S_i, Omega_j-S_i; E_i-F_j, E_i-L_j
         u1, u2 = be_i + be_j, be_i * be_j
         h1 = v11 + u1 * v21 + u2 * v31
         h2 = v12 + u1 * v22 + u2 * v32
@@ -479,15 +512,8 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         sum_dl += d_l
 
         # receiver i, source j
+        gx, gy, gz, s, ef, el, cx, cy, cz = _source_moments(w, wt, j, e0, e1, e2)
         fx, fy, fz = w[j, 0], w[j, 1], w[j, 2]
-        lx, ly, lz = w[j, 3], w[j, 4], w[j, 5]
-        gx = wt[j, 0] * e0 + wt[j, 3] * e1 + wt[j, 4] * e2
-        gy = wt[j, 3] * e0 + wt[j, 1] * e1 + wt[j, 5] * e2
-        gz = wt[j, 4] * e0 + wt[j, 5] * e1 + wt[j, 2] * e2
-        s = e0 * gx + e1 * gy + e2 * gz
-        ef = e0 * fx + e1 * fy + e2 * fz
-        el = e0 * lx + e1 * ly + e2 * lz
-        cx, cy, cz = e1 * lz - e2 * ly, e2 * lx - e0 * lz, e0 * ly - e1 * lx  # e x L
         k = c1a * s - a_f * ef
         ui0 += f_ul * cx + c2a * gx + k * e0
         ui1 += f_ul * cy + c2a * gy + k * e1
@@ -501,23 +527,11 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         px = h_i * cx + cw * gx - c2b * fx + k * e0
         py = h_i * cy + cw * gy - c2b * fy + k * e1
         pz = h_i * cz + cw * gz - c2b * fz + k * e2
-        ti0 += e0 * px
-        ti1 += e1 * py
-        ti2 += e2 * pz
-        ti3 += e0 * py + e1 * px
-        ti4 += e0 * pz + e2 * px
-        ti5 += e1 * pz + e2 * py
+        t_i = _add_symmetric_outer(t_i, e0, e1, e2, px, py, pz)
 
         # receiver j, source i (e -> -e, radii exchanged)
+        gx, gy, gz, s, ef, el, cx, cy, cz = _source_moments(w, wt, i, e0, e1, e2)
         fx, fy, fz = w[i, 0], w[i, 1], w[i, 2]
-        lx, ly, lz = w[i, 3], w[i, 4], w[i, 5]
-        gx = wt[i, 0] * e0 + wt[i, 3] * e1 + wt[i, 4] * e2
-        gy = wt[i, 3] * e0 + wt[i, 1] * e1 + wt[i, 5] * e2
-        gz = wt[i, 4] * e0 + wt[i, 5] * e1 + wt[i, 2] * e2
-        s = e0 * gx + e1 * gy + e2 * gz
-        ef = e0 * fx + e1 * fy + e2 * fz
-        el = e0 * lx + e1 * ly + e2 * lz
-        cx, cy, cz = e1 * lz - e2 * ly, e2 * lx - e0 * lz, e0 * ly - e1 * lx
         k = -c1b * s - a_f * ef
         uj0 += k * e0 - f_of * cx - c2b * gx
         uj1 += k * e1 - f_of * cy - c2b * gy
@@ -531,12 +545,7 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         px = h_j * cx + cw * gx + c2a * fx + k * e0
         py = h_j * cy + cw * gy + c2a * fy + k * e1
         pz = h_j * cz + cw * gz + c2a * fz + k * e2
-        tj0 += e0 * px
-        tj1 += e1 * py
-        tj2 += e2 * pz
-        tj3 += e0 * py + e1 * px
-        tj4 += e0 * pz + e2 * px
-        tj5 += e1 * pz + e2 * py
+        t_j = _add_symmetric_outer(t_j, e0, e1, e2, px, py, pz)
 
         if p + 1 < n_img and pi[p + 1] == i and pj[p + 1] == j:
             continue
@@ -555,22 +564,12 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         for m in range(5):
             out[i, 6 + m] += sum_cd * w[j, 6 + m]
             out[j, 6 + m] += sum_cd * w[i, 6 + m]
-        tacc[i, 0] += ti0
-        tacc[i, 1] += ti1
-        tacc[i, 2] += ti2
-        tacc[i, 3] += ti3
-        tacc[i, 4] += ti4
-        tacc[i, 5] += ti5
-        tacc[j, 0] += tj0
-        tacc[j, 1] += tj1
-        tacc[j, 2] += tj2
-        tacc[j, 3] += tj3
-        tacc[j, 4] += tj4
-        tacc[j, 5] += tj5
+        for c in range(6):
+            tacc[i, c] += t_i[c]
+            tacc[j, c] += t_j[c]
+        t_i = t_j = _ZERO_SYMMETRIC
         ui0 = ui1 = ui2 = oi0 = oi1 = oi2 = 0.0
         uj0 = uj1 = uj2 = oj0 = oj1 = oj2 = 0.0
-        ti0 = ti1 = ti2 = ti3 = ti4 = ti5 = 0.0
-        tj0 = tj1 = tj2 = tj3 = tj4 = tj5 = 0.0
         sum_df = sum_dl = sum_cd = 0.0
     # E_m += B^m : sym(T): tacc holds the diagonal and T_ab + T_ba (a < b)
     for k in range(n):
