@@ -1,11 +1,11 @@
 """Benchmark: ms per Brownian SD step of one realisation, in Cholesky equivalents.
 
 The seed study's setting (jobs/schaink2000_newtonian.toml: phi = 0.45, dt = 5e-4 t_D,
-Brownian, oscillatory shear, dense solver, the rfd drift scheme, ewald_tolerance 1e-4,
-and again at 1e-6 in "single_ewald_1e-6"), one rank, BLAS on one thread (the Makefile
-pins it), for N = 8, 27, 64, 125 (N = 8 is mostly the part of a step that does not grow
-with N: the interpreter's and numpy's per-call work, which is what stepping realisations
-in lockstep could share). A step includes its hydrodynamic evaluation, the resistance
+Brownian, oscillatory shear, dense solver, the rfd drift scheme, ewald_tolerance 1e-3,
+and again at 1e-4 and 1e-6 in "single_ewald_1e-4", "single_ewald_1e-6"), one rank, BLAS
+on one thread (the Makefile pins it), for N = 8, 27, 64, 125 (N = 8 is mostly the part
+of a step that does not grow with N: the interpreter's and numpy's per-call work, which
+is what stepping realisations in lockstep could share). A step includes its hydrodynamic evaluation, the resistance
 change of the random finite difference, the overlap and near-contact corrections, the
 drift and the Brownian stresslets (`Realisation.advance`). Each size is timed in blocks
 of steps interleaved with blocks of one 297 x 297 LAPACK Cholesky (dpotrf) in the same
@@ -103,12 +103,14 @@ def main():
     results = {"command": "make bench (python bench/bench_step.py)", "job": JOB,
                "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
                "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
-               "date": time.strftime("%Y-%m-%d", time.gmtime()), "single": {}, "single_ewald_1e-6": {},
+               "date": time.strftime("%Y-%m-%d", time.gmtime()), "single": {}, "single_ewald_1e-4": {},
+               "single_ewald_1e-6": {},
                "batched": None}  # batched realisations: not implemented yet
     print(f"{'N':>5} {'Ewald':>6} {'ms/step':>9} {'Cholesky':>9} {'cpu ms':>9} {'cpu Chol':>9} {'Ch-equiv':>9}")
     for n in args.sizes:
         per_block = max(2, int(1e3 * args.seconds / args.blocks / guess_ms.get(n, 0.02 * n ** 2)))
-        for name, overrides in (("single", ()), ("single_ewald_1e-6", ("hydrodynamics.ewald_tolerance=1e-6",))):
+        for name, overrides in (("single", ()), *((f"single_ewald_{tol}", (f"hydrodynamics.ewald_tolerance={tol}",))
+                                                  for tol in ("1e-4", "1e-6"))):
             r = time_steps(n, args.blocks, per_block, spd, overrides)
             results[name][str(n)] = r
             print(f"{n:5d} {r['ewald_tolerance']:6.0e} {r['ms_per_step']:9.2f} {r['cholesky_ms']:9.3f} "

@@ -8,7 +8,7 @@ resistance change to first order, `hydro.resistance.resistance_change`: the far-
 change as a matrix-free product with the assembly's own Ewald terms, the lubrication pair
 by pair) against the same random finite difference taken between two full evaluations
 (R assembled, inverted and factorised again at x + epsilon m), at the job's Ewald
-tolerance (the Brownian default 1e-4). Reports the relative rms difference over all
+tolerance (the Brownian default 1e-3). Reports the relative rms difference over all
 samples of each quantity (sum of squared differences over sum of squares). Writes
 bench/rfd_accuracy.json.
 

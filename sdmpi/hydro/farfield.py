@@ -221,6 +221,31 @@ def _stresslet_coefficients(v, ir, alpha, beta):
     return c1, c2, h
 
 
+@numba.njit(cache=True, inline="always")
+def _strain_coefficients(v, ir, u1, u2):
+    """(d, c_w, c_i): the E-S coupling of two spheres (beta sums u1 = b_i + b_j,
+    u2 = b_i b_j, b = a^2/10) from the radial values v[p, m] = d^m/dr^m lap^p chi_r at r
+    (ir = 1/r), DBB 1987:
+      -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I
+        = c_w (B^m e).(B^n e) + d q_m q_n + c_i delta_mn,   q_m = e.B^m.e,
+    with F = (1 + b_i lap)(1 + b_j lap) chi_r, H = lap F and F_m, H_m their r-derivatives:
+      d = F4 - 6 F3/r + 15 F2/r^2 - 15 F1/r^3,
+      c_w = 4 (F3/r - 3 F2/r^2 + 3 F1/r^3) - (H2 - H1/r),
+      c_i = 2 (F2/r^2 - F1/r^3) - H1/r."""
+    ir2 = ir * ir
+    ir3 = ir2 * ir
+    h1 = v[1, 1] + u1 * v[2, 1] + u2 * v[3, 1]
+    h2 = v[1, 2] + u1 * v[2, 2] + u2 * v[3, 2]
+    f1 = v[0, 1] + u1 * v[1, 1] + u2 * v[2, 1]
+    f2 = v[0, 2] + u1 * v[1, 2] + u2 * v[2, 2]
+    f3 = v[0, 3] + u1 * v[1, 3] + u2 * v[2, 3]
+    f4 = v[0, 4] + u1 * v[1, 4] + u2 * v[2, 4]
+    d = f4 - 6 * f3 * ir + 15 * f2 * ir2 - 15 * f1 * ir3
+    c_w = 4 * (f3 * ir - 3 * f2 * ir2 + 3 * f1 * ir3) - (h2 - h1 * ir)
+    c_i = 2 * (f2 * ir2 - f1 * ir3) - h1 * ir
+    return d, c_w, c_i
+
+
 @numba.njit(cache=True)
 def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     """The 11x11 block of `_pair_block` from the radial values v[p, m] at r = |rvec|
@@ -231,10 +256,8 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
     e0, e1, e2 = rvec[0] / r, rvec[1] / r, rvec[2] / r
     al_i, al_j = ai * ai / 6.0, aj * aj / 6.0
     be_i, be_j = ai * ai / 10.0, aj * aj / 10.0
-    v00, v01, v02, v03, v04 = v[0, 0], v[0, 1], v[0, 2], v[0, 3], v[0, 4]
-    v10, v11, v12, v13, v14 = v[1, 0], v[1, 1], v[1, 2], v[1, 3], v[1, 4]
-    v20, v21, v22, v23, v24 = v[2, 0], v[2, 1], v[2, 2], v[2, 3], v[2, 4]
-    v30, v31, v32 = v[3, 0], v[3, 1], v[3, 2]
+    v01, v02, v10, v11, v12 = v[0, 1], v[0, 2], v[1, 0], v[1, 1], v[1, 2]
+    v20, v21, v22, v30 = v[2, 0], v[2, 1], v[2, 2], v[3, 0]
 
     # UF: I lap Psi0 - grad grad Psi0,  Psi0 = (1 + al_i lap)(1 + al_j lap) chi_r
     s1, s2 = al_i + al_j, al_i * al_j
@@ -338,19 +361,7 @@ def _block_from_radial(rvec, r, v, ai, aj, basis, e, be, q, out):
                 out[6 + n, 5] -= x2
 
     # E-S: -A2[L1] w - B2[L1] I + D1[L0] q q + 4 D2[L0] w + 2 D3[L0] I, w = (B^m e).(B^n e)
-    u1, u2 = be_i + be_j, be_i * be_j
-    h1 = v11 + u1 * v21 + u2 * v31
-    h2 = v12 + u1 * v22 + u2 * v32
-    f1 = v01 + u1 * v11 + u2 * v21
-    f2 = v02 + u1 * v12 + u2 * v22
-    f3 = v03 + u1 * v13 + u2 * v23
-    f4 = v04 + u1 * v14 + u2 * v24
-    ir2 = ir * ir
-    ir3 = ir2 * ir
-    a2 = h2 - h1 * ir
-    dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir2 - 15 * f1 * ir3
-    cw = 4 * (f3 * ir - 3 * f2 * ir2 + 3 * f1 * ir3) - a2
-    cd = 2 * (f2 * ir2 - f1 * ir3) - h1 * ir
+    dd1, cw, cd = _strain_coefficients(v, ir, be_i + be_j, be_i * be_j)
     for m in range(5):
         bm0, bm1, bm2, dq = be[m, 0], be[m, 1], be[m, 2], dd1 * q[m]
         out[6 + m, 6 + m] += cw * (bm0 * bm0 + bm1 * bm1 + bm2 * bm2) + dq * q[m] + cd
@@ -477,12 +488,8 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
         ai, aj = radii[i], radii[j]
         al_i, al_j = alpha[i], alpha[j]
         be_i, be_j = beta[i], beta[j]
-        v01, v02, v03, v04 = v[0, 1], v[0, 2], v[0, 3], v[0, 4]
-        v10, v11, v12, v13, v14 = v[1, 0], v[1, 1], v[1, 2], v[1, 3], v[1, 4]
-        v20, v21, v22, v23, v24 = v[2, 0], v[2, 1], v[2, 2], v[2, 3], v[2, 4]
-        v30, v31, v32 = v[3, 0], v[3, 1], v[3, 2]
-        ir2 = ir * ir
-        ir3 = ir2 * ir
+        v01, v02, v10, v11, v12 = v[0, 1], v[0, 2], v[1, 0], v[1, 1], v[1, 2]
+        v20, v21, v22, v30 = v[2, 0], v[2, 1], v[2, 2], v[3, 0]
 
         # scalar coefficients, as in _block_from_radial
         s1, s2 = al_i + al_j, al_i * al_j
@@ -498,16 +505,8 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
             c1b, c2b, h_i = c1a, c2a, h_j
         else:
             c1b, c2b, h_i = _stresslet_coefficients(v, ir, al_j, be_i)  # U_j-S_i, Omega_j-S_i; E_i-F_j, E_i-L_j
-        u1, u2 = be_i + be_j, be_i * be_j
-        h1 = v11 + u1 * v21 + u2 * v31
-        h2 = v12 + u1 * v22 + u2 * v32
-        f1 = v01 + u1 * v11 + u2 * v21
-        f2 = v02 + u1 * v12 + u2 * v22
-        f3 = v03 + u1 * v13 + u2 * v23
-        f4 = v04 + u1 * v14 + u2 * v24
-        dd1 = f4 - 6 * f3 * ir + 15 * f2 * ir2 - 15 * f1 * ir3
-        cw = 4 * (f3 * ir - 3 * f2 * ir2 + 3 * f1 * ir3) - (h2 - h1 * ir)
-        sum_cd += 2 * (f2 * ir2 - f1 * ir3) - h1 * ir
+        dd1, cw, cd = _strain_coefficients(v, ir, be_i + be_j, be_i * be_j)
+        sum_cd += cd
         sum_df += d_f
         sum_dl += d_l
 
