@@ -197,7 +197,7 @@ _ISQ2 = 1.0 / math.sqrt(2.0)
 _ISQ6 = 1.0 / math.sqrt(6.0)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _stresslet_coefficients(v, ir, alpha, beta):
     """(c1, c2, h): the U-S and Omega-S couplings of a receiver sphere (Faxen coefficient
     alpha = a^2/6) to a source sphere's stresslet column W = sum_n w_n B^n (beta = a^2/10)
@@ -221,7 +221,7 @@ def _stresslet_coefficients(v, ir, alpha, beta):
     return c1, c2, h
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _strain_coefficients(v, ir, u1, u2):
     """(d, c_w, c_i): the E-S coupling of two spheres (beta sums u1 = b_i + b_j,
     u2 = b_i b_j, b = a^2/10) from the radial values v[p, m] = d^m/dr^m lap^p chi_r at r
@@ -406,7 +406,7 @@ def _real_space_sum(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h, xi,
         block[:, :] = 0.0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _source_moments(w, wt, k, e0, e1, e2):
     """(g, s, e.F, e.L, e x L) of the source particle k along the unit vector e: g = W e and
     s = e.W.e with W = wt[k] its strain tensor (xx, yy, zz, xy, xz, yz), F = w[k, 0:3] its
@@ -426,7 +426,7 @@ def _source_moments(w, wt, k, e0, e1, e2):
 _ZERO_SYMMETRIC = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _add_symmetric_outer(acc, e0, e1, e2, p0, p1, p2):
     """acc + (e P^T + P e^T) for acc a 6-tuple (xx, yy, zz, xy, xz, yz), the diagonal
     halved (e_a P_a)."""
