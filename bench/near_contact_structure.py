@@ -12,6 +12,7 @@ a block).
 
     python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
         [--collisions separate|reflect] [--symmetric] [--dt 5e-4] [--seeds 11 ...] [--workers 1]
+        [--ewald-tolerance TOL]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
 the near-contact correction of `sdmpi.dynamics.models` off (for comparison); --collisions
@@ -33,6 +34,7 @@ import numpy as np
 
 from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
 from sdmpi.config.loader import parse_job
+from sdmpi.config.schema import BROWNIAN_EWALD_TOLERANCE
 from sdmpi.dynamics import models
 from sdmpi.dynamics.collisions import RULES, default_rule
 from sdmpi.dynamics.initial import _mc_sweeps, hard_sphere_fluid
@@ -63,6 +65,7 @@ realisations = 1
 [hydrodynamics]
 model = "{model}"
 {collisions}
+{ewald}
 """
 
 
@@ -93,11 +96,13 @@ def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
     return np.array(counts), np.array(etas)
 
 
-def dynamics(model, n, phi, steps, eta_every, dt, collisions, seed=11):
+def dynamics(model, n, phi, steps, eta_every, dt, collisions, ewald_tolerance=None, seed=11):
     """g per shell (one row per step) and eta_H every eta_every steps of one run at rest, of
     the configurations the model is evaluated at (each step's start, overlaps corrected)."""
     rule = f'collisions = "{collisions}"' if collisions else ""
-    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule))
+    ewald = f"ewald_tolerance = {ewald_tolerance}" if ewald_tolerance else ""
+    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule,
+                               ewald=ewald))
     real = Realisation(job, enumerate_tasks(job)[0])
     ideal = ideal_counts(n, real.box)
     counts, etas = np.empty((steps, len(EDGES) - 1)), []
@@ -133,6 +138,7 @@ def main():
     parser.add_argument("--collisions", choices=RULES)
     parser.add_argument("--symmetric", action="store_true")
     parser.add_argument("--dt", type=float, default=5e-4)
+    parser.add_argument("--ewald-tolerance", type=float, help="absent: the Brownian default")
     parser.add_argument("--out", default=str(Path(__file__).with_name("near_contact_structure.json")))
     args = parser.parse_args()
     if args.uncorrected:
@@ -142,7 +148,8 @@ def main():
         Realisation._separate = lambda self, pos, strain, reflect=False, mobility=None: symmetric(
             self, pos, strain, reflect)
     start = time.perf_counter()
-    runs = functools.partial(dynamics, args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions)
+    runs = functools.partial(dynamics, args.model, args.n, args.phi, args.steps, 100, args.dt, args.collisions,
+                             args.ewald_tolerance)
     with multiprocessing.Pool(args.workers) as pool:
         per_seed = pool.map(runs, args.seeds)
     skip = int(args.discard * args.steps)
@@ -157,6 +164,7 @@ def main():
     (g2, e2), (h2, f2) = summary(g_mc, blocks=20), summary(eta_mc, blocks=20)
     row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
            "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip,
+           "ewald_tolerance": args.ewald_tolerance or BROWNIAN_EWALD_TOLERANCE,
            **({"seed": args.seeds[0]} if len(args.seeds) == 1 else {"seeds": args.seeds}),
            "collisions": args.collisions or default_rule(args.model),
            "collision_moves": "symmetric" if args.symmetric else "through the mobility",
