@@ -5,11 +5,11 @@ Brownian, oscillatory shear, dense solver, the rfd drift scheme, ewald_tolerance
 and again at 1e-4 and 1e-6 in "single_ewald_1e-4", "single_ewald_1e-6"), one rank, BLAS
 on one thread (the Makefile pins it), for N = 8, 27, 64, 125 (N = 8 is mostly the part
 of a step that does not grow with N: the interpreter's and numpy's per-call work, which
-is what stepping realisations in lockstep could share). A step includes its hydrodynamic evaluation, the resistance
-change of the random finite difference, the overlap and near-contact corrections, the
-drift and the Brownian stresslets (`Realisation.advance`). Each size is timed in blocks
-of steps interleaved with blocks of one 297 x 297 LAPACK Cholesky (dpotrf) in the same
-process; the medians of their CPU times give "Cholesky-equivalents per step", a figure
+is what stepping realisations in lockstep could share). A step includes its hydrodynamic
+evaluation, the resistance change of the random finite difference, the overlap and
+near-contact corrections, the drift and the Brownian stresslets (`Realisation.advance`).
+Each size is timed in blocks of steps interleaved with blocks of one 297 x 297 LAPACK
+Cholesky (dpotrf) in the same process; the medians of their CPU times give "Cholesky-equivalents per step", a figure
 that holds up under other load and carries roughly across machines (wall-clock ms are
 recorded too; on an idle machine they agree).
 Also times the first step of a realisation from an empty numba cache, in a fresh process
