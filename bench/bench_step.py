@@ -9,9 +9,9 @@ is what stepping realisations in lockstep could share). A step includes its hydr
 evaluation, the resistance change of the random finite difference, the overlap and
 near-contact corrections, the drift and the Brownian stresslets (`Realisation.advance`).
 Each size is timed in blocks of steps interleaved with blocks of one 297 x 297 LAPACK
-Cholesky (dpotrf) in the same process; the medians of their CPU times give "Cholesky-equivalents per step", a figure
-that holds up under other load and carries roughly across machines (wall-clock ms are
-recorded too; on an idle machine they agree).
+Cholesky (dpotrf) in the same process; the medians of their CPU times give
+"Cholesky-equivalents per step", a figure that holds up under other load and carries
+roughly across machines (wall-clock ms are recorded too; on an idle machine they agree).
 Also times the first step of a realisation from an empty numba cache, in a fresh process
 ("cold_first_step_s": the kernels' compile time, which every new installation and every
 cluster node without a shared cache pays once; `--no-cold` skips it). Writes
