@@ -679,19 +679,19 @@ def _wave_tensors(b, cos_entries, sin_entries, ksq, scale, a2, row_c, tcos, tsin
     """tcos[k, e], tsin[k, e] = scale (b b^T)[entry e] of the cosine and sine entries, for
     the wave vectors' b (`_wave_amplitudes`); with a2 >= 0 (all radii equal, a^2) times the
     radius factors f_r(a) f_c(a), f = 1 - row_c a^2 |k|^2 (ksq), of the entry's row and
-    column."""
-    factor = np.empty(row_c.shape[0])
+    column (folded into the rows of b first: one product per entry)."""
+    rows = row_c.shape[0]
+    bf = np.empty((rows, 2))
     for kk in range(b.shape[0]):
-        for a in range(row_c.shape[0]):
-            factor[a] = 1 - row_c[a] * a2 * ksq[kk]
-        for half in range(2):
-            entries, out = (cos_entries, tcos) if half == 0 else (sin_entries, tsin)
-            for e in range(entries.shape[0]):
-                r, c = entries[e, 0], entries[e, 1]
-                val = (b[kk, r, 0] * b[kk, c, 0] + b[kk, r, 1] * b[kk, c, 1]) * scale
-                if a2 >= 0.0:
-                    val *= factor[r] * factor[c]
-                out[kk, e] = val
+        for a in range(rows):
+            factor = 1.0 - row_c[a] * a2 * ksq[kk] if a2 >= 0.0 else 1.0
+            bf[a, 0], bf[a, 1] = b[kk, a, 0] * factor, b[kk, a, 1] * factor
+        for e in range(cos_entries.shape[0]):
+            r, c = cos_entries[e, 0], cos_entries[e, 1]
+            tcos[kk, e] = (bf[r, 0] * bf[c, 0] + bf[r, 1] * bf[c, 1]) * scale
+        for e in range(sin_entries.shape[0]):
+            r, c = sin_entries[e, 0], sin_entries[e, 1]
+            tsin[kk, e] = (bf[r, 0] * bf[c, 0] + bf[r, 1] * bf[c, 1]) * scale
 
 
 @numba.njit(cache=True, inline="never")
