@@ -84,10 +84,13 @@ def _add_validate(subparsers) -> None:
 
 def _validate(args) -> int:
     from .config import resources
+    from .config.checks import scheme_problems
+    from .hydro.solvers import backend_for
 
     try:
         job = job_from_args(args)
-        problems = resources.start_problems(job)
+        used = backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
+        problems = resources.start_problems(job) + scheme_problems(job, used)
         if problems:
             raise JobError(problems, args.job)
     except JobError as err:

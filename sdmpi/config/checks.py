@@ -304,8 +304,7 @@ def _frictional(job):
 def _model(job):
     """What the hydrodynamic models support (sdmpi.dynamics.models): lubrication is the
     Stokesian model's; monolayers and frictional contacts are built on lubrication; the
-    rfd drift needs a direct solver (a difference over a length ~1e-6 a would be swamped
-    by an iterative solver's tolerance)."""
+    rfd drift needs a direct solver (`scheme_problems`)."""
     hyd, problems = job.hydrodynamics, []
     if hyd.model != "stokesian" and not hyd.lubrication:
         problems.append(Problem("hydrodynamics.lubrication", "applies to the stokesian model "
@@ -321,13 +320,23 @@ def _model(job):
         problems.append(Problem("ensemble.ranks_per_task", "a free-draining realisation has "
                                 "nothing to solve on several ranks", job.ensemble.ranks_per_task,
                                 allowed='1 with hydrodynamics.model = "free-draining"'))
-    if job.brownian.scheme == "rfd" and hyd.model != "free-draining" and \
-            job.solver.backend == "petsc-krylov":
-        problems.append(Problem("brownian.scheme", "the random finite difference takes a "
-                                "difference over ~1e-6 a, which an iterative solver's tolerance "
-                                "would swamp", "rfd",
-                                allowed='"midpoint" (or absent) with solver.backend = "petsc-krylov"'))
-    return problems
+    return problems + scheme_problems(job, job.solver.backend)
+
+
+def scheme_problems(job, backend: str) -> list[Problem]:
+    """brownian.scheme = "rfd" on the iterative backend: the random finite difference takes a
+    difference over ~1e-6 a, which an iterative solver's tolerance would swamp. backend: the
+    one the job runs on (the loader passes solver.backend; `sdmpi run` and `sdmpi validate`
+    pass what "auto" stands for, `hydro.solvers.backend_for`, which this package does not
+    import)."""
+    if job.brownian.scheme != "rfd" or job.hydrodynamics.model == "free-draining" or \
+            backend != "petsc-krylov":
+        return []
+    named = job.solver.backend
+    where = "" if named == backend else f' (what "{named}" stands for with {job.system.n_particles} particles)'
+    return [Problem("brownian.scheme", "the random finite difference takes a difference over "
+                    "~1e-6 a, which an iterative solver's tolerance would swamp", "rfd",
+                    allowed=f'"midpoint" (or absent) with solver.backend = "petsc-krylov"{where}')]
 
 
 #: backends implemented in this version (the others are named by the job schema)

@@ -46,6 +46,7 @@ from .. import __version__
 from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
                       extension_hash, load_job, parse_job, resources, resume_hash)
+from ..config.checks import scheme_problems
 from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
@@ -181,7 +182,7 @@ def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) ->
     if size % rpt:
         raise BadInput(f"ensemble.ranks_per_task = {rpt} does not divide the {size} MPI "
                        f"ranks; run with a multiple of {rpt} ranks")
-    _check_backend(job)
+    _check_backend(job, job_path)
     _check_output(out, new)
     _check_resources(job, job_path, out, new, size, extend)
     plan = _mode(job, out, new, extend)
@@ -244,14 +245,19 @@ def _extended(plan: Plan, out: Path) -> Plan:
                                slots=summary.slots, extension=said)
 
 
-def _check_backend(job) -> None:
-    """A PETSc backend (named, or what "auto" picks for this N and ranks_per_task) needs
-    petsc4py: refuse the job before anything is written if it cannot be imported."""
+def _check_backend(job, job_path) -> None:
+    """The backend the job runs on (named, or what "auto" picks for this N and
+    ranks_per_task) must suit its drift scheme (`config.checks.scheme_problems`), and a
+    PETSc backend needs petsc4py: refuse the job before anything is written otherwise."""
     from ..hydro.petsc_dense import PetscUnavailable, import_petsc4py
     from ..hydro.solvers import backend_for
 
     backend = job.solver.backend
-    if backend_for(backend, job.system.n_particles, job.ensemble.ranks_per_task) == "dense":
+    used = backend_for(backend, job.system.n_particles, job.ensemble.ranks_per_task)
+    problems = scheme_problems(job, used)
+    if problems:
+        raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
+    if used == "dense":
         return
     try:
         import_petsc4py()  # not load_petsc: PETSc initialisation is collective
