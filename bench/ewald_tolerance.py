@@ -19,9 +19,11 @@ Also the CPU time of one `grand_resistance` at each tolerance, in units of a 297
 LAPACK Cholesky timed in the same process. Writes JSON (default bench/ewald_tolerance.json).
 With --cutoffs, the same comparison for shorter hydrodynamics.lubrication_cutoff values
 against the default cut-off, all at the reference tolerance (default
-bench/lubrication_cutoff.json).
+bench/lubrication_cutoff.json). With --cost-only, only the cost field of the output file is
+timed again, for the settings it holds (seconds instead of the ~40 CPU-minutes of the
+errors, which do not depend on how fast the kernels are).
 
-    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/ewald_tolerance.py [--cutoffs 1.5 1]
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/ewald_tolerance.py [--cutoffs 1.5 1] [--cost-only]
 """
 
 import argparse
@@ -87,6 +89,39 @@ def cholesky_units(pos, box, settings, repeat=40):
     return {"ms": ms, "cholesky_equivalents": {k: v / ms["cholesky"] for k, v in ms.items()}}
 
 
+def configuration(n, phi, seed):
+    """Configuration `seed` of the set: (positions, box) of a Monte Carlo hard-sphere fluid."""
+    pos, side = hard_sphere_fluid(n, phi, np.random.default_rng(seed))
+    return pos, np.full(3, side)
+
+
+def _setting(label, reference):
+    """(tolerance, cut-off) of a label of the cost field: "T", "T, cutoff C" or "cutoff C"
+    (at the reference tolerance)."""
+    tol, cutoff = reference, DEFAULT_CUTOFF
+    for part in label.split(", "):
+        if part.startswith("cutoff "):
+            cutoff = float(part.split()[1])
+        else:
+            tol = float(part)
+    return tol, cutoff
+
+
+def refresh_cost(args):
+    """Re-times the cost field of an existing result file for its own settings."""
+    out = args.out or ("bench/lubrication_cutoff.json" if args.cutoffs else "bench/ewald_tolerance.json")
+    with open(out) as fh:
+        result = json.load(fh)
+    settings = {label: _setting(label, result["reference"]) for label in result["cost"]["ms"]
+                if label != "cholesky"}
+    result["cost"] = cholesky_units(*configuration(result["n"], result["phi"], 0), settings)
+    result["cost_date"] = time.strftime("%Y-%m-%d", time.gmtime())
+    with open(out, "w") as fh:
+        json.dump(result, fh, indent=1)
+    print("grand_resistance cost [Cholesky-297 equivalents]:",
+          {k: round(v, 2) for k, v in result["cost"]["cholesky_equivalents"].items()})
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--configs", type=int, default=20)
@@ -98,7 +133,14 @@ def main():
                     help="compare these lubrication cut-offs (at the reference tolerance) instead")
     ap.add_argument("--h", type=float, default=1e-5, help="finite-difference step [a]")
     ap.add_argument("--out")
+    ap.add_argument("--cost-only", action="store_true",
+                    help="re-time only the cost of the settings already in the output file "
+                         "(the errors do not depend on the speed of the kernels) and rewrite its "
+                         "cost field")
     args = ap.parse_args()
+    if args.cost_only:
+        refresh_cost(args)
+        return
     if args.cutoffs:
         settings = {f"cutoff {c:g}": (args.reference, c) for c in args.cutoffs}
         args.out = args.out or "bench/lubrication_cutoff.json"
@@ -111,8 +153,7 @@ def main():
     errors = {label: {} for label in settings}
     configs = []
     for seed in range(args.configs):
-        pos, side = hard_sphere_fluid(args.n, args.phi, np.random.default_rng(seed))
-        box = np.full(3, side)
+        pos, box = configuration(args.n, args.phi, seed)
         configs.append((pos, box))
         ref = operators(pos, box, args.reference, args.h)
         for label, (t, c) in settings.items():
