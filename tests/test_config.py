@@ -96,6 +96,24 @@ def test_empty_file_gives_the_documented_defaults():
     assert job.time_unit == "t_D"
 
 
+@pytest.mark.parametrize("text, expected", [
+    ("", 1e-3),  # 27 equal spheres at phi = 0.45: box side 6.3
+    ("[system]\nn_particles = 8\n", 1e-3),  # side 4.2
+    ("[system]\nn_particles = 2\n", 1e-4),  # side 2.65: sums to 1e-3 leave M_inf indefinite
+    ("[system]\nn_particles = 8\nphi = [0.1, 0.45]\n", 1e-3),  # the densest phi decides
+    ("[system]\nn_particles = 6\nphi = [0.1, 0.45]\n", 1e-4),  # side 3.8 at phi = 0.45
+    ("[system]\nsize_classes = [{radius = 1.0, fraction = 0.9}, {radius = 0.2, fraction = 0.1}]\n", 1e-4),
+    ("[brownian]\nenabled = false\n", 1e-6),
+    ("[system]\nn_particles = 2\n[hydrodynamics]\newald_tolerance = 1e-3\n", 1e-3),  # given: kept
+])
+def test_ewald_tolerance_default_by_kind_of_job(text, expected):
+    """Brownian jobs default to 1e-3 only where it was measured to hold (equal spheres in a
+    box of side >= 4 radii at every phi); other Brownian jobs to 1e-4; deterministic jobs
+    (monolayers among them) to 1e-6. The resolved value is written into the job."""
+    job = parse_job(text)
+    assert job.ewald_tolerance == job.hydrodynamics.ewald_tolerance == expected
+
+
 def test_default_job_round_trips_through_its_canonical_text():
     job = parse_job("")
     assert parse_job(canonical_text(job)) == job

@@ -177,3 +177,22 @@ def test_state_round_trip_is_bitwise():
     for key in rest:
         assert np.array_equal(rest[key], again[key]), key
     assert first["time"][0] == 0.0 and rest["time"][0] == 7 * task.dt
+
+
+def test_indefinite_far_field_names_the_ewald_tolerance():
+    """Two spheres at phi = 0.45 (box side 2.65): Ewald sums to 1e-3 leave M_inf indefinite
+    at the start of seed 1's realisation. It stops with a RealisationFailed that names the task, the
+    step and hydrodynamics.ewald_tolerance (not the time step); the job's own default for
+    so small a box (1e-4) runs."""
+    from sdmpi.dynamics.realisation import RealisationFailed
+
+    job = _job("job.seed=1", "system.n_particles=2", "system.phi=[0.45]", "hydrodynamics.ewald_tolerance=1e-3")
+    real = Realisation(job, enumerate_tasks(job)[0])
+    with pytest.raises(RealisationFailed, match=r"task 0, step 0: the far-field mobility M_inf is not "
+                                                r"positive definite .*hydrodynamics\.ewald_tolerance = 0\.001"):
+        real.advance(1)
+    job = _job("job.seed=1", "system.n_particles=2", "system.phi=[0.45]")
+    assert job.ewald_tolerance == 1e-4
+    real = Realisation(job, enumerate_tasks(job)[0])
+    real.advance(3)
+    assert np.all(np.isfinite(real.positions))

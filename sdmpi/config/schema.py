@@ -30,13 +30,21 @@ START_PHI_LIMIT = 0.6
 #: Monte Carlo sweeps of a generated start: enough to melt the simple cubic lattice start
 #: (its Bragg peak decays to the fluid's structure factor) up to phi = 0.5 with margin
 START_SWEEPS = 5000
-#: hydrodynamics.ewald_tolerance when absent: Brownian jobs, whose operators change by less
-#: than 1e-3 of themselves between 1e-6 and 1e-3 (R_FU^-1, drift, Brownian stresslets, eta_H
-#: on 20 equilibrium configurations, largest single value 8e-4; docs/performance.md), far
-#: below any stress average's sampling error; deterministic jobs, compared with exact and
-#: published numbers
+#: hydrodynamics.ewald_tolerance when absent: Brownian jobs of equal spheres in a box of side
+#: >= LOOSE_EWALD_MIN_SIDE, whose operators change by less than 1e-3 of themselves
+#: between 1e-6 and 1e-3 (R_FU^-1, drift, Brownian stresslets, eta_H on 20 equilibrium
+#: configurations, largest single value 8e-4; docs/performance.md), far below any stress
+#: average's sampling error; ...
 BROWNIAN_EWALD_TOLERANCE = 1e-3
+#: ... other Brownian jobs (size classes, smaller boxes), where sums to 1e-3 can
+#: leave the far-field mobility indefinite (one or two spheres in a box of side 2.1-2.7,
+#: spheres of radius 0.2 among spheres of radius 1; docs/performance.md); ...
+BROWNIAN_EWALD_TOLERANCE_TIGHT = 1e-4
+#: ... and deterministic jobs, compared with exact and published numbers
 EWALD_TOLERANCE = 1e-6
+#: the smallest box side (radii) at which Brownian jobs default to BROWNIAN_EWALD_TOLERANCE
+#: (8 equal spheres at phi = 0.45: side 4.2)
+LOOSE_EWALD_MIN_SIDE = 4.0
 
 
 def lattice_sites_per_axis(n: int) -> int:
@@ -524,8 +532,11 @@ class Hydrodynamics:
                      "of isolated spheres)", allowed=Choice(("stokesian", "far-field", "free-draining")))
     ewald_tolerance: float | None = key(None, "float", "relative accuracy of the Ewald sums; "
                                         f"absent: {_num(BROWNIAN_EWALD_TOLERANCE)} for Brownian "
-                                        "jobs (their operators change by < 1e-3 of themselves, "
-                                        f"docs/performance.md), else {_num(EWALD_TOLERANCE)}",
+                                        "jobs of equal spheres in a box of side >= "
+                                        f"{_num(LOOSE_EWALD_MIN_SIDE)} (their operators change by "
+                                        "< 1e-3 of themselves, docs/performance.md), "
+                                        f"{_num(BROWNIAN_EWALD_TOLERANCE_TIGHT)} for other "
+                                        f"Brownian jobs, else {_num(EWALD_TOLERANCE)}",
                                         allowed=Range(0.0, 1e-2, lo_open=True), optional=True)
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
     lubrication_cutoff: float = key(2.0, "float", "gap below which lubrication is added",
@@ -636,11 +647,19 @@ class Job:
 
     @property
     def ewald_tolerance(self) -> float:
-        """hydrodynamics.ewald_tolerance, or its default for this job (Brownian or not)."""
+        """hydrodynamics.ewald_tolerance, or its default for this job: EWALD_TOLERANCE without
+        Brownian motion (monolayers included); with it BROWNIAN_EWALD_TOLERANCE for equal
+        spheres in a box of side >= LOOSE_EWALD_MIN_SIDE at every phi, else
+        BROWNIAN_EWALD_TOLERANCE_TIGHT."""
         tol = self.hydrodynamics.ewald_tolerance
         if tol is not None:
             return tol
-        return BROWNIAN_EWALD_TOLERANCE if self.brownian.enabled else EWALD_TOLERANCE
+        if not self.brownian.enabled:
+            return EWALD_TOLERANCE
+        system = self.system
+        loose = system.size_classes is None and \
+            (system.n_particles * 4.0 * math.pi / 3.0 / max(system.phi)) ** (1 / 3) >= LOOSE_EWALD_MIN_SIDE
+        return BROWNIAN_EWALD_TOLERANCE if loose else BROWNIAN_EWALD_TOLERANCE_TIGHT
 
     @property
     def time_unit(self) -> str:

@@ -268,17 +268,22 @@ class ResistanceModel:
         self._separate = separate  # positions, strain -> (positions, overlaps found)
         self._on_error = on_error  # LinAlgError -> exception to raise
 
-    def _assemble(self, positions, strain, plan=None):
+    def _guarded(self, build, *args, **kwargs):
+        """build(*args, **kwargs), its LinAlgError (a matrix not positive definite) turned
+        into the exception on_error makes of it."""
         try:
-            return assemble(self.backend, positions, self.radii, self.box, strain, plan=plan,
-                            comm=self.comm, **self._hydro)
+            return build(*args, **kwargs)
         except np.linalg.LinAlgError as err:
             if self._on_error is None:
                 raise
             raise self._on_error(err) from err
 
+    def _assemble(self, positions, strain, plan=None):
+        return self._guarded(assemble, self.backend, positions, self.radii, self.box, strain, plan=plan,
+                             comm=self.comm, **self._hydro)
+
     def _solver(self, resistance):
-        return make_solver(self.backend, resistance, self.comm, **self._solver_args)
+        return self._guarded(make_solver, self.backend, resistance, self.comm, **self._solver_args)
 
     def at(self, positions, strain):
         res = self._assemble(positions, strain)
@@ -353,7 +358,8 @@ def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None)
     """The model of job.hydrodynamics.model for spheres of these radii in this box
     (comm: the ranks that solve together; separate(positions, strain) -> (positions,
     overlaps): the overlap correction the midpoint scheme applies at its half step;
-    on_error(LinAlgError) -> the exception raised when R_FU loses positive definiteness)."""
+    on_error(LinAlgError) -> the exception raised when M_inf or R_FU is not positive
+    definite)."""
     hyd = job.hydrodynamics
     if hyd.model == "free-draining":
         return FreeDrainingModel(radii, box, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)

@@ -54,6 +54,7 @@ import numpy as np
 from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import BASIS, to_five
 from ..hydro.geometry import Lattice
+from ..hydro.resistance import FarFieldIndefinite
 from .collisions import Collisions, default_rule, separate
 from .contacts import contact_model
 from .forces import force_law, pair_forces
@@ -62,6 +63,11 @@ from .media import MaxwellFilter
 from .models import hydrodynamic_model
 from .monolayer import Monolayer
 from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
+
+class RealisationFailed(RuntimeError):
+    """A realisation cannot go on (e.g. a hydrodynamic matrix not positive definite): the
+    message names the task, the step, the cause and the job key to change."""
+
 
 #: kT in sdmpi's reduced units (a = 1, eta_m = 1, D0 = 1)
 KT_REDUCED = 6 * math.pi
@@ -231,11 +237,25 @@ class Realisation:
     # ------------------------------------------------------------------ physics
 
     def _lost_definiteness(self, err):
-        return RuntimeError(
-            f"task {self.task.task_id}, step {self.step}: the hydrodynamic matrices lost "
-            f"positive definiteness ({err}); a time step of {self.dt:.3g} moves spheres by "
-            f"~{math.sqrt(2 * self.dt):.2g} radii per step (Brownian) - use a smaller "
-            "time step (Schaink et al. 2000 used 5e-5 <= dt <= 5e-4 t_D)")
+        """The RealisationFailed of a hydrodynamic matrix that is not positive definite
+        (LinAlgError err): the far-field mobility (Ewald sums too coarse for the box or the
+        radii) or R_FU (a configuration the time step drove too far)."""
+        where = f"task {self.task.task_id}, step {self.step}: "
+        if isinstance(err, FarFieldIndefinite):
+            return RealisationFailed(
+                f"{where}{err}: its Ewald sums at hydrodynamics.ewald_tolerance = "
+                f"{self.job.ewald_tolerance:g} are too coarse for this box (side "
+                f"{float(np.min(self.box)):.3g}) and these radii ({float(np.min(self.radii)):.3g} to "
+                f"{float(np.max(self.radii)):.3g}) - set a smaller hydrodynamics.ewald_tolerance "
+                "(1e-6 is the deterministic jobs' default)")
+        if self.kT > 0:
+            advice = (f"a time step of {self.dt:.3g} moves spheres by ~{math.sqrt(2 * self.dt):.2g} "
+                      "radii per step (Brownian) - use a smaller time step (Schaink et al. 2000 "
+                      "used 5e-5 <= dt <= 5e-4 t_D)")
+        else:
+            advice = f"the time step of {self.dt:.3g} moved the spheres too far - use a smaller one"
+        return RealisationFailed(f"{where}the hydrodynamic matrices lost positive definiteness "
+                                 f"({err}); {advice}")
 
     def _separate(self, positions, strain, reflect=False, mobility=None):
         """Pairs in contact separated, or reflected, symmetrically or through the mobility

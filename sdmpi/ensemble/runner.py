@@ -47,6 +47,7 @@ from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
                       extension_hash, load_job, parse_job, resources, resume_hash)
 from ..config.checks import scheme_problems
+from ..dynamics.realisation import RealisationFailed
 from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
@@ -102,6 +103,9 @@ def run(job_path, overrides, output, *, new=False, extend=False, realisation_fac
                              f"system is full ({err}). Everything up to the last checkpoint "
                              "is committed: free some space, then run the same command "
                              "again to resume.\n")
+        elif isinstance(err, RealisationFailed):  # its message says why and what to change
+            sys.stderr.write(f"sdmpi run: rank {comm.rank}: {err}. Everything up to the last "
+                             "checkpoint is committed.\n")
         else:
             sys.stderr.write(f"sdmpi run: rank {comm.rank} failed:\n{traceback.format_exc()}")
         sys.stderr.flush()

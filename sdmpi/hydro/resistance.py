@@ -214,12 +214,20 @@ def _partition(matrix, r_fu, r_fe, r_se):
                         r_se[5 * i + a - 6, 5 * j + b - 6] = v
 
 
+class FarFieldIndefinite(np.linalg.LinAlgError):
+    """The far-field mobility M_inf of a configuration is not positive definite: its Ewald
+    sums too coarse for the box or the radii (the truncation error outgrows the smallest
+    eigenvalue), or spheres overlapping deeply."""
+
+
 def _spd_inverse_of_upper(upper):
     """The inverse (Fortran-ordered, both triangles) of the symmetric positive definite
-    matrix held in the upper triangle of the Fortran-ordered array upper, in its memory."""
+    matrix held in the upper triangle of the Fortran-ordered array upper, in its memory
+    (FarFieldIndefinite if it is not: the Schur complement of M_inf)."""
     chol, info = lapack.dpotrf(upper, lower=False, clean=False, overwrite_a=True)
     if info != 0:
-        raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info})")
+        raise FarFieldIndefinite(f"the far-field mobility M_inf is not positive definite "
+                                 f"(potrf info {info}, Schur complement)")
     inv, info = lapack.dpotri(chol, lower=False, overwrite_c=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed (info {info})")
@@ -305,7 +313,8 @@ def far_field_blocks(mob):
     _partition(mob, m_aa, m_ab, m_bb)
     chol_bb, info = lapack.dpotrf(m_bb.T, lower=False, clean=True, overwrite_a=True)
     if info != 0:
-        raise np.linalg.LinAlgError(f"matrix not positive definite (potrf info {info}, strain block)")
+        raise FarFieldIndefinite(f"the far-field mobility M_inf is not positive definite "
+                                 f"(potrf info {info}, strain block)")
     # X = M_ab U_b^-1 (6N x 5N; the right-side solve is the faster kernel), S = M_aa - X X^T
     x = blas.dtrsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
     schur = blas.dsyrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
