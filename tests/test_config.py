@@ -225,6 +225,14 @@ def test_schema_text_documents_every_key():
      'mu = 0.1\nk_n = 1e4\nk_t = 1e4\nf_r0 = 1.0\nrepulsion_length = 0.02\n[brownian]\nenabled = false\n'
      '[shear]\nprotocol = "steady"\nrate = 1.0\n[integration]\ndt = 1e-4\nn_steps = 10\ndiscard_steps = 0\n',
      ["hydrodynamics.model", "frictional contacts"]),
+    ('[hydrodynamics]\nlubrication = false\n[interparticle]\nkind = "frictional"\n'
+     'mu = 0.1\nk_n = 1e4\nk_t = 1e4\nf_r0 = 1.0\nrepulsion_length = 0.02\n[brownian]\nenabled = false\n'
+     '[shear]\nprotocol = "steady"\nrate = 1.0\n[integration]\ndt = 1e-4\nn_steps = 10\ndiscard_steps = 0\n',
+     ["hydrodynamics.lubrication = false", "frictional contacts", "allowed: true"]),
+    ('[system]\ngeometry = "monolayer"\nn_particles = 16\nphi = [0.3]\n[hydrodynamics]\nlubrication = false\n'
+     '[brownian]\nenabled = false\n[shear]\nprotocol = "steady"\nrate = 1.0\n[integration]\ndt = 1e-3\n'
+     'n_steps = 10\ndiscard_steps = 0\n',
+     ["hydrodynamics.lubrication = false", "monolayers", "allowed: true"]),
     ('[brownian]\nscheme = "rfd"\n[solver]\nbackend = "petsc-krylov"\n',
      ["brownian.scheme", "iterative solver", '"midpoint"']),
     ('[hydrodynamics]\nmodel = "free-draining"\n[ensemble]\nranks_per_task = 2\n[solver]\n'

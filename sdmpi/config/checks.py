@@ -310,12 +310,14 @@ def _model(job):
         problems.append(Problem("hydrodynamics.lubrication", "applies to the stokesian model "
                                 "only (lubrication = false there is the far-field model)", False,
                                 allowed=f'true (the default) with hydrodynamics.model = "{hyd.model}"'))
-    if hyd.model != "stokesian" and job.system.geometry == "monolayer":
-        problems.append(Problem("hydrodynamics.model", "monolayers are simulated with full "
-                                "Stokesian dynamics only", hyd.model, allowed='"stokesian"'))
-    if hyd.model != "stokesian" and job.interparticle.kind == "frictional":
-        problems.append(Problem("hydrodynamics.model", "frictional contacts need the "
-                                "lubrication of the stokesian model", hyd.model, allowed='"stokesian"'))
+    for needed, why in ((job.system.geometry == "monolayer", "monolayers are simulated with full "
+                         "Stokesian dynamics only"),
+                        (job.interparticle.kind == "frictional", "frictional contacts need the "
+                         "lubrication of the stokesian model")):
+        if needed and hyd.model != "stokesian":
+            problems.append(Problem("hydrodynamics.model", why, hyd.model, allowed='"stokesian"'))
+        elif needed and not hyd.lubrication:  # the stokesian model without it is the far field
+            problems.append(Problem("hydrodynamics.lubrication", why, False, allowed="true (the default)"))
     if hyd.model == "free-draining" and job.ensemble.ranks_per_task > 1:
         problems.append(Problem("ensemble.ranks_per_task", "a free-draining realisation has "
                                 "nothing to solve on several ranks", job.ensemble.ranks_per_task,
