@@ -165,7 +165,7 @@ def test_schema_text_documents_every_key():
     ("[system]\nn_particles = 8.0\n", ["system.n_particles = 8.0", "expected an integer",
                                        "write 8", "n_particles >= 1"]),
     ("[ensemble]\nrealisations = true\n", ["ensemble.realisations = true",
-                                           "got a boolean", "realisations >= 1"]),
+                                           "got a boolean", "1 <= realisations <= 100000"]),
     ('[shear]\ngamma0 = "0.02"\n', ["shear.gamma0", "expected a number", "0 < gamma0 <= 1"]),
     ("[brownian]\nenabled = 1\n", ["brownian.enabled = 1", "true or false"]),
     ("[system]\nphi = {a = 1}\n", ["system.phi", "expected an array of numbers"]),
@@ -233,6 +233,7 @@ def test_schema_text_documents_every_key():
      '[brownian]\nenabled = false\n[shear]\nprotocol = "steady"\nrate = 1.0\n[integration]\ndt = 1e-3\n'
      'n_steps = 10\ndiscard_steps = 0\n',
      ["hydrodynamics.lubrication = false", "monolayers", "allowed: true"]),
+    ("[ensemble]\nrealisations = 1000000000000\n", ["ensemble.realisations", "realisations <= 100000"]),
     ('[brownian]\nscheme = "rfd"\n[solver]\nbackend = "petsc-krylov"\n',
      ["brownian.scheme", "iterative solver", '"midpoint"']),
     ('[hydrodynamics]\nmodel = "free-draining"\n[ensemble]\nranks_per_task = 2\n[solver]\n'

@@ -67,6 +67,30 @@ def test_absurdly_dilute_job_refused(job_file, tmp_path, capsys):
     assert resources.start_problems(job) == []
 
 
+def test_too_many_spheres_for_any_start_names_n_particles(job_file, capsys):
+    """When no volume fraction below the start's limit could bring the start's cell list
+    down, the problem is the number of spheres (computed without a tuple of N radii)."""
+    assert main(["validate", str(job_file), "--set", "system.n_particles=1000000000000"]) == 2
+    err = capsys.readouterr().err
+    assert "system.n_particles = 1000000000000: needs a start cell list of about" in err, err
+    assert "allowed: N below ~" in err and "system.phi" not in err
+
+
+def test_disk_problem_names_the_length_key_of_the_protocol(monkeypatch):
+    """Steady and quiescent jobs run integration.n_steps, oscillatory ones periods or a
+    duration: the disk problem names the key the job sets its length with."""
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10 ** 9, 10 ** 9, 0))
+    cases = [(ens.JOB, [], "integration.periods = 3"),
+             (ens.JOB, ["integration.duration=10.0", "integration.discard_duration=1.0"],
+              "integration.duration = 10.0"),
+             (ens.JOB, ['shear.protocol="steady"', "shear.rate=1.0", "integration.dt=1e-3",
+                        "integration.n_steps=100", "integration.discard_steps=0"], "integration.n_steps = 100")]
+    for text, overrides, named in cases:
+        job = parse_job(text, overrides)
+        found = resources.disk_problems(job, 1e6, ".")
+        assert len(found) == 1 and str(found[0]).startswith(named), str(found[0])
+
+
 def test_run_file_too_big_for_the_disk(job_file, tmp_path, monkeypatch, capsys):
     job = load_job(job_file)
     monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(

@@ -25,6 +25,7 @@ import os
 import shutil
 
 from .problems import Problem
+from .schema import START_PHI_LIMIT
 from .tasks import enumerate_tasks
 
 # 11N x 11N matrices alive at once, rounded up (a dense evaluation holds 218 N^2 doubles:
@@ -57,13 +58,13 @@ def dense_bytes(job, backend: str) -> float:
 def start_cells_bytes(job) -> float:
     """Bytes of the start's cell list at the smallest volume (areal) fraction."""
     system = job.system
-    radii = system.radii if system.size_classes else (1.0,) * system.n_particles
-    reach = 2.0 * max(radii)
+    classes = list(zip(system.class_radii, system.class_counts))  # not a tuple of N radii
+    reach = 2.0 * max(system.class_radii)
     phi = min(system.phi)
     if system.geometry == "monolayer":  # areal fraction of discs in a square cell
-        side = math.sqrt(sum(math.pi * r * r for r in radii) / phi)
+        side = math.sqrt(math.fsum(m * math.pi * r * r for r, m in classes) / phi)
         return max(side / reach, 1.0) ** 2 * 8.0
-    side = (sum(4.0 / 3.0 * math.pi * r ** 3 for r in radii) / phi) ** (1.0 / 3.0)
+    side = (math.fsum(m * 4.0 / 3.0 * math.pi * r ** 3 for r, m in classes) / phi) ** (1.0 / 3.0)
     return max(side / reach, 1.0) ** 3 * 8.0
 
 
@@ -101,10 +102,18 @@ def start_problems(job) -> list[Problem]:
     cells = start_cells_bytes(job)
     if cells <= MAX_CELL_BYTES:
         return []
+    system, need = job.system, min_phi(job, MAX_CELL_BYTES)
+    # the densest start: START_PHI_LIMIT in bulk, the square lattice's pi/4 in a monolayer
+    limit = START_PHI_LIMIT if system.geometry == "bulk" else math.pi / 4
+    if need >= limit:  # no volume fraction helps: too many spheres
+        fewer = int(system.n_particles * MAX_CELL_BYTES / cells * limit / min(system.phi))
+        return [Problem("system.n_particles", f"needs a start cell list of about {gib(cells)} "
+                        f"(at most {gib(MAX_CELL_BYTES)}), more than any volume fraction "
+                        "can bring down", system.n_particles,
+                        allowed=f"N below ~{fewer:.3g} (at phi near {limit:.3g})")]
     return [Problem("system.phi", f"so dilute a box needs a start cell list of about "
-                    f"{gib(cells)} (at most {gib(MAX_CELL_BYTES)})", min(job.system.phi),
-                    allowed=f"phi >= {min_phi(job, MAX_CELL_BYTES):.3g} for "
-                            f"N = {job.system.n_particles}")]
+                    f"{gib(cells)} (at most {gib(MAX_CELL_BYTES)})", min(system.phi),
+                    allowed=f"phi >= {need:.3g} for N = {system.n_particles}")]
 
 
 def memory_problems(job, backend: str, ranks: int, available: float | None) -> list[Problem]:
@@ -135,10 +144,16 @@ def disk_problems(job, run_file_bytes: float, directory) -> list[Problem]:
     free = shutil.disk_usage(directory).free
     if run_file_bytes <= free:
         return []
-    return [Problem("integration.periods", f"the run file needs about "
-                    f"{gib(run_file_bytes)}, but {directory} has {gib(free)} free",
-                    job.integration.periods,
-                    allowed="fewer periods, steps per period, realisations or frequencies, "
+    integ = job.integration
+    if job.shear.protocol != "oscillatory":
+        key, value, fewer = "integration.n_steps", integ.n_steps, "fewer steps"
+    elif integ.duration is not None:
+        key, value, fewer = "integration.duration", integ.duration, "a shorter duration, fewer steps per period"
+    else:
+        key, value, fewer = "integration.periods", integ.periods, "fewer periods, steps per period"
+    return [Problem(key, f"the run file needs about {gib(run_file_bytes)}, but {directory} has "
+                    f"{gib(free)} free", value,
+                    allowed=f"{fewer}, realisations, volume fractions or frequencies, "
                             "output.per_particle = false, or a file system with more room")]
 
 

@@ -42,6 +42,9 @@ BROWNIAN_EWALD_TOLERANCE = 1e-3
 BROWNIAN_EWALD_TOLERANCE_TIGHT = 1e-4
 #: ... and deterministic jobs, compared with exact and published numbers
 EWALD_TOLERANCE = 1e-6
+#: the most realisations per (phi, omega): the task list is built before any work (one
+#: entry per task), and a study of 100 000 independent runs is far beyond any allocation
+MAX_REALISATIONS = 100_000
 #: the smallest box side (radii) at which Brownian jobs default to BROWNIAN_EWALD_TOLERANCE
 #: (8 equal spheres at phi = 0.45: side 4.2)
 LOOSE_EWALD_MIN_SIDE = 4.0
@@ -489,7 +492,7 @@ class Ensemble:
     """[ensemble]: independent realisations and how many MPI ranks share one task."""
 
     realisations: int = key(7, "int", "independent realisations per (phi, omega) "
-                            "(Schaink et al. 2000: at least 7)", allowed=Range(1, None))
+                            "(Schaink et al. 2000: at least 7)", allowed=Range(1, MAX_REALISATIONS))
     ranks_per_task: int = key(1, "int", "MPI ranks per task (> 1 needs a petsc backend)",
                               allowed=Range(1, None))
 
