@@ -135,6 +135,16 @@ def test_oscillatory_frequencies_and_no_physical_section():
      ["physical.medium_permittivity: is required with physical.surface_potential"]),
     ("[physical]\nradius = -1.0\nviscosity = 1.0\n",
      ["physical.radius = -1.0: out of range", "radius > 0 [nm]"]),
+    # in range, but beyond floating point once converted: the values named, no traceback
+    ("[physical]\nradius = 1e-100\nviscosity = 1.0\ntemperature = 300.0\nhamaker = 1e-20\n"
+     "[interparticle]\nkind = \"vdw\"\ncap_gap = 0.01\n",
+     ["physical: these values cannot be converted to reduced units in floating point (a scale "
+      "underflows to zero): radius = 1e-100, viscosity = 1.0, temperature = 300.0, hamaker = 1e-20",
+      "e.g. radius = 37.5 nm"]),
+    ("[physical]\nradius = 10.0\nviscosity = 1.0\ntemperature = 300.0\nsurface_potential = 1e200\n"
+     "medium_permittivity = 80.0\n[interparticle]\nkind = \"dlvo\"\nhamaker = 1.0\ncap_gap = 0.01\n"
+     "debye_length = 0.05\n",
+     ["physical: these values cannot be converted", "(a value overflows)", "surface_potential = 1e+200"]),
 ])
 def test_errors_name_the_keys(text, expected):
     with pytest.raises(JobError) as err:

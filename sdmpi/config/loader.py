@@ -450,8 +450,20 @@ def _apply_physical(raw: dict, st: _Pass) -> None:
         _unconverted(st, targets)
         return
     physical = Physical(**phys)
-    scales = units.make_scales(physical, brownian, protocol)
-    for name, (target, value) in units.reduced_values(physical, scales).items():
+    try:
+        reduced = units.reduced_values(physical, units.make_scales(physical, brownian, protocol))
+    except (OverflowError, ZeroDivisionError) as err:  # e.g. radius = 1e-300 nm
+        what = "a value overflows" if isinstance(err, OverflowError) else "a scale underflows to zero"
+        st.problems.append(Problem("physical", "these values cannot be converted to reduced units "
+                                   f"in floating point ({what}): " + ", ".join(
+                                       f"{k} = {toml_literal(phys[k])}" for k in given),
+                                   allowed="the magnitudes of colloids and their media, e.g. radius "
+                                   "= 37.5 nm, viscosity = 0.1 Pa s, temperature = 298.15 K, "
+                                   "surface_potential = 30 mV"))
+        st.invalid.add("physical")
+        _unconverted(st, targets)
+        return
+    for name, (target, value) in reduced.items():
         section, key_name = target.split(".")
         table = raw.setdefault(section, {})
         if not isinstance(table, dict):
