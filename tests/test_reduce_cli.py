@@ -60,6 +60,11 @@ def test_bad_task_writes_nothing(tmp_path, capsys):
     (out / "keep.txt").write_text("mine")
     assert main(["reduce", str(run), "-o", str(out), "--task", "99"]) == 2
     assert listing(out) == ["keep.txt"]
+    # without the plots that use it, a bad --task is refused all the same
+    for bad in ("99", "-1"):
+        assert main(["reduce", str(run), "-o", str(out), "--task", bad, "--no-plots"]) == 2
+        assert f"no task {bad}" in capsys.readouterr().err
+    assert listing(out) == ["keep.txt"]
 
 
 def test_output_onto_a_file_or_an_unwritable_place_is_refused(tmp_path, capsys):

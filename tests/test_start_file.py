@@ -125,7 +125,9 @@ def overlapping(tmp_path):
     (lambda p: write_xyz(p / "bad.xyz", lattice_configurations(1), lattice="no box"),
      "the comment line gives no box"),
     (lambda p: text_file(p / "bad.txt", "hello\n"), "not an XYZ particle count"),
-    (lambda p: write_h5(p / "bad.h5", np.array([b"x"] * 3)), "cannot be read (ValueError"),
+    (lambda p: write_h5(p / "bad.h5", np.array([b"x"] * 3)), "a dataset positions of type |S1 (not real numbers)"),
+    (lambda p: write_h5(p / "bad.h5", lattice_configurations(1) * (1 + 0j)),
+     "a dataset positions of type complex128 (not real numbers)"),
 ])
 def test_bad_start_files_are_refused_and_nothing_is_written(tmp_path, capsys, make, message):
     job = job_with_start(tmp_path, make(tmp_path))

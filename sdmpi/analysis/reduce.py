@@ -670,6 +670,15 @@ def _partial_note(path, job: Job, task, done: int, n_values: int) -> str:
 # --------------------------------------------------------------------------- one task
 
 
+def task_of(red: Reduction, task_id, file_index=0):
+    """The task ``task_id`` of run file ``file_index`` (ReduceError if it has none)."""
+    path = red.files[file_index]
+    tasks = {t.task_id: t for t in open_run(path).tasks}
+    if task_id not in tasks:
+        raise ReduceError(f"{path} has no task {task_id} (tasks 0..{len(tasks) - 1})")
+    return tasks[task_id]
+
+
 def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     """Stress-strain loop of one task (oscillatory jobs), phase-averaged over the
     whole periods it contributes: for each phase j = 0..n-1 of a period (w t = 2 pi j/n)
@@ -691,10 +700,7 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
         g = int(np.argmax(used.max(axis=1) > 0))     # the first group with data (else 0)
         task_id = int(red.task_id[g, cols[int(np.argmax(used[g]))]])
     path = red.files[file_index]
-    tasks = {t.task_id: t for t in open_run(path).tasks}
-    if task_id not in tasks:
-        raise ReduceError(f"{path} has no task {task_id} (tasks 0..{len(tasks) - 1})")
-    task = tasks[task_id]
+    task = task_of(red, task_id, file_index)
     n = job.steps_per_period(task.omega)
     first = task.discard_steps // n
     cols = np.flatnonzero(red.file_index == file_index)

@@ -66,7 +66,7 @@ from .. import __version__
 from .errors import SOURCES
 from .tables import csv_value
 from .trust import TRUST_UNITS
-from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError
+from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError, task_of
 
 #: errors.csv columns after phi and omega (or rate): see the module docstring
 ERROR_COLUMNS = ("component", "quantity", "n_realisations", "err", "err_within",
@@ -285,6 +285,8 @@ def write_all(red, outdir, *, plots=True, task_id=None):
     notes); OSError is raised as ReduceError."""
     outdir = Path(outdir)
     check_output_dir(outdir)
+    if task_id is not None:  # checked with or without the plots that use it
+        task_of(red, task_id)
     created = [p for p in (outdir, *outdir.parents) if not p.exists()]
     stem = "moduli" if red.kind == "oscillatory" else "viscosity"
     staging = None

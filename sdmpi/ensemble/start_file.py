@@ -110,6 +110,10 @@ def _read_hdf5(path) -> dict:
             _fail(path, f"an HDF5 file without the dataset(s) {', '.join(missing)}",
                   "datasets positions (N, 3) or (M, N, 3), box (3,), optional radii (N,), "
                   "or an sdmpi run file")
+        for name in ("positions", "box", "radii"):
+            if name in f and isinstance(f[name], h5py.Dataset) and f[name].dtype.kind not in "fiu":
+                _fail(path, f"a dataset {name} of type {f[name].dtype} (not real numbers)",
+                      f"{name} as floating-point (or integer) numbers")
         positions = np.asarray(f["positions"][()], dtype=float)
         box = np.asarray(f["box"][()], dtype=float)
         radii = np.asarray(f["radii"][()], dtype=float) if "radii" in f else None
