@@ -185,3 +185,18 @@ def test_rfd_on_what_auto_picks_for_large_n_refused(tmp_path):
     # below 300 particles "auto" is a direct solver: the same job is valid
     res = python_m("validate", job, "--set", 'solver.backend="auto"', "--set", 'brownian.scheme="rfd"')
     assert res.returncode == 0, res.stderr
+
+
+def test_indefinite_far_field_stops_the_run_without_a_traceback(tmp_path):
+    """Ewald sums too coarse for a tiny box: `sdmpi run` stops with exit 1 and one message
+    that names the task, the step and hydrodynamics.ewald_tolerance; no traceback."""
+    job = tmp_path / "job.toml"
+    job.write_text('[job]\nname = "tiny-box"\nseed = 1\n[system]\nn_particles = 2\nphi = [0.45]\n'
+                   "[shear]\nomega = [6.283185307179586]\n[integration]\nsteps_per_period = 200\n"
+                   "periods = 1\ndiscard_periods = 0\n[ensemble]\nrealisations = 1\n"
+                   "[hydrodynamics]\newald_tolerance = 1e-3\n")
+    res = python_m("run", job, "-o", tmp_path / "run.h5", timeout=600)
+    assert res.returncode == 1, res.stderr
+    assert "task 0, step 0: the far-field mobility M_inf is not positive definite" in res.stderr
+    assert "set a smaller hydrodynamics.ewald_tolerance" in res.stderr
+    assert "Traceback" not in res.stderr

@@ -54,7 +54,7 @@ import numpy as np
 from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import BASIS, to_five
 from ..hydro.geometry import Lattice
-from ..hydro.resistance import FarFieldIndefinite
+from ..hydro.farfield import FarFieldIndefinite
 from .collisions import Collisions, default_rule, separate
 from .contacts import contact_model
 from .forces import force_law, pair_forces
@@ -242,11 +242,12 @@ class Realisation:
         radii) or R_FU (a configuration the time step drove too far)."""
         where = f"task {self.task.task_id}, step {self.step}: "
         if isinstance(err, FarFieldIndefinite):
+            lo, hi = float(np.min(self.radii)), float(np.max(self.radii))
+            radii = "" if lo == hi else f" and radii from {lo:.3g} to {hi:.3g}"
             return RealisationFailed(
                 f"{where}{err}: its Ewald sums at hydrodynamics.ewald_tolerance = "
-                f"{self.job.ewald_tolerance:g} are too coarse for this box (side "
-                f"{float(np.min(self.box)):.3g}) and these radii ({float(np.min(self.radii)):.3g} to "
-                f"{float(np.max(self.radii)):.3g}) - set a smaller hydrodynamics.ewald_tolerance "
+                f"{self.job.ewald_tolerance:g} are too coarse for a box of side "
+                f"{float(np.min(self.box)):.3g}{radii} - set a smaller hydrodynamics.ewald_tolerance "
                 "(1e-6 is the deterministic jobs' default)")
         if self.kT > 0:
             advice = (f"a time step of {self.dt:.3g} moves spheres by ~{math.sqrt(2 * self.dt):.2g} "
@@ -341,7 +342,10 @@ class Realisation:
             stress_p = self._force_stress(at, u_force, virial)
         stress_b, midpoint_overlaps, noise = np.zeros(6), 0, np.zeros((n, 6))
         if self.kT > 0:
-            brownian = at.brownian(self.rng, self.kT, self.dt)
+            try:  # the Brownian forces of the iterative backend (Lanczos) need an SPD M_inf
+                brownian = at.brownian(self.rng, self.kT, self.dt)
+            except np.linalg.LinAlgError as err:
+                raise self._lost_definiteness(err) from err
             noise = brownian.velocities
             stress_b = bulk_stress(brownian.stresslets, self.volume)
             midpoint_overlaps = brownian.midpoint_overlaps

@@ -1114,6 +1114,12 @@ def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=Non
                         grid, {a: self_mobility(a, par.xi) for a in np.unique(radii)}, lattice.volume)
 
 
+class FarFieldIndefinite(np.linalg.LinAlgError):
+    """The far-field mobility M_inf of a configuration is not positive definite: its Ewald
+    sums too coarse for the box or the radii (the truncation error outgrows the smallest
+    eigenvalue), or spheres overlapping deeply."""
+
+
 def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD_TOL, xi=None, plan=None):
     """The (11N, 11N) far-field grand mobility M_inf, symmetric positive definite for
     non-overlapping spheres.

@@ -70,7 +70,7 @@ import weakref
 import numpy as np
 import scipy.sparse
 
-from .farfield import NDOF, far_field_mobility, plan_far_field, self_mobility
+from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
 
 #: default relative residual of the saddle-point solves and the Lanczos square roots
 DEFAULT_TOL = 1e-8
@@ -321,7 +321,8 @@ def lanczos_inverse_sqrt(apply, z, dot, tol=DEFAULT_TOL, max_iterations=LANCZOS_
     orthonormal Krylov basis, T_k the tridiagonal Lanczos matrix). Stops when the
     estimate changes by less than tol (relative) between steps. apply and dot act on
     this rank's part of distributed vectors (dot sums over ranks).
-    Returns (A^-1/2 z, iterations)."""
+    Returns (A^-1/2 z, iterations); FarFieldIndefinite when T_k shows that A (the far-field
+    mobility) is not positive definite."""
     beta0 = np.sqrt(dot(z, z))
     if beta0 == 0.0:
         return np.zeros_like(z), 0
@@ -337,7 +338,7 @@ def lanczos_inverse_sqrt(apply, z, dot, tol=DEFAULT_TOL, max_iterations=LANCZOS_
         t = np.diag(alphas) + np.diag(betas, 1) + np.diag(betas, -1)
         evals, evecs = np.linalg.eigh(t)
         if evals.min() <= 0.0:
-            raise KrylovError("Lanczos: the far-field mobility is not positive definite")
+            raise FarFieldIndefinite("the far-field mobility M_inf is not positive definite (Lanczos)")
         coef = evecs @ (evecs[0] / np.sqrt(evals))
         change = np.linalg.norm(coef - np.concatenate([coef_prev, [0.0]]))
         if change <= tol * np.linalg.norm(coef):

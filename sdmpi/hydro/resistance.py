@@ -28,7 +28,8 @@ import numpy as np
 import scipy.sparse
 from scipy.linalg import blas, lapack
 
-from .farfield import DEFAULT_EWALD_TOL, NDOF, FarFieldPlan, far_field_mobility, far_field_product, plan_far_field
+from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldIndefinite, FarFieldPlan, far_field_mobility,
+                       far_field_product, plan_far_field)
 from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
@@ -212,12 +213,6 @@ def _partition(matrix, r_fu, r_fe, r_se):
                             r_fe[6 * i + a, 5 * j + b - 6] = v
                     elif b >= 6:
                         r_se[5 * i + a - 6, 5 * j + b - 6] = v
-
-
-class FarFieldIndefinite(np.linalg.LinAlgError):
-    """The far-field mobility M_inf of a configuration is not positive definite: its Ewald
-    sums too coarse for the box or the radii (the truncation error outgrows the smallest
-    eigenvalue), or spheres overlapping deeply."""
 
 
 def _spd_inverse_of_upper(upper):
