@@ -53,8 +53,8 @@ import numpy as np
 
 from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import BASIS, to_five
-from ..hydro.geometry import Lattice
 from ..hydro.farfield import FarFieldIndefinite
+from ..hydro.geometry import Lattice
 from .collisions import Collisions, default_rule, separate
 from .contacts import contact_model
 from .forces import force_law, pair_forces
@@ -63,6 +63,7 @@ from .media import MaxwellFilter
 from .models import hydrodynamic_model
 from .monolayer import Monolayer
 from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
+
 
 class RealisationFailed(RuntimeError):
     """A realisation cannot go on (e.g. a hydrodynamic matrix not positive definite): the

@@ -1,0 +1,92 @@
+"""How often a Brownian step brings pairs to the floor, against the exact transition.
+
+Near contact a pair's gap h follows a squared Bessel process, dh = c dt + sqrt(2 c h) dW
+with D_rr = kT G = c h (G its relative mobility along the line of centres,
+`sdmpi.dynamics.models`), whose exact step from h0 is h1 = (c dt / 2) X with X a
+non-central chi-square of 2 degrees of freedom and non-centrality 2 h0 / (c dt). Over one
+run at rest (no shear; the setting of `bench/near_contact_structure.py`) this counts the
+pairs the step leaves closer than the floor hydrodynamics.min_gap (the samples'
+n_overlaps: the overlap correction's first search), and sums, over the same steps, the
+exact probability P(h1 < min_gap) of every pair closer than the near-contact correction's
+reach (NEAR_CONTACT_GAP) at the step's start, with c = kT G_p / h_p from the step's own
+mobility. A ratio above 1 is the time-step error of the step near contact; it should fall
+towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hits.json.
+
+    python bench/floor_hits.py [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0]
+"""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import ncx2
+
+from near_contact_structure import JOB
+from sdmpi.config.loader import parse_job
+from sdmpi.config.tasks import enumerate_tasks
+from sdmpi.dynamics import models
+from sdmpi.dynamics.realisation import Realisation
+from sdmpi.hydro.solvers import mobility_forms
+
+
+def exact_floor_probability(evaluation, kT, dt, min_gap):
+    """Sum over the pairs of evaluation closer than NEAR_CONTACT_GAP of the exact squared
+    Bessel probability that one step of dt leaves the pair below min_gap."""
+    pairs = evaluation.pairs
+    close = pairs.gap < models.NEAR_CONTACT_GAP
+    if not close.any():
+        return 0.0
+    i, j, dx = pairs.i[close], pairs.j[close], pairs.dx[close]
+    e = dx / np.linalg.norm(dx, axis=1)[:, None]
+    g = mobility_forms(evaluation.solver, models.unit_pair_forces(i, j, e, evaluation.n_particles))
+    h0 = np.maximum(pairs.gap[close], min_gap)
+    half = 0.5 * (kT * g / h0) * dt  # c dt / 2
+    return float(ncx2.cdf(min_gap / half, 2, h0 / half).sum())
+
+
+def run(seed, n, phi, dt, relax, duration):
+    """Observed floor hits and the exact prediction per step, over `duration` t_D after
+    `relax` t_D of one run at rest."""
+    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=10 ** 7, model="stokesian", dt=dt,
+                               collisions="", ewald=""))
+    real = Realisation(job, enumerate_tasks(job)[0])
+    real.advance(int(round(relax / dt)))
+    predicted = [0.0]
+    evaluate = real.model.at
+
+    def at(positions, strain):  # the step's own evaluation, instrumented
+        evaluation = evaluate(positions, strain)
+        predicted[0] += exact_floor_probability(evaluation, real.kT, dt, job.hydrodynamics.min_gap)
+        return evaluation
+
+    real.model.at = at
+    steps = int(round(duration / dt))
+    observed = int(real.advance(steps)["n_overlaps"].sum())
+    return {"seed": seed, "n_particles": n, "phi": phi, "dt": dt, "steps": steps,
+            "relax_t_D": relax, "observed_per_step": observed / steps,
+            "exact_per_step": predicted[0] / steps, "ratio": observed / max(predicted[0], 1e-300)}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=27)
+    parser.add_argument("--phi", type=float, default=0.45)
+    parser.add_argument("--dt", type=float, default=5e-4)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[21, 22])
+    parser.add_argument("--relax", type=float, default=1.0, help="t_D left out from the Monte Carlo start")
+    parser.add_argument("--duration", type=float, default=2.0, help="t_D counted")
+    parser.add_argument("--out", default=str(Path(__file__).with_name("floor_hits.json")))
+    args = parser.parse_args()
+    for seed in args.seeds:
+        start = time.perf_counter()
+        row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration)
+        row["seconds"] = round(time.perf_counter() - start)
+        print(json.dumps(row), flush=True)
+        with open(args.out, "a") as out:
+            out.write(json.dumps(row) + "\n")
+
+
+if __name__ == "__main__":
+    main()
