@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import ncx2
 
-from near_contact_structure import JOB
-from sdmpi.config.loader import parse_job
+from near_contact_structure import job_at_rest
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.dynamics import models
 from sdmpi.dynamics.realisation import Realisation
@@ -49,8 +48,7 @@ def exact_floor_probability(evaluation, kT, dt, min_gap):
 def run(seed, n, phi, dt, relax, duration):
     """Observed floor hits and the exact prediction per step, over `duration` t_D after
     `relax` t_D of one run at rest."""
-    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=10 ** 7, model="stokesian", dt=dt,
-                               collisions="", ewald=""))
+    job = job_at_rest("stokesian", n, phi, 10 ** 7, dt, seed=seed)
     real = Realisation(job, enumerate_tasks(job)[0])
     real.advance(int(round(relax / dt)))
     predicted = [0.0]

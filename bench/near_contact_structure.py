@@ -34,7 +34,6 @@ import numpy as np
 
 from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
 from sdmpi.config.loader import parse_job
-from sdmpi.config.schema import BROWNIAN_EWALD_TOLERANCE
 from sdmpi.dynamics import models
 from sdmpi.dynamics.collisions import RULES, default_rule
 from sdmpi.dynamics.initial import _mc_sweeps, hard_sphere_fluid
@@ -96,13 +95,18 @@ def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
     return np.array(counts), np.array(etas)
 
 
+def job_at_rest(model, n, phi, steps, dt, collisions=None, ewald_tolerance=None, seed=11):
+    """The job of one run at rest (JOB; collisions, ewald_tolerance None: the defaults)."""
+    rule = f'collisions = "{collisions}"' if collisions else ""
+    ewald = f"ewald_tolerance = {ewald_tolerance}" if ewald_tolerance else ""
+    return parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule,
+                                ewald=ewald))
+
+
 def dynamics(model, n, phi, steps, eta_every, dt, collisions, ewald_tolerance=None, seed=11):
     """g per shell (one row per step) and eta_H every eta_every steps of one run at rest, of
     the configurations the model is evaluated at (each step's start, overlaps corrected)."""
-    rule = f'collisions = "{collisions}"' if collisions else ""
-    ewald = f"ewald_tolerance = {ewald_tolerance}" if ewald_tolerance else ""
-    job = parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule,
-                               ewald=ewald))
+    job = job_at_rest(model, n, phi, steps, dt, collisions, ewald_tolerance, seed)
     real = Realisation(job, enumerate_tasks(job)[0])
     ideal = ideal_counts(n, real.box)
     counts, etas = np.empty((steps, len(EDGES) - 1)), []
@@ -162,12 +166,16 @@ def main():
         (g1, e1) = summary(np.array([g[skip:].mean(axis=0) for g, _ in per_seed]))
         (h1, f1) = summary(np.array([eta[skip // 100:].mean() for _, eta in per_seed]))
     (g2, e2), (h2, f2) = summary(g_mc, blocks=20), summary(eta_mc, blocks=20)
+    row_rule = args.collisions or default_rule(args.model)
     row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
            "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip,
-           "ewald_tolerance": args.ewald_tolerance or BROWNIAN_EWALD_TOLERANCE,
+           "ewald_tolerance": job_at_rest(args.model, args.n, args.phi, args.steps, args.dt,
+                                          ewald_tolerance=args.ewald_tolerance).ewald_tolerance,
            **({"seed": args.seeds[0]} if len(args.seeds) == 1 else {"seeds": args.seeds}),
-           "collisions": args.collisions or default_rule(args.model),
-           "collision_moves": "symmetric" if args.symmetric else "through the mobility",
+           "collisions": row_rule,
+           # separate moves the two spheres of a pair (collisions.remove_overlaps), reflect
+           # acts through the mobility unless --symmetric
+           "collision_moves": "symmetric" if args.symmetric or row_rule == "separate" else "through the mobility",
            "mc_configs": args.mc_configs,
            "mc_start_sweeps": args.mc_sweeps, "mc_every_sweeps": args.mc_every,
            "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
