@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Seed 000 Fig. 2: viscosity eta'/eta_m vs volume fraction phi (Newtonian medium).
+"""Schaink et al., J. Rheol. 44 (2000),
+Fig. 2: viscosity eta'/eta_m vs volume fraction phi (Newtonian medium).
 
     postprocess/fig2_viscosity_vs_phi.py RUN.h5 [RUN2.h5 ...] [--omega 18.85] [-o fig2.png]
 

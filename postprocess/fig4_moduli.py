@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Seed 000 Fig. 4: G'(omega) and G''(omega) of hard spheres in a Newtonian medium.
+"""Schaink et al., J. Rheol. 44 (2000),
+Fig. 4: G'(omega) and G''(omega) of hard spheres in a Newtonian medium.
 
     postprocess/fig4_moduli.py RUN.h5 [RUN2.h5 ...] [-o fig4.png]
 

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Seed 000 Fig. 5: eta'/eta_m and eta''/eta_m vs omega^(-1/2) (Newtonian medium).
+"""Schaink et al., J. Rheol. 44 (2000),
+Fig. 5: eta'/eta_m and eta''/eta_m vs omega^(-1/2) (Newtonian medium).
 
     postprocess/fig5_omega_half.py RUN.h5 [RUN2.h5 ...] [-o fig5.png]
 

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Seed 000 Fig. 7: complex viscosity vs omega of hard spheres in a Newtonian medium.
+"""Schaink et al., J. Rheol. 44 (2000),
+Fig. 7: complex viscosity vs omega of hard spheres in a Newtonian medium.
 
     postprocess/fig7_newtonian_viscosity.py RUN.h5 [RUN2.h5 ...] [-o fig7.png]
 

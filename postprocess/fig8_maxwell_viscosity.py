@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Seed 000 Fig. 8: complex viscosity vs omega of hard spheres in a Maxwell medium.
+"""Schaink et al., J. Rheol. 44 (2000),
+Fig. 8: complex viscosity vs omega of hard spheres in a Maxwell medium.
 
     postprocess/fig8_maxwell_viscosity.py MAXWELL_RUN.h5 [...] [--newtonian RUN.h5 ...] [-o fig8.png]
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Seed 001 (Dratler & Schowalter, J. Fluid Mech. 325 (1996)): sheared monolayers, purely
+"""Dratler & Schowalter, J. Fluid Mech. 325 (1996): sheared monolayers, purely
 hydrodynamic vs with the short-range repulsion; our viscosities and overlap statistics
 next to Dratler & Schowalter's (1996) statements, as Markdown tables.
 

@@ -346,7 +346,7 @@ IMPLEMENTED_BACKENDS = ("dense", "petsc-dense", "petsc-krylov", "auto")
 
 
 def _maxwell_forces(job):
-    """Seed 000 covers hard spheres in a Maxwell medium: the viscoelastic response of the
+    """Schaink et al. (2000) cover hard spheres in a Maxwell medium: the viscoelastic response of the
     force-induced stresslets is not modelled, so the combination is refused."""
     if job.medium.kind == "maxwell" and job.interparticle.kind != "none":
         return [Problem("interparticle.kind", "interparticle forces in a Maxwell medium are not "

@@ -1,6 +1,6 @@
 """Suspending media: Newtonian, and multi-mode Maxwell via the correspondence principle.
 
-Seed 000 (Schaink et al. 2000) sec. II C: in a Maxwell medium the particle trajectories
+Schaink et al. (2000) sec. II C: in a Maxwell medium the particle trajectories
 are those of the viscous medium of the same zero-shear viscosity eta_m (eq. 32), while
 each mode k filters the hydrodynamic stresslets (eqs. 33-34, 42):
 
