@@ -38,7 +38,7 @@ START_SWEEPS = 5000
 BROWNIAN_EWALD_TOLERANCE = 1e-3
 #: ... other Brownian jobs (size classes, smaller boxes), where sums to 1e-3 can
 #: leave the far-field mobility indefinite (one or two spheres in a box of side 2.1-2.7,
-#: spheres of radius 0.2 among spheres of radius 1; docs/performance.md); ...
+#: spheres of radius 0.2 among spheres of radius 1; bench/ewald_definiteness.py); ...
 BROWNIAN_EWALD_TOLERANCE_TIGHT = 1e-4
 #: ... and deterministic jobs, compared with exact and published numbers
 EWALD_TOLERANCE = 1e-6
@@ -46,7 +46,8 @@ EWALD_TOLERANCE = 1e-6
 #: entry per task), and a study of 100 000 independent runs is far beyond any allocation
 MAX_REALISATIONS = 100_000
 #: the smallest box side (radii) at which Brownian jobs default to BROWNIAN_EWALD_TOLERANCE
-#: (8 equal spheres at phi = 0.45: side 4.2)
+#: (M_inf at 1e-3 indefinite up to side 2.65, positive from 3.03 with ~4e-3 to spare:
+#: bench/ewald_definiteness.json)
 LOOSE_EWALD_MIN_SIDE = 4.0
 
 
