@@ -14,16 +14,16 @@ the minimum over them. Writes bench/ewald_definiteness.json (docs/performance.md
 
 import argparse
 import json
-import math
 
 import numpy as np
 
-from sdmpi.dynamics.initial import hard_sphere_fluid
+from sdmpi.dynamics.initial import cubic_box, hard_sphere_fluid
 from sdmpi.hydro.farfield import far_field_mobility
 
 
 def smallest_eigenvalue(n, phi, tol, seed):
-    """The smallest eigenvalue of M_inf of one Monte Carlo configuration."""
+    """The smallest eigenvalue of M_inf of one Monte Carlo configuration (box side
+    `initial.cubic_box`)."""
     pos, side = hard_sphere_fluid(n, phi, np.random.default_rng(seed))
     mob = far_field_mobility(pos, np.ones(n), np.full(3, side), 0.0, tol=tol)
     return float(np.linalg.eigvalsh(0.5 * (mob + mob.T))[0])
@@ -40,7 +40,7 @@ def main():
     rows = []
     for phi in args.phi:
         for n in args.sizes:
-            side = (4 * math.pi * n / 3 / phi) ** (1 / 3)
+            side = cubic_box(n, phi)
             smallest = {f"{tol:g}": min(smallest_eigenvalue(n, phi, tol, seed) for seed in range(args.configs))
                         for tol in args.tolerances}
             rows.append({"n": n, "phi": phi, "side": side, "configs": args.configs, "smallest_eigenvalue": smallest})

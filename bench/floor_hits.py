@@ -27,7 +27,6 @@ from near_contact_structure import job_at_rest
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.dynamics import models
 from sdmpi.dynamics.realisation import Realisation
-from sdmpi.hydro.solvers import mobility_forms
 
 
 def exact_floor_probability(evaluation, kT, dt, min_gap):
@@ -39,7 +38,7 @@ def exact_floor_probability(evaluation, kT, dt, min_gap):
         return 0.0
     i, j, dx = pairs.i[close], pairs.j[close], pairs.dx[close]
     e = dx / np.linalg.norm(dx, axis=1)[:, None]
-    g = mobility_forms(evaluation.solver, models.unit_pair_forces(i, j, e, evaluation.n_particles))
+    g = evaluation.relative_mobility(i, j, e)
     h0 = np.maximum(pairs.gap[close], min_gap)
     half = 0.5 * (kT * g / h0) * dt  # c dt / 2
     return float(ncx2.cdf(min_gap / half, 2, h0 / half).sum())

@@ -64,7 +64,7 @@ def start_cells_bytes(job) -> float:
     if system.geometry == "monolayer":  # areal fraction of discs in a square cell
         side = math.sqrt(math.fsum(m * math.pi * r * r for r, m in classes) / phi)
         return max(side / reach, 1.0) ** 2 * 8.0
-    side = (math.fsum(m * 4.0 / 3.0 * math.pi * r ** 3 for r, m in classes) / phi) ** (1.0 / 3.0)
+    side = (system.sphere_volume / phi) ** (1.0 / 3.0)
     return max(side / reach, 1.0) ** 3 * 8.0
 
 

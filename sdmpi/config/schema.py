@@ -303,6 +303,12 @@ class System:
         return tuple(v / total for v in vols)
 
     @property
+    def sphere_volume(self) -> float:
+        """sum_i 4 pi a_i^3 / 3 over the N spheres (from the class counts, without a tuple of N
+        radii): the box side at volume fraction phi is (sphere_volume / phi)^(1/3)."""
+        return math.fsum(m * 4.0 / 3.0 * math.pi * r ** 3 for r, m in zip(self.class_radii, self.class_counts))
+
+    @property
     def lattice_phi_limit(self) -> float:
         """The largest phi of the simple-cubic lattice start (m^3 >= N sites, m =
         :func:`lattice_sites_per_axis`), whose spacing L/m must exceed the largest diameter
@@ -662,7 +668,7 @@ class Job:
             return EWALD_TOLERANCE
         system = self.system
         loose = system.size_classes is None and \
-            (system.n_particles * 4.0 * math.pi / 3.0 / max(system.phi)) ** (1 / 3) >= LOOSE_EWALD_MIN_SIDE
+            (system.sphere_volume / max(system.phi)) ** (1 / 3) >= LOOSE_EWALD_MIN_SIDE
         return BROWNIAN_EWALD_TOLERANCE if loose else BROWNIAN_EWALD_TOLERANCE_TIGHT
 
     @property

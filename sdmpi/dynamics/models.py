@@ -185,7 +185,8 @@ class ResistanceEvaluation:
         shape = noise_shape(self.solver)
         z = rng.standard_normal(shape)
         z_near = rng.standard_normal(shape) if self.model.near_contact else None
-        return self.brownian_terms(z, kT, dt, z_near)
+        # the iterative backend's Brownian forces (Lanczos) need a positive definite M_inf
+        return self.model._guarded(self.brownian_terms, z, kT, dt, z_near)
 
     def brownian_terms(self, z, kT, dt, z_near=None):
         """The step's `BrownianTerms` for the standard normal noise z (`solvers.noise_shape`):
@@ -270,7 +271,7 @@ class ResistanceModel:
 
     def _guarded(self, build, *args, **kwargs):
         """build(*args, **kwargs), its LinAlgError (a matrix not positive definite) turned
-        into the exception on_error makes of it."""
+        into the exception on_error makes of it (assembly, factorisation, Brownian forces)."""
         try:
             return build(*args, **kwargs)
         except np.linalg.LinAlgError as err:

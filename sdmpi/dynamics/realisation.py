@@ -343,10 +343,7 @@ class Realisation:
             stress_p = self._force_stress(at, u_force, virial)
         stress_b, midpoint_overlaps, noise = np.zeros(6), 0, np.zeros((n, 6))
         if self.kT > 0:
-            try:  # the Brownian forces of the iterative backend (Lanczos) need an SPD M_inf
-                brownian = at.brownian(self.rng, self.kT, self.dt)
-            except np.linalg.LinAlgError as err:
-                raise self._lost_definiteness(err) from err
+            brownian = at.brownian(self.rng, self.kT, self.dt)
             noise = brownian.velocities
             stress_b = bulk_stress(brownian.stresslets, self.volume)
             midpoint_overlaps = brownian.midpoint_overlaps
