@@ -1,0 +1,116 @@
+"""The Brownian drift of close pairs in a suspension: the rfd estimate against the exact
+divergence, on configurations evolved at rest.
+
+Full SD (`stokesian`), N = 27, phi = 0.45, the setting of `bench/near_contact_structure.py`
+(no shear, dt = 5e-4, the Brownian Ewald default). A run at rest is stepped for --relax t_D,
+then every --every steps its configuration x is taken, and there
+
+* the exact drift kT div R_FU^-1 (the sum over the 3N translations of the derivatives of
+  the mobility's columns, centred differences of step 1e-7 with the pair sets of x:
+  `ResistanceModel.displaced`),
+* the mean of the `rfd` drift over --samples antithetic noise pairs z, -z (the Brownian
+  velocities of z and -z averaged: the noise cancels, the drift, even in z, stays),
+
+are projected on every pair closer than --gap: the relative radial drift
+e.(u_j - u_i) (e the unit line of centres), in units of c = kT G/h (G the pair's relative
+mobility along e, h its gap), the coefficient of dh = c dt + sqrt(2 c h) dW for an
+isolated pair (`sdmpi.dynamics.models`). Reported per pair: h, c, the exact radial drift
+over c, the rfd mean over c with its standard error, and the standard deviation of one
+rfd sample's radial drift, times dt, over c dt (how much the drift estimate scatters the
+gap in one step, next to the gaps near contact, ~c dt). Prints one JSON line, appended to
+bench/drift_near_contact.json.
+
+    OMP_NUM_THREADS=1 python bench/drift_near_contact.py [--seed 22] [--configs 8] [--samples 4000]
+"""
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from near_contact_structure import job_at_rest
+from sdmpi.config.tasks import enumerate_tasks
+from sdmpi.dynamics.realisation import Realisation
+from sdmpi.hydro.solvers import noise_shape
+
+#: step of the centred differences (the gaps are >= 1e-4)
+FD_STEP = 1e-7
+
+
+def exact_drift(model, evaluation, kT):
+    """kT div R_FU^-1 (N, 6) at the evaluation's configuration, by centred differences over
+    the 3N translations with its pair sets."""
+    x = evaluation.positions
+    n = len(x)
+    zero = np.zeros((n, 5))
+    div = np.zeros((n, 6))
+    for k in range(3 * n):
+        step = np.zeros((n, 3))
+        step[k // 3, k % 3] = FD_STEP
+        unit = np.zeros((n, 6))
+        unit[k // 3, k % 3] = 1.0
+        plus, _ = model.displaced(evaluation, x + step, separate=False)
+        minus, _ = model.displaced(evaluation, x - step, separate=False)
+        div += (plus.velocities(unit, zero) - minus.velocities(unit, zero)) / (2 * FD_STEP)
+    return kT * div
+
+
+def rfd_drift_samples(evaluation, kT, dt, samples, rng):
+    """(samples, N, 6) rfd drift samples, each the mean of the Brownian velocities of z and
+    -z (no near-contact correction)."""
+    shape = noise_shape(evaluation.solver)
+    out = []
+    for _ in range(samples):
+        z = rng.standard_normal(shape)
+        out.append(0.5 * (evaluation.brownian_terms(z, kT, dt).velocities
+                          + evaluation.brownian_terms(-z, kT, dt).velocities))
+    return np.array(out)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seed", type=int, default=22)
+    ap.add_argument("--configs", type=int, default=8)
+    ap.add_argument("--samples", type=int, default=4000)
+    ap.add_argument("--relax", type=float, default=1.0, help="t_D stepped before the first configuration")
+    ap.add_argument("--every", type=int, default=400, help="steps between configurations")
+    ap.add_argument("--gap", type=float, default=1e-2, help="pairs closer than this (a) are reported")
+    ap.add_argument("--out", default=str(Path(__file__).with_name("drift_near_contact.json")))
+    args = ap.parse_args()
+    dt = 5e-4
+    job = job_at_rest("stokesian", 27, 0.45, 10 ** 7, dt, seed=args.seed)
+    real = Realisation(job, enumerate_tasks(job)[0])
+    real.advance(int(round(args.relax / dt)))
+    rng = np.random.default_rng(args.seed)
+    rows, start = [], time.time()
+    for _ in range(args.configs):
+        real.advance(args.every)
+        evaluation = real.model.at(real.positions, 0.0)
+        exact = exact_drift(real.model, evaluation, real.kT)
+        samples = rfd_drift_samples(evaluation, real.kT, dt, args.samples, rng)
+        pairs = evaluation.pairs
+        close = pairs.gap < args.gap
+        i, j, dx = pairs.i[close], pairs.j[close], pairs.dx[close]
+        e = dx / np.linalg.norm(dx, axis=1)[:, None]
+        c = real.kT * evaluation.relative_mobility(i, j, e) / np.maximum(pairs.gap[close], job.hydrodynamics.min_gap)
+        radial_exact = np.einsum("pc,pc->p", e, exact[j, :3] - exact[i, :3])
+        radial = np.einsum("pc,spc->sp", e, samples[:, j, :3] - samples[:, i, :3])
+        for p in range(len(i)):
+            rows.append({"gap": float(pairs.gap[close][p]), "c": float(c[p]),
+                         "exact_over_c": float(radial_exact[p] / c[p]),
+                         "rfd_over_c": float(radial[:, p].mean() / c[p]),
+                         "rfd_over_c_err": float(radial[:, p].std() / math.sqrt(args.samples) / c[p]),
+                         "rfd_sample_std_over_c": float(radial[:, p].std() / c[p])})
+            print(json.dumps(rows[-1]), flush=True)
+    result = {"model": "stokesian", "n_particles": 27, "phi": 0.45, "dt": dt, "seed": args.seed,
+              "ewald_tolerance": job.ewald_tolerance, "configs": args.configs, "samples": args.samples,
+              "pairs": rows, "seconds": round(time.time() - start)}
+    with open(args.out, "a") as fh:
+        fh.write(json.dumps(result) + "\n")
+
+
+if __name__ == "__main__":
+    main()
