@@ -15,9 +15,13 @@ are projected on every pair closer than --gap: the relative radial drift
 e.(u_j - u_i) (e the unit line of centres), in units of c = kT G/h (G the pair's relative
 mobility along e, h its gap), the coefficient of dh = c dt + sqrt(2 c h) dW for an
 isolated pair (`sdmpi.dynamics.models`). Reported per pair: h, c, the exact radial drift
-over c, the rfd mean over c with its standard error, and the standard deviation of one
-rfd sample's radial drift, times dt, over c dt (how much the drift estimate scatters the
-gap in one step, next to the gaps near contact, ~c dt). Prints one JSON line, appended to
+over c, the rfd mean over c with its standard error, the standard deviation of one rfd
+sample's radial drift over c, and the curvature term kT (G_t1 + G_t2)/r over c (G_t the
+relative mobilities along two unit tangents t perpendicular to e, r the pair's separation):
+the mean rate at which tangential diffusion opens the gap, <|dr_perp|^2>/(2 r dt). A flat
+pair density at contact (hard spheres in equilibrium, g constant) has zero radial flux
+there, D_rr' = radial drift + curvature term with D_rr = c h, so the exact radial drift plus
+the curvature term is c as h -> 0. Prints one JSON line, appended to
 bench/drift_near_contact.json.
 
     OMP_NUM_THREADS=1 python bench/drift_near_contact.py [--seed 22] [--configs 8] [--samples 4000]
@@ -70,6 +74,17 @@ def rfd_drift_samples(evaluation, kT, dt, samples, rng):
     return np.array(out)
 
 
+def tangential_mobility(evaluation, i, j, e):
+    """G_t1 + G_t2 of the pairs (i, j) with unit lines of centres e: the relative mobilities
+    t.(M_jj + M_ii - M_ij - M_ji).t along two unit tangents t perpendicular to e and to each
+    other (their sum does not depend on the choice of the tangents)."""
+    helper = np.where(np.abs(e[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(e, helper)
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    t2 = np.cross(e, t1)
+    return sum(evaluation.relative_mobility(i, j, t) for t in (t1, t2))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=22)
@@ -97,13 +112,15 @@ def main():
         e = dx / np.linalg.norm(dx, axis=1)[:, None]
         c = real.kT * evaluation.relative_mobility(i, j, e) / np.maximum(pairs.gap[close], job.hydrodynamics.min_gap)
         radial_exact = np.einsum("pc,pc->p", e, exact[j, :3] - exact[i, :3])
+        curvature = real.kT * tangential_mobility(evaluation, i, j, e) / np.linalg.norm(dx, axis=1)
         radial = np.einsum("pc,spc->sp", e, samples[:, j, :3] - samples[:, i, :3])
         for p in range(len(i)):
             rows.append({"gap": float(pairs.gap[close][p]), "c": float(c[p]),
                          "exact_over_c": float(radial_exact[p] / c[p]),
                          "rfd_over_c": float(radial[:, p].mean() / c[p]),
                          "rfd_over_c_err": float(radial[:, p].std() / math.sqrt(args.samples) / c[p]),
-                         "rfd_sample_std_over_c": float(radial[:, p].std() / c[p])})
+                         "rfd_sample_std_over_c": float(radial[:, p].std() / c[p]),
+                         "curvature_over_c": float(curvature[p] / c[p])})
             print(json.dumps(rows[-1]), flush=True)
     result = {"model": "stokesian", "n_particles": 27, "phi": 0.45, "dt": dt, "seed": args.seed,
               "ewald_tolerance": job.ewald_tolerance, "configs": args.configs, "samples": args.samples,
