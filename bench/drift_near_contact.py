@@ -21,7 +21,8 @@ relative mobilities along two unit tangents t perpendicular to e, r the pair's s
 the mean rate at which tangential diffusion opens the gap, <|dr_perp|^2>/(2 r dt). A flat
 pair density at contact (hard spheres in equilibrium, g constant) has zero radial flux
 there, D_rr' = radial drift + curvature term with D_rr = c h, so the exact radial drift plus
-the curvature term is c as h -> 0. Prints one JSON line, appended to
+the curvature term is c as h -> 0. The same for two spheres alone ("isolated_pair"). Prints
+one JSON line, appended to
 bench/drift_near_contact.json.
 
     OMP_NUM_THREADS=1 python bench/drift_near_contact.py [--seed 22] [--configs 8] [--samples 4000]
@@ -37,7 +38,8 @@ import numpy as np
 
 from near_contact_structure import job_at_rest
 from sdmpi.config.tasks import enumerate_tasks
-from sdmpi.dynamics.realisation import Realisation
+from sdmpi.dynamics.models import ResistanceModel
+from sdmpi.dynamics.realisation import KT_REDUCED, Realisation
 from sdmpi.hydro.solvers import noise_shape
 
 #: step of the centred differences (the gaps are >= 1e-4)
@@ -85,6 +87,25 @@ def tangential_mobility(evaluation, i, j, e):
     return sum(evaluation.relative_mobility(i, j, t) for t in (t1, t2))
 
 
+def isolated_pair(gaps=(2e-4, 1e-3, 3e-3)):
+    """The same quantities for two spheres alone (box of side 10, the stokesian model at
+    ewald_tolerance 1e-6), per gap: c, the exact radial drift over c, the curvature term
+    over c."""
+    rows = []
+    for gap in gaps:
+        pos = np.array([[3.0, 4.0, 5.0], [5.0 + gap, 4.0, 5.0]])
+        model = ResistanceModel(np.ones(2), np.full(3, 10.0), lubrication=True, ewald_tol=1e-6, cutoff=2.0,
+                                min_gap=1e-4, scheme="rfd")
+        evaluation = model.at(pos, 0.0)
+        exact = exact_drift(model, evaluation, KT_REDUCED)
+        i, j, e = np.array([0]), np.array([1]), np.array([[1.0, 0.0, 0.0]])
+        c = KT_REDUCED * evaluation.relative_mobility(i, j, e)[0] / gap
+        rows.append({"gap": gap, "c": float(c), "exact_over_c": float((exact[1, 0] - exact[0, 0]) / c),
+                     "curvature_over_c": float(KT_REDUCED * tangential_mobility(evaluation, i, j, e)[0]
+                                               / (2 + gap) / c)})
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=22)
@@ -124,7 +145,7 @@ def main():
             print(json.dumps(rows[-1]), flush=True)
     result = {"model": "stokesian", "n_particles": 27, "phi": 0.45, "dt": dt, "seed": args.seed,
               "ewald_tolerance": job.ewald_tolerance, "configs": args.configs, "samples": args.samples,
-              "pairs": rows, "seconds": round(time.time() - start)}
+              "pairs": rows, "isolated_pair": isolated_pair(), "seconds": round(time.time() - start)}
     with open(args.out, "a") as fh:
         fh.write(json.dumps(result) + "\n")
 
