@@ -83,27 +83,47 @@ Ross diffusion with a vanishing level), whose exact transition over dt is
     h1 = (sqrt(h0) + sqrt(c dt/2) z1)^2 + (c dt/2) z2^2,      z1, z2 ~ N(0, 1) independent,
 
 a scaled non-central chi-square with two degrees of freedom. Both schemes draw the drift
-along the noise's own direction. Its singular part near contact is the lubrication term:
-with R_hh ~ A/h the pair's squeeze resistance, f_p the unit pair force (e on j, -e on i),
-m_h = f_p.m the pair's part of the step's direction m = R_FU^-1 C z, and G ~ h/A,
+along the noise's own direction. Its singular part near contact is the lubrication term.
+Write the pair's squeeze resistance along its unit pair force f_p (e on j, -e on i,
+|f_p|^2 = 2) as the rank-one part sigma(h) f_p f_p^T/|f_p|^4 of R_FU, sigma = f_p.R_2B.f_p
+(two-sphere squeeze, ~ A/h), and let m_h = f_p.m be the pair's part of the step's direction
+m = R_FU^-1 C z, z1 = m_h/sqrt(G) its standard normal radial noise (<m_h^2> = G). The drift
+along m changes G by dG = -(sigma'/|f_p|^4) G^2 (f_p.dx) (Sherman-Morrison), so its radial
+part is
 
-    kT div R_FU^-1  ~  R_FU^-1 f_p kT (A/h^2) m_h^2  ~  R_FU^-1 f_p kT m_h^2 / (G h),
+    f_p.(kT div R_FU^-1) ~ kT |sigma'| G m_h^2 / |f_p|^4 = kappa c z1^2,
+    kappa = G h |sigma'| / |f_p|^4   (`squeeze_fraction`),
 
-so the radial step is h0 + sqrt(2 c h0 dt) z1 + c dt z1^2 with z1 = m_h/sqrt(G): the right
-mean, but z2 = z1, so that h1 >= h0/2; a pair can never close more than half its gap in one
-step, and the layer h < ~c dt is under-sampled (two spheres at dt = 5e-4: 0.2-0.4 of the
-equilibrium time below a gap of 1e-3). The near-contact correction gives every pair with a
-gap below NEAR_CONTACT_GAP (the separation and gap h of the model's pair list) the exact
-transition: it replaces m_h^2 by (m_h^2 + m'_h^2)/2, with m'_h = f_p.m' from one
-independent direction m' = R_FU^-1 C z' (z2 = m'_h/sqrt(G)), i.e. it adds the velocities
+the derivative of D_rr = kT G along the pair's own response over c = D_rr/h. Two spheres
+alone at contact have kappa = 1 (G -> |f_p|^4 h/A); below 1 by the share of the pair's
+relative mobility that the rest of the suspension takes, and falling with the gap (N = 27,
+phi = 0.45: 0.99 at h = 8e-4, 0.95 at 4e-3, 0.9 at 1e-2, 0.8 at 2e-2; two spheres alone:
+0.99, 0.98, 0.94, 0.90). With kappa = 1 the radial step is h0 + sqrt(2 c h0 dt) z1 +
+c dt z1^2: the right mean, but z2 = z1, so that h1 >= h0/2; a pair can never close more
+than half its gap in one step, and the layer h < ~c dt is under-sampled (two spheres at
+dt = 5e-4: 0.2-0.4 of the equilibrium time below a gap of 1e-3). The near-contact
+correction gives every pair with a gap below NEAR_CONTACT_GAP (the separation and gap h of
+the model's pair list) the step
 
-    R_FU^-1 sum_p w_p f_p,      w_p = kT (m'_h^2 - m_h^2) / (2 G_p h_p),
+    h1 = (sqrt(h0) + sqrt(c dt/2) z1)^2 + (kappa - 1/2) c dt z2^2,
 
-which change the pair's own gap by (c dt/2)(z2^2 - z1^2) and move its neighbours as the
-hydrodynamics couples them. Both squares have mean G_p, so the correction has mean zero
-at every gap and the mean drift stays exactly the scheme's. Far from contact (h >> c dt)
-it is a negligible O(dt^2) change of the step's variance. Cost: two solves, and the G_p
-(`relative_mobility`) by one triangular solve for all pairs on the dense backend. It is
+the exact transition when kappa = 1 and, for every kappa >= 1/2, a gap that cannot pass
+contact with the scheme's mean h0 + kappa c dt: it replaces kappa m_h^2 by m_h^2/2 +
+(kappa - 1/2) m'_h^2, with m'_h = f_p.m' from one independent direction m' = R_FU^-1 C z'
+(z2 = m'_h/sqrt(G)), i.e. it adds the velocities
+
+    R_FU^-1 sum_p w_p f_p,      w_p = (2 kappa_p - 1) kT (m'_h^2 - m_h^2) / (2 G_p h_p),
+
+which change the pair's own gap by (kappa - 1/2) c dt (z2^2 - z1^2) and move its neighbours
+as the hydrodynamics couples them (w_p = 0 where kappa_p < 1/2, at gaps where c dt << h).
+Both squares have mean G_p, so the correction has mean zero at every gap and the mean drift
+stays exactly the scheme's. Taking kappa = 1 where it is smaller would leave the quadratic
+term (kappa - 1/2) c dt z1^2 and a gap that can pass contact, down to
+h0 (1 - 1/(2 kappa - 1)): at N = 27, phi = 0.45, dt = 5e-4, pairs from gaps above 3e-3 then
+reach the floor 7 times as often as the squared-Bessel transition says (1.2-1.5 times with
+kappa; `bench/floor_hits.py`). Far from contact (h >> c dt) the correction is a negligible
+O(dt^2) change of the step's variance. Cost: two solves, and the G_p (`relative_mobility`)
+by one triangular solve for all pairs on the dense backend. It is
 applied on the direct backends only: an iterative solve's relative error, small against
 the whole of m, is large against the small radial parts m_h of close pairs, and divided by
 G_p h_p it would dominate the correction (petsc-krylov keeps the scheme's own step).
@@ -120,6 +140,7 @@ from ..hydro.lubrication import close_pairs
 from ..hydro.resistance import resistance_change
 from ..hydro.solvers import (MATRIX_FREE, assemble, brownian_velocities, make_solver, mobility_forms, noise_shape,
                              resolve_backend, solver_stats, take_preconditioner)
+from ..hydro.two_sphere import squeeze_slope
 
 #: hydrodynamics.model choices
 MODELS = ("stokesian", "far-field", "free-draining")
@@ -147,6 +168,16 @@ def default_scheme(backend):
     """The drift scheme a backend gets when brownian.scheme is absent: rfd on the direct
     backends, midpoint on the iterative one (module docstring)."""
     return "midpoint" if backend in MATRIX_FREE else "rfd"
+
+
+def squeeze_fraction(mobility, gap, radius_i, radius_j):
+    """kappa = G h |d(f.R_2B f)/dh| / |f|^4 (|f|^2 = 2) of pairs with relative mobility
+    G = f.R_FU^-1.f (`unit_pair_forces` f) at gap h: the derivative of the pair's relative
+    diffusivity along its own mobility response over D_rr/h (module docstring), from the
+    two-sphere squeeze resistance (`hydro.two_sphere.squeeze_slope`). 1 for two spheres
+    alone at contact; below 1 by the share of the pair's relative mobility the rest of the
+    suspension takes."""
+    return mobility * squeeze_slope(gap, radius_i, radius_j) / 4.0
 
 
 def unit_pair_forces(i, j, e, n):
@@ -235,7 +266,9 @@ class ResistanceEvaluation:
         m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
         gap = np.maximum(pairs.gap[close], self.model.min_gap * mean_radius[close])  # the lubrication's floor
         forces = unit_pair_forces(i, j, e, n)
-        weight = 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility_forms(self.solver, forces) * gap)
+        mobility = mobility_forms(self.solver, forces)
+        kappa = squeeze_fraction(mobility, gap, self.model.radii[i], self.model.radii[j])
+        weight = np.maximum(2.0 * kappa - 1.0, 0.0) * 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility * gap)
         return self.solver.velocities(np.einsum("p,pkc->kc", weight, forces), zero)
 
     def stats(self):
