@@ -438,23 +438,17 @@ def squeeze_slope(gap, a1, a2):
     """h |d/dh (f.R f)| of two spheres at surface gap h (dimensional, viscosity 1), where
     f.R f is their resistance to relative motion along the line of centres for the unit
     pair force f (e on sphere 2, -e on sphere 1; |f|^2 = 2):
-    f.R f = A11 + A22 - 2 A12 along d, A_ab = 3 pi (a_a + a_b) X^A_ab. From the near-contact
-    forms X^A_11 ~ G1/xi + G2 log(1/xi) + G3 xi log(1/xi), X^A_12 = P12 (the same with the
-    h_12 coefficients), xi = 2h/(a1 + a2), X^A_22(lam) = X^A_11(1/lam) (Jeffrey & Onishi,
-    J. Fluid Mech. 139, 261 (1984); Townsend 2018), whose -xi d/dxi is
-    G1/xi + G2 + G3 xi (1 - log(1/xi)); the regular remainder of X^A changes the result by
-    O(h) relative. gap, a1, a2 broadcast."""
-    gap, a1, a2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (gap, a1, a2)))
+    f.R f = A11 + A22 - 2 A12 along d, A_ab = 3 pi (a_a + a_b) X^A_ab. With the near-contact
+    forms X^A_11 ~ G1/xi + G2 log(1/xi) + G3 xi log(1/xi), X^A_12 = -2/(1 + lam) times the
+    same, xi = 2h/(a1 + a2), lam = a2/a1, and X^A_22(lam) = X^A_11(1/lam) with
+    lam Gk(1/lam) = Gk(lam) (Jeffrey & Onishi, J. Fluid Mech. 139, 261 (1984); Townsend
+    2018), f.R f ~ 24 pi a1 X^A_11, whose -xi d/dxi is G1/xi + G2 + G3 xi (1 - log(1/xi));
+    the regular remainder of X^A changes the result by O(h) relative. gap, a1, a2
+    broadcast."""
+    gap, a1, a2 = (np.asarray(v, dtype=float) for v in (gap, a1, a2))
     xi = 2.0 * gap / (a1 + a2)
-    log_inv = np.log(1.0 / xi)
-
-    def slope(g):
-        return g[0] / xi + g[1] + g[2] * xi * (1.0 - log_inv)
-
-    lam = a2 / a1
-    g11, g12, p12 = _singular_coefficients("XA", lam)
-    g22, _, _ = _singular_coefficients("XA", 1.0 / lam)
-    return 3.0 * math.pi * (2 * a1 * slope(g11) + 2 * a2 * slope(g22) - 2 * (a1 + a2) * p12 * slope(g12))
+    (g1, g2, g3), _, _ = _singular_coefficients("XA", a2 / a1)
+    return 24.0 * math.pi * a1 * (g1 / xi + g2 + g3 * xi * (1.0 + np.log(xi)))
 
 
 def _basis_taylor(m_max, parity):
