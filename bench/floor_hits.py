@@ -12,7 +12,10 @@ reach (NEAR_CONTACT_GAP) at the step's start, with c = kT G_p / h_p from the ste
 mobility. A ratio above 1 is the time-step error of the step near contact; it should fall
 towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hits.json.
 
-    python bench/floor_hits.py [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0]
+    python bench/floor_hits.py [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0] [--kappa-one]
+
+--kappa-one gives the near-contact correction the isolated pair's kappa = 1 for every pair
+(`near_contact_structure.use_kappa_one`, for comparison).
 """
 
 import argparse
@@ -23,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import ncx2
 
-from near_contact_structure import job_at_rest
+from near_contact_structure import job_at_rest, use_kappa_one
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.dynamics import models
 from sdmpi.dynamics.realisation import Realisation
@@ -75,10 +78,14 @@ def main():
     parser.add_argument("--relax", type=float, default=1.0, help="t_D left out from the Monte Carlo start")
     parser.add_argument("--duration", type=float, default=2.0, help="t_D counted")
     parser.add_argument("--out", default=str(Path(__file__).with_name("floor_hits.json")))
+    parser.add_argument("--kappa-one", action="store_true")
     args = parser.parse_args()
+    if args.kappa_one:
+        use_kappa_one()
     for seed in args.seeds:
         start = time.perf_counter()
         row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration)
+        row["kappa"] = "1" if args.kappa_one else "the pair's own"
         row["seconds"] = round(time.perf_counter() - start)
         print(json.dumps(row), flush=True)
         with open(args.out, "a") as out:

@@ -10,12 +10,13 @@ Errors: one standard error over 20 blocks (of the run; of the chain); with sever
 standard error of the runs' means (which also holds when structural fluctuations outlast
 a block).
 
-    python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected]
+    python bench/near_contact_structure.py MODEL [--phi 0.45] [--steps 10000] [--uncorrected] [--kappa-one]
         [--collisions separate|reflect] [--symmetric] [--dt 5e-4] [--seeds 11 ...] [--workers 1]
         [--ewald-tolerance TOL]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
-the near-contact correction of `sdmpi.dynamics.models` off (for comparison); --collisions
+the near-contact correction of `sdmpi.dynamics.models` off, --kappa-one gives it the
+isolated pair's kappa = 1 for every pair instead of the pair's own (both for comparison); --collisions
 chooses the overlap correction's rule (`sdmpi.dynamics.collisions`; absent: the model's);
 --symmetric moves only the two spheres of a pair in contact, by half the separation change
 each, instead of acting through the mobility (the oblique reflection, for comparison). Prints one JSON
@@ -103,6 +104,12 @@ def job_at_rest(model, n, phi, steps, dt, collisions=None, ewald_tolerance=None,
                                 ewald=ewald))
 
 
+def use_kappa_one():
+    """The near-contact correction with kappa = 1 for every pair (the isolated pair at
+    contact) in this process and the worker processes it forks."""
+    models.squeeze_fraction = lambda mobility, gap, radius_i, radius_j: np.ones(len(gap))
+
+
 def dynamics(model, n, phi, steps, eta_every, dt, collisions, ewald_tolerance=None, seed=11):
     """g per shell (one row per step) and eta_H every eta_every steps of one run at rest, of
     the configurations the model is evaluated at (each step's start, overlaps corrected)."""
@@ -139,6 +146,7 @@ def main():
     parser.add_argument("--seeds", type=int, nargs="+", default=[11])
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--uncorrected", action="store_true")
+    parser.add_argument("--kappa-one", action="store_true")
     parser.add_argument("--collisions", choices=RULES)
     parser.add_argument("--symmetric", action="store_true")
     parser.add_argument("--dt", type=float, default=5e-4)
@@ -147,6 +155,8 @@ def main():
     args = parser.parse_args()
     if args.uncorrected:
         models.NEAR_CONTACT_GAP = 0.0
+    if args.kappa_one:
+        use_kappa_one()
     if args.symmetric:
         symmetric = Realisation._separate
         Realisation._separate = lambda self, pos, strain, reflect=False, mobility=None: symmetric(
@@ -167,7 +177,8 @@ def main():
         (h1, f1) = summary(np.array([eta[skip // 100:].mean() for _, eta in per_seed]))
     (g2, e2), (h2, f2) = summary(g_mc, blocks=20), summary(eta_mc, blocks=20)
     row_rule = args.collisions or default_rule(args.model)
-    row = {"model": args.model, "near_contact_correction": not args.uncorrected, "n_particles": args.n,
+    row = {"model": args.model, "near_contact_correction": not args.uncorrected,
+           "kappa": "1" if args.kappa_one else "the pair's own", "n_particles": args.n,
            "phi": args.phi, "dt": args.dt, "steps": args.steps, "discarded_steps": skip,
            "ewald_tolerance": job_at_rest(args.model, args.n, args.phi, args.steps, args.dt,
                                           ewald_tolerance=args.ewald_tolerance).ewald_tolerance,

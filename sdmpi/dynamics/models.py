@@ -119,11 +119,11 @@ as the hydrodynamics couples them (w_p = 0 where kappa_p < 1/2, at gaps where c 
 Both squares have mean G_p, so the correction has mean zero at every gap and the mean drift
 stays exactly the scheme's. Taking kappa = 1 where it is smaller would leave the quadratic
 term (kappa - 1/2) c dt z1^2 and a gap that can pass contact, down to
-h0 (1 - 1/(2 kappa - 1)): at N = 27, phi = 0.45, dt = 5e-4, pairs from gaps above 3e-3 then
-reach the floor 7 times as often as the squared-Bessel transition says (1.2-1.5 times with
-kappa; `bench/floor_hits.py`). Far from contact (h >> c dt) the correction is a negligible
-O(dt^2) change of the step's variance. Cost: two solves, and the G_p (`relative_mobility`)
-by one triangular solve for all pairs on the dense backend. It is
+h0 (1 - 1/(2 kappa - 1)): at N = 27, phi = 0.45, dt = 5e-4 the step then leaves pairs below
+the floor 2.3-2.5 times as often as the squared-Bessel transition of the same pairs says,
+0.99-1.12 times with kappa (`bench/floor_hits.py`). Far from contact (h >> c dt) the
+correction is a negligible O(dt^2) change of the step's variance. Cost: two solves, and the
+G_p (`relative_mobility`) by one triangular solve for all pairs on the dense backend. It is
 applied on the direct backends only: an iterative solve's relative error, small against
 the whole of m, is large against the small radial parts m_h of close pairs, and divided by
 G_p h_p it would dominate the correction (petsc-krylov keeps the scheme's own step).
