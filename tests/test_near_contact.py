@@ -308,8 +308,9 @@ def test_many_body_layer_near_contact_is_filled():
     Carnahan-Starling g(2) = (1 - phi/2)/(1 - phi)^3 = 4.66 at phi = 0.45 (Monte Carlo
     configurations give 4.66 +- 0.20 below 1e-3 and 4.45 +- 0.06 in 1e-3 ... 1e-2,
     bench/near_contact_structure.py). With the near-contact correction 2000 steps give
-    0.85-1.3 of it (measured 1.10-1.18 over 4000 steps: the explicit step's remaining
-    many-body error; counting noise ~10%)."""
+    0.85-1.3 of it (measured 1.13: single runs of this length differ by up to 10% per
+    shell, and 8 runs of 20 000 steps agree with Monte Carlo within errors; counting noise
+    ~10%)."""
     phi = 0.45
     contact = (1 - phi / 2) / (1 - phi) ** 3
     corrected = _layer_g() / contact

@@ -98,10 +98,11 @@ the derivative of D_rr = kT G along the pair's own response over c = D_rr/h. Two
 alone at contact have kappa = 1 (G -> |f_p|^4 h/A); below 1 by the share of the pair's
 relative mobility that the rest of the suspension takes, and falling with the gap (N = 27,
 phi = 0.45: 0.99 at h = 8e-4, 0.95 at 4e-3, 0.9 at 1e-2, 0.8 at 2e-2; two spheres alone:
-0.99, 0.98, 0.94, 0.90). With kappa = 1 the radial step is h0 + sqrt(2 c h0 dt) z1 +
-c dt z1^2: the right mean, but z2 = z1, so that h1 >= h0/2; a pair can never close more
-than half its gap in one step, and the layer h < ~c dt is under-sampled (two spheres at
-dt = 5e-4: 0.2-0.4 of the equilibrium time below a gap of 1e-3). The near-contact
+0.99 at 1e-3, 0.98 at 3e-3, 0.94 at 1e-2, 0.90 at 2e-2). With kappa = 1 the radial step is
+h0 + sqrt(2 c h0 dt) z1 + c dt z1^2: the right mean, but z2 = z1, so that h1 >= h0/2; a
+pair can never close more than half its gap in one step, and the layer h < ~c dt is
+under-sampled (two spheres at dt = 5e-4: 0.2-0.4 of the equilibrium time below a gap of
+1e-3). The near-contact
 correction gives every pair with a gap below NEAR_CONTACT_GAP (the separation and gap h of
 the model's pair list) the step
 
