@@ -447,7 +447,10 @@ def squeeze_slope(gap, a1, a2):
     broadcast."""
     gap, a1, a2 = (np.asarray(v, dtype=float) for v in (gap, a1, a2))
     xi = 2.0 * gap / (a1 + a2)
-    (g1, g2, g3), _, _ = _singular_coefficients("XA", a2 / a1)
+    lam = a2 / a1
+    if lam.size and lam.min() == lam.max():  # one size ratio: the coefficients once
+        lam = float(lam.flat[0])
+    (g1, g2, g3), _, _ = _singular_coefficients("XA", lam)
     return 24.0 * math.pi * a1 * (g1 / xi + g2 + g3 * xi * (1.0 + np.log(xi)))
 
 
