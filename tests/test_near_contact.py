@@ -155,7 +155,7 @@ def test_squeeze_fraction_is_the_slope_of_the_relative_mobility(h0, h_cross):
     model = ResistanceModel(np.ones(4), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP)
     at = model.at(_square(h0, h_cross), 0.0)
     forces = unit_pair_forces(np.array([0]), np.array([1]), np.array([[1.0, 0, 0]]), 4)
-    g = at.relative_mobility(np.array([0]), np.array([1]), np.array([[1.0, 0, 0]]))[0]
+    g = mobility_forms(at.solver, forces)[0]
     v = at.velocities(forces[0], np.zeros((4, 5)))
     delta = 1e-3 * h0 / g
     moved = [mobility_forms(model.displaced(at, at.positions + sign * delta * v[:, :3], separate=False)[0],
@@ -388,7 +388,7 @@ def test_reflection_through_the_mobility_is_a_contact_impulse():
     spheres by s/2, nothing else), the rule's form before, fails the force check: it puts
     forces on the other spheres (the oblique reflection of the module docstring)."""
     from sdmpi.dynamics.collisions import through_mobility
-    from sdmpi.dynamics.models import ResistanceModel, squeeze_fraction, unit_pair_forces
+    from sdmpi.dynamics.models import ResistanceModel
     box, radii = np.full(3, 6.0), np.ones(4)
     pos = np.array([[1.0, 1.0, 1.0], [3.0 - 3e-3, 1.3, 1.1], [2.0, 3.05, 1.0], [1.5, 1.8, 3.04]])
     pos[1] = pos[0] + (pos[1] - pos[0]) * (2 + MIN_GAP - 3e-3) / np.linalg.norm(pos[1] - pos[0])

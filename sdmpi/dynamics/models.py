@@ -102,9 +102,8 @@ phi = 0.45: 0.99 at h = 8e-4, 0.95 at 4e-3, 0.9 at 1e-2, 0.8 at 2e-2; two sphere
 h0 + sqrt(2 c h0 dt) z1 + c dt z1^2: the right mean, but z2 = z1, so that h1 >= h0/2; a
 pair can never close more than half its gap in one step, and the layer h < ~c dt is
 under-sampled (two spheres at dt = 5e-4: 0.2-0.4 of the equilibrium time below a gap of
-1e-3). The near-contact
-correction gives every pair with a gap below NEAR_CONTACT_GAP (the separation and gap h of
-the model's pair list) the step
+1e-3). The near-contact correction gives every pair with a gap below NEAR_CONTACT_GAP (the
+separation and gap h of the model's pair list) the step
 
     h1 = (sqrt(h0) + sqrt(c dt/2) z1)^2 + (kappa - 1/2) c dt z2^2,
 
