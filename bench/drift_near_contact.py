@@ -7,7 +7,7 @@ then every --every steps its configuration x is taken, and there
 
 * the exact drift kT div R_FU^-1 (the sum over the 3N translations of the derivatives of
   the mobility's columns, centred differences of step 1e-7 with the pair sets of x:
-  `ResistanceModel.displaced`),
+  `hydro.resistance.mobility_divergence`),
 * the mean of the `rfd` drift over --samples antithetic noise pairs z, -z (the Brownian
   velocities of z and -z averaged: the noise cancels, the drift, even in z, stays),
 
@@ -40,28 +40,25 @@ from near_contact_structure import job_at_rest
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.dynamics.realisation import KT_REDUCED, Realisation
+from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
 from sdmpi.hydro.solvers import noise_shape
 
 #: step of the centred differences (the gaps are >= 1e-4)
 FD_STEP = 1e-7
 
 
-def exact_drift(model, evaluation, kT):
-    """kT div R_FU^-1 (N, 6) at the evaluation's configuration, by centred differences over
-    the 3N translations with its pair sets."""
-    x = evaluation.positions
-    n = len(x)
-    zero = np.zeros((n, 5))
-    div = np.zeros((n, 6))
-    for k in range(3 * n):
-        step = np.zeros((n, 3))
-        step[k // 3, k % 3] = FD_STEP
-        unit = np.zeros((n, 6))
-        unit[k // 3, k % 3] = 1.0
-        plus, _ = model.displaced(evaluation, x + step, separate=False)
-        minus, _ = model.displaced(evaluation, x - step, separate=False)
-        div += (plus.velocities(unit, zero) - minus.velocities(unit, zero)) / (2 * FD_STEP)
-    return kT * div
+def exact_drift(evaluation, kT, ewald_tol, min_gap, cutoff=2.0):
+    """kT div R_FU^-1 (N, 6) at the evaluation's configuration (stokesian model at strain
+    0), by centred differences over the 3N translations with its pair sets
+    (`hydro.resistance.mobility_divergence`)."""
+    base = evaluation.resistance
+
+    def resistance_at(positions, plan):
+        return grand_resistance(positions, base.radii, evaluation.model.box, 0.0, plan=plan, ewald_tol=ewald_tol,
+                                cutoff=cutoff, min_gap=min_gap)
+
+    div_m, _ = mobility_divergence(resistance_at, base, FD_STEP)
+    return kT * div_m.reshape(-1, 6)
 
 
 def rfd_drift_samples(evaluation, kT, dt, samples, rng):
@@ -97,7 +94,7 @@ def isolated_pair(gaps=(2e-4, 1e-3, 3e-3)):
         model = ResistanceModel(np.ones(2), np.full(3, 10.0), lubrication=True, ewald_tol=1e-6, cutoff=2.0,
                                 min_gap=1e-4, scheme="rfd")
         evaluation = model.at(pos, 0.0)
-        exact = exact_drift(model, evaluation, KT_REDUCED)
+        exact = exact_drift(evaluation, KT_REDUCED, 1e-6, 1e-4)
         i, j, e = np.array([0]), np.array([1]), np.array([[1.0, 0.0, 0.0]])
         c = KT_REDUCED * evaluation.relative_mobility(i, j, e)[0] / gap
         rows.append({"gap": gap, "c": float(c), "exact_over_c": float((exact[1, 0] - exact[0, 0]) / c),
@@ -125,7 +122,8 @@ def main():
     for _ in range(args.configs):
         real.advance(args.every)
         evaluation = real.model.at(real.positions, 0.0)
-        exact = exact_drift(real.model, evaluation, real.kT)
+        exact = exact_drift(evaluation, real.kT, job.ewald_tolerance, job.hydrodynamics.min_gap,
+                            job.hydrodynamics.lubrication_cutoff)
         samples = rfd_drift_samples(evaluation, real.kT, dt, args.samples, rng)
         pairs = evaluation.pairs
         close = pairs.gap < args.gap
