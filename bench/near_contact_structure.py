@@ -43,8 +43,11 @@ from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
 from sdmpi.hydro.geometry import Lattice
 
-#: shells of surface gap (in a) where g is counted
-EDGES = np.array([1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1])
+#: shells of surface gap (in a) where g is counted; after them, one more column: the first
+#: two shells together, from contact to 3e-4 (the pairs that the exact dynamics would take
+#: below the floor hydrodynamics.min_gap = 1e-4 are placed, or reflected, just above it by
+#: the collision rule: counted from contact, they are where they belong)
+EDGES = np.array([0.0, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1])
 JOB = """
 [job]
 name = "near-contact-structure"
@@ -70,13 +73,16 @@ model = "{model}"
 
 
 def shell_counts(pos, box):
-    """Pairs per gap shell (EDGES) of one configuration (nearest images, unit radii)."""
-    return pair_counts(pos, Lattice(box, 0.0), 2.0 + EDGES)
+    """Pairs per gap shell (EDGES) of one configuration (nearest images, unit radii), and
+    in the first two shells together."""
+    counts = pair_counts(pos, Lattice(box, 0.0), 2.0 + EDGES)
+    return np.append(counts, counts[0] + counts[1])
 
 
 def ideal_counts(n, box):
-    """Pairs per shell of an ideal gas (g = 1) in the box."""
-    return ideal_pair_counts(n, np.prod(box), 2.0 + EDGES)
+    """Pairs per shell (`shell_counts`) of an ideal gas (g = 1) in the box."""
+    counts = ideal_pair_counts(n, np.prod(box), 2.0 + EDGES)
+    return np.append(counts, counts[0] + counts[1])
 
 
 def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
@@ -116,7 +122,7 @@ def dynamics(model, n, phi, steps, eta_every, dt, collisions, ewald_tolerance=No
     job = job_at_rest(model, n, phi, steps, dt, collisions, ewald_tolerance, seed)
     real = Realisation(job, enumerate_tasks(job)[0])
     ideal = ideal_counts(n, real.box)
-    counts, etas = np.empty((steps, len(EDGES) - 1)), []
+    counts, etas = np.empty((steps, len(EDGES))), []
     for k in range(steps):
         real.advance(1)
         pos = real.positions  # the next step's start, overlaps corrected
@@ -189,7 +195,8 @@ def main():
            "collision_moves": "symmetric" if args.symmetric or row_rule == "separate" else "through the mobility",
            "mc_configs": args.mc_configs,
            "mc_start_sweeps": args.mc_sweeps, "mc_every_sweeps": args.mc_every,
-           "gap_shells": EDGES.tolist(), "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
+           "gap_shells": EDGES.tolist(), "last_column": "gaps 0 to 3e-4 (the first two shells together)",
+           "g_dynamics": g1.tolist(), "g_dynamics_err": e1.tolist(),
            "g_mc": g2.tolist(), "g_mc_err": e2.tolist(), "eta_h_dynamics": [float(h1), float(f1)],
            "eta_h_mc": [float(h2), float(f2)],
            **({} if len(per_seed) == 1 else
