@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test bench clean
+.PHONY: setup run test bench schaink2000 clean
 
 setup: $(VENV)/.installed
 
@@ -52,6 +52,20 @@ bench: setup
 	$(VPY) bench/bench_hydro.py --out bench/results.json
 	$(VPY) bench/bench_ensemble.py
 	$(VPY) bench/bench_step.py --out bench/step.json
+
+# The seed paper's study (docs/validation/schaink2000/README.md): its three jobs on RANKS
+# ranks into out/schaink2000/, then its tables, figures and comparison into STUDY_OUT. A
+# stopped study resumes where it stopped when this is run again.
+RANKS     ?= 2
+STUDY_OUT ?= docs/validation/schaink2000
+schaink2000: setup
+	mkdir -p out/schaink2000
+	for job in frequency_scan phi_scan fixed_dt; do \
+	  mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/schaink2000_$$job.toml \
+	    -o out/schaink2000/$$job.h5 || exit 1; \
+	done
+	$(VPY) postprocess/schaink2000.py --newtonian out/schaink2000/frequency_scan.h5 \
+	  --phi-scan out/schaink2000/phi_scan.h5 --fixed-dt out/schaink2000/fixed_dt.h5 -o $(STUDY_OUT)
 
 clean:
 	rm -rf $(VENV) .numba_cache build *.egg-info
