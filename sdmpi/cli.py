@@ -85,11 +85,11 @@ def _add_validate(subparsers) -> None:
 def _validate(args) -> int:
     from .config import resources
     from .config.checks import scheme_problems
-    from .hydro.solvers import backend_for
+    from .dynamics.models import job_backend
 
     try:
         job = job_from_args(args)
-        used = backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
+        used = job_backend(job)
         problems = resources.start_problems(job) + scheme_problems(job, used)
         if problems:
             raise JobError(problems, args.job)
@@ -128,12 +128,11 @@ def resource_text(job, ranks: int, output) -> str:
     from pathlib import Path
 
     from .config import resources
+    from .dynamics.models import job_backend
     from .ensemble.store import run_file_bytes
-    from .hydro.solvers import backend_for
 
     gib = resources.gib
-    backend = backend_for(job.solver.backend, job.system.n_particles,
-                          job.ensemble.ranks_per_task)
+    backend = job_backend(job)
     size, memory = run_file_bytes(job), resources.memory_per_rank(job, backend)
     available = resources.available_memory()
     where = Path(output).resolve().parent
@@ -227,11 +226,11 @@ def _backend(job) -> str:
     """The solver backend as `run` uses it ("auto" resolved), and whether PETSc, which
     the other backends need, can be imported here (`run` refuses the job otherwise)."""
     from .hydro.krylov import far_field_kind
+    from .dynamics.models import job_backend
     from .hydro.petsc_dense import PetscUnavailable, import_petsc4py
-    from .hydro.solvers import backend_for
 
     name = job.solver.backend
-    used = backend_for(name, job.system.n_particles, job.ensemble.ranks_per_task)
+    used = job_backend(job)
     text = name if used == name else f"{name} (here {used})"
     if used == "dense":
         return text

@@ -138,8 +138,8 @@ from ..hydro.farfield import NDOF
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
 from ..hydro.resistance import resistance_change
-from ..hydro.solvers import (MATRIX_FREE, assemble, brownian_velocities, make_solver, mobility_forms, noise_shape,
-                             resolve_backend, solver_stats, take_preconditioner)
+from ..hydro.solvers import (MATRIX_FREE, assemble, backend_for, brownian_velocities, make_solver, mobility_forms,
+                             noise_shape, resolve_backend, solver_stats, take_preconditioner)
 from ..hydro.two_sphere import squeeze_slope
 
 #: hydrodynamics.model choices
@@ -386,6 +386,12 @@ class FreeDrainingModel:
         pos = lattice.wrap(positions)
         return FreeDrainingEvaluation(self.radii, pos, close_pairs(pos, self.radii, lattice, self.cutoff,
                                                                    self.min_gap))
+
+
+def job_backend(job):
+    """The backend a job's tasks solve on: job.solver.backend, or what "auto" stands for at
+    its N on ensemble.ranks_per_task ranks (`hydro.solvers.backend_for`)."""
+    return backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
 
 
 def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None):

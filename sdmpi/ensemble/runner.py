@@ -47,6 +47,7 @@ from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
                       extension_hash, load_job, parse_job, resources, resume_hash)
 from ..config.checks import scheme_problems
+from ..dynamics.models import job_backend
 from ..dynamics.realisation import RealisationFailed
 from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
@@ -254,10 +255,9 @@ def _check_backend(job, job_path) -> None:
     ranks_per_task) must suit its drift scheme (`config.checks.scheme_problems`), and a
     PETSc backend needs petsc4py: refuse the job before anything is written otherwise."""
     from ..hydro.petsc_dense import PetscUnavailable, import_petsc4py
-    from ..hydro.solvers import backend_for
 
     backend = job.solver.backend
-    used = backend_for(backend, job.system.n_particles, job.ensemble.ranks_per_task)
+    used = job_backend(job)
     problems = scheme_problems(job, used)
     if problems:
         raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
@@ -274,10 +274,7 @@ def _check_resources(job, job_path, out: Path, new: bool, size: int,
     """Refuse a job that cannot fit: the memory of the ranks on this machine, and (for a
     run file still to be created, or the longer copy an extension writes beside the run
     file) the room for it in the output's file system."""
-    from ..hydro.solvers import backend_for
-
-    backend = backend_for(job.solver.backend, job.system.n_particles,
-                          job.ensemble.ranks_per_task)
+    backend = job_backend(job)
     creating = new or extend or not out.exists()
     replaced = out.stat().st_size if out.exists() and creating and not extend else 0
     problems = resources.problems(job, backend, resources.ranks_on_this_node(size),
