@@ -225,8 +225,8 @@ def summary(job) -> str:
 def _backend(job) -> str:
     """The solver backend as `run` uses it ("auto" resolved), and whether PETSc, which
     the other backends need, can be imported here (`run` refuses the job otherwise)."""
-    from .hydro.krylov import far_field_kind
     from .dynamics.models import job_backend
+    from .hydro.krylov import far_field_kind
     from .hydro.petsc_dense import PetscUnavailable, import_petsc4py
 
     name = job.solver.backend
