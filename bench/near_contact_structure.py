@@ -72,17 +72,20 @@ model = "{model}"
 """
 
 
-def shell_counts(pos, box):
-    """Pairs per gap shell (EDGES) of one configuration (nearest images, unit radii), and
-    in the first two shells together."""
-    counts = pair_counts(pos, Lattice(box, 0.0), 2.0 + EDGES)
+def with_contact_shell(counts):
+    """Counts per shell (EDGES) and, appended, those of the first two shells together."""
     return np.append(counts, counts[0] + counts[1])
+
+
+def shell_counts(pos, box):
+    """Pairs per gap shell of one configuration (nearest images, unit radii),
+    `with_contact_shell`."""
+    return with_contact_shell(pair_counts(pos, Lattice(box, 0.0), 2.0 + EDGES))
 
 
 def ideal_counts(n, box):
     """Pairs per shell (`shell_counts`) of an ideal gas (g = 1) in the box."""
-    counts = ideal_pair_counts(n, np.prod(box), 2.0 + EDGES)
-    return np.append(counts, counts[0] + counts[1])
+    return with_contact_shell(ideal_pair_counts(n, np.prod(box), 2.0 + EDGES))
 
 
 def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
