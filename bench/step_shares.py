@@ -5,14 +5,30 @@ rank, BLAS on one thread). Each part's functions are wrapped by a timer (process
 around each call; the wrappers cost ~1 us a call) and one realisation is stepped; a part's
 share is its time over the time of the steps, "the rest" is what no part claims (the
 integrator, the overlap and near-contact corrections, the Brownian noise, small solves and
-products, Python glue). Writes bench/step_shares.json.
+products, Python glue).
+
+A second pass wraps every compiled kernel instead (each numba dispatcher of sdmpi's modules
+and each SciPy LAPACK and BLAS routine the code calls) and gives their share of the step:
+the arithmetic a step cannot shed by being organised differently. Its inverse,
+"lockstep_ceiling", bounds the speed-up of stepping many realisations together in lockstep
+with batched kernels: a batch shares the per-call work of the interpreter and numpy among
+its realisations, but each realisation keeps its own kernels' arithmetic (one LAPACK
+factorisation per matrix, the pair sums image by image). The bound is generous: numpy's
+own dense products count as shareable. Writes bench/step_shares.json.
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python bench/step_shares.py
 """
 
 import argparse
+import importlib
 import json
+import pkgutil
 import time
+
+from numba.core.registry import CPUDispatcher
+from scipy.linalg import blas, lapack
+
+import sdmpi
 
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics import Realisation
@@ -52,12 +68,64 @@ def instrument(totals):
             setattr(owner, name, timed)
 
 
+#: the SciPy LAPACK and BLAS routines sdmpi calls (through the modules scipy.linalg.lapack, .blas)
+LINEAR_ALGEBRA = {lapack: ("dpotrf", "dpotri", "dpotrs", "dtrtrs"), blas: ("dtrsm", "dsyrk", "dgemv", "dgemm")}
+
+
+def instrument_kernels(clock):
+    """Wrap every compiled kernel (module docstring) so that its CPU time is added to
+    clock[0] (calls made while one is already timed count once)."""
+    depth = [0]
+
+    def timed(kernel):
+        def call(*args, **kwargs):
+            if depth[0]:
+                return kernel(*args, **kwargs)
+            depth[0] += 1
+            t0 = time.process_time()
+            try:
+                return kernel(*args, **kwargs)
+            finally:
+                clock[0] += time.process_time() - t0
+                depth[0] -= 1
+        return call
+
+    for info in pkgutil.walk_packages(sdmpi.__path__, "sdmpi."):
+        if info.name.endswith("__main__"):
+            continue
+        module = importlib.import_module(info.name)
+        for name, obj in list(vars(module).items()):
+            if isinstance(obj, CPUDispatcher):
+                setattr(module, name, timed(obj))
+    for module, names in LINEAR_ALGEBRA.items():
+        for name in names:
+            setattr(module, name, timed(getattr(module, name)))
+
+
+def step_realisation(n):
+    """A warmed-up realisation of the benchmark's job at N = n."""
+    job = load_job(JOB, overrides=[f"system.n_particles={n}"])
+    real = Realisation(job, enumerate_tasks(job)[0])
+    real.advance(3)  # warm-up: numba caches, lubrication tables
+    return real
+
+
+def kernel_share(n, steps, clock):
+    """The compiled kernels' share of the CPU time of `steps` steps at N = n and the
+    lockstep ceiling it implies (module docstring)."""
+    real = step_realisation(n)
+    clock[0] = 0.0
+    t0 = time.process_time()
+    real.advance(steps)
+    total = time.process_time() - t0
+    return {"cpu_ms_per_step": 1e3 * total / steps, "kernel_ms_per_step": 1e3 * clock[0] / steps,
+            "kernel_share": clock[0] / total, "lockstep_ceiling": total / clock[0], "steps": steps}
+
+
 def shares(n, steps, totals):
     """The parts' shares of the CPU time of `steps` steps at N = n (totals: the
     instrumented parts' accumulators)."""
-    job = load_job(JOB, overrides=[f"system.n_particles={n}"])
-    real = Realisation(job, enumerate_tasks(job)[0])
-    real.advance(3)  # warm-up
+    real = step_realisation(n)
     for part in totals:
         totals[part] = 0.0
     t0 = time.process_time()
@@ -71,18 +139,26 @@ def shares(n, steps, totals):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[27, 125])
+    ap.add_argument("--kernel-sizes", type=int, nargs="+", default=[8, 27, 64, 125])
     ap.add_argument("--out", default="bench/step_shares.json")
     args = ap.parse_args()
     results = {"command": "python bench/step_shares.py", "job": JOB,
-               "date": time.strftime("%Y-%m-%d", time.gmtime()), "sizes": {}}
+               "date": time.strftime("%Y-%m-%d", time.gmtime()), "sizes": {}, "kernels": {}}
     totals = {}
     instrument(totals)
     for n in args.sizes:
         results["sizes"][str(n)] = shares(n, max(10, int(300 * (27 / n) ** 2)), totals)
+    clock = [0.0]
+    instrument_kernels(clock)
+    for n in args.kernel_sizes:
+        results["kernels"][str(n)] = kernel_share(n, max(10, int(300 * (27 / n) ** 2)), clock)
     for n, r in results["sizes"].items():
         print(f"N = {n}: {r['cpu_ms_per_step']:.2f} ms per step")
         for part, share in r["shares"].items():
             print(f"  {100 * share:5.1f}%  {part}")
+    for n, r in results["kernels"].items():
+        print(f"N = {n}: compiled kernels {100 * r['kernel_share']:.0f}% of {r['cpu_ms_per_step']:.2f} ms "
+              f"per step: lockstep ceiling {r['lockstep_ceiling']:.2f}x")
     with open(args.out, "w") as fh:
         json.dump(results, fh, indent=2)
     print(f"written {args.out}")
