@@ -32,6 +32,7 @@ import sys  # noqa: E402
 
 from . import __version__
 from .config import JobError, enumerate_tasks, job_hash, load_job
+from .config.stresses import CONTRIBUTIONS
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -386,12 +387,13 @@ def _add_reduce(subparsers) -> None:
         "reduce", help="ensemble-averaged moduli (or viscosities) with errors, and plots",
         description="Reduce one or several run files of the same system (jobs differing "
                     "only in seed and number of realisations) to G', G'', eta', eta'' per "
-                    "(phi, omega) and contribution (medium, hydrodynamic, brownian, "
-                    "interparticle, total), each with one standard error: the larger of the "
-                    "spread between realisations and the blocking error within them "
-                    "(OUTDIR/errors.csv says which). Writes OUTDIR/moduli.csv, "
-                    "OUTDIR/moduli.h5, errors.csv, units.json (the unit of every column) "
-                    "and PNG figures, each written whole or not at all; steady-shear jobs give "
+                    "(phi, omega) and contribution (medium, "
+                    + ", ".join(c.component for c in CONTRIBUTIONS) + ", total), each with one "
+                    "standard error: the larger of the spread between realisations and the "
+                    "blocking error within them (OUTDIR/errors.csv says which). Writes "
+                    "OUTDIR/moduli.csv, OUTDIR/moduli.h5, errors.csv, units.json (the unit of "
+                    "every column), trust.csv (the dynamics' trust report: docs/reduce.md) and "
+                    "PNG figures, each written whole or not at all; steady-shear jobs give "
                     "viscosity.csv/.h5 instead. Uses the committed samples only, so it works "
                     "on a run that is unfinished or still going (and says so). Units: omega "
                     "in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m.",
