@@ -53,7 +53,7 @@ bench: setup
 	$(VPY) bench/bench_ensemble.py
 	$(VPY) bench/bench_step.py --out bench/step.json
 
-# The seed paper's study (docs/validation/schaink2000/README.md): its three jobs on RANKS
+# The Schaink et al. (2000) study (docs/validation/schaink2000/README.md): its three jobs on RANKS
 # ranks into out/schaink2000/, then its tables, figures and comparison into STUDY_OUT. A
 # stopped study resumes where it stopped when this is run again.
 RANKS     ?= 2

@@ -54,7 +54,7 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
         f"solver.tolerance={tolerance}", f"solver.lanczos_tolerance={lanczos_tolerance}",
         f"hydrodynamics.ewald_tolerance={ewald_tolerance}", f"ensemble.ranks_per_task={comm.size}",
         "ensemble.realisations=1", "shear.omega=[6.283185307179586]",
-        "integration.steps_per_period=2000",  # dt = 5e-4 t_D, the seed's largest
+        "integration.steps_per_period=2000",  # dt = 5e-4 t_D, Schaink et al.'s largest
         *([f"solver.far_field='{far_field}'"] if far_field else [])])
     speed_before = machine_speed()
     t0 = time.perf_counter()

@@ -1,6 +1,6 @@
 """Benchmark: ms per Brownian SD step of one realisation, in Cholesky equivalents.
 
-The seed study's setting (jobs/schaink2000_newtonian.toml: phi = 0.45, dt = 5e-4 t_D,
+The setting of the Schaink et al. (2000) study (jobs/schaink2000_newtonian.toml: phi = 0.45, dt = 5e-4 t_D,
 Brownian, oscillatory shear, dense solver, the rfd drift scheme, ewald_tolerance 1e-3,
 and again at 1e-4 and 1e-6 in "single_ewald_1e-4", "single_ewald_1e-6"), one rank, BLAS
 on one thread (the Makefile pins it), for N = 8, 27, 64, 125 (N = 8 is mostly the part
@@ -9,7 +9,7 @@ is what stepping realisations in lockstep could share). A step includes its hydr
 evaluation, the resistance change of the random finite difference, the overlap and
 near-contact corrections, the drift and the Brownian stresslets (`Realisation.advance`).
 "rank_of_7": the same per realisation-step with seven realisations on the rank, stepped one
-after another as a rank of a study steps the tasks it owns (the seed study's 49 tasks on 7
+after another as a rank of a study steps the tasks it owns (that study's 49 tasks on 7
 ranks). Each size is timed in blocks of steps interleaved with blocks of one 297 x 297 LAPACK
 Cholesky (dpotrf) in the same process; the medians of their CPU times give
 "Cholesky-equivalents per step", a figure that holds up under other load and carries
@@ -129,7 +129,7 @@ def main():
         for name, overrides in (("single", ()), *((f"single_ewald_{tol}", (f"hydrodynamics.ewald_tolerance={tol}",))
                                                   for tol in ("1e-4", "1e-6"))):
             results[name][str(n)] = show(n, time_steps(n, args.blocks, per_block, spd, overrides))
-    for n in args.sizes:  # seven realisations on one rank (the seed study's 49 tasks on 7 ranks)
+    for n in args.sizes:  # seven realisations on one rank (that study's 49 tasks on 7 ranks)
         per_block = max(7, int(1e3 * args.seconds / args.blocks / guess_ms.get(n, 0.02 * n ** 2)))
         results["rank_of_7"][str(n)] = show(n, time_steps(n, args.blocks, per_block, spd, realisations=7),
                                             "  (7 realisations on the rank)")

@@ -368,7 +368,7 @@ def info_text(run, running=None) -> str:
     if "extended" in a:
         lines.append(f"extended {len(json.loads(a['extended']))} time(s) (sdmpi run --extend)")
     if not run.checksummed:
-        lines.append("checksums: none (written by an sdmpi without them); data not verified")
+        lines.append("checksums: none in this file; data not verified")
     elif run.damage:
         lines.append(f"checksums: {len(run.damage)} mismatch(es), see below")
     else:

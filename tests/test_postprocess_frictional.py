@@ -6,7 +6,8 @@ import pytest
 from sdmpi.analysis.reduce import confidence_half_width
 from tiny_runs import postprocess_script
 
-#: the production scans' shape (README "Frictional contact"): volume fractions, realisations
+#: the production scans' shape (docs/validation.md#frictional-contacts): volume fractions,
+#: realisations
 PHI = np.array([0.45, 0.50, 0.53, 0.56])
 R = 4
 

@@ -311,7 +311,7 @@ def medium_viscosity(job: Job) -> float:
 
 #: the sample datasets of the viscous-medium stress contributions
 VISCOUS_DATASETS = tuple(c.dataset for c in CONTRIBUTIONS)
-#: datasets that run files written before their contribution existed lack (read as zero)
+#: contribution datasets a run file may lack, reduced as zero (`StressContribution.absent_is_zero`)
 ABSENT_IS_ZERO = frozenset(c.dataset for c in CONTRIBUTIONS if c.absent_is_zero)
 
 

@@ -516,7 +516,8 @@ class Solver:
     tolerance: float = key(1e-8, "float", "relative residual of iterative solves "
                            "(petsc-krylov; direct backends ignore it); for dynamics 1e-4 to "
                            "1e-6 with lanczos_tolerance = 1e-4 and hydrodynamics."
-                           "ewald_tolerance = 1e-4 suffice (README, Krylov benchmark)",
+                           "ewald_tolerance = 1e-4 suffice "
+                           "(docs/performance.md#krylov-backend-benchbench_krylovpy)",
                            allowed=Range(0.0, 1.0, lo_open=True, hi_open=True))
     lanczos_tolerance: float | None = key(None, "float", "relative accuracy of the Lanczos "
                                           "square root M^-1/2 z in the Brownian forces "

@@ -4,9 +4,9 @@ their attributes), the reducer (the rows of moduli.csv and viscosity.csv, betwee
 medium and the total) and the manual (docs/store.md, docs/reduce.md).
 
 A new contribution is added here, sampled by the realisation, and reduced with no other
-change. Run files written before a contribution existed lack its dataset; the reducer reads
-it as zero where ``absent_is_zero`` says that is what it was (e.g. no collision stress was
-recorded, the overlap correction's stress was simply not sampled), and says so.
+change. A run file without a contribution's dataset is refused by the reducer, except
+where ``absent_is_zero`` is set (the collision stress): that contribution is then reduced
+as zero.
 
 Sample time. Sample k of every stream is stored at row k, t_k = k dt, but a stream may
 represent another instant: ``sample_offset`` (in units of dt) says which, t_k + offset dt,
@@ -27,8 +27,9 @@ here (`unrecorded_offset`).
   few steps per period occur (w dt large, dt << tau); so these stay at t_k.
 * collision, +1/2: the impulses of the overlap correction at the end of step k,
   f = s/(G dt), undo the overlaps that the motion over [t_k, t_{k+1}] made: they are that
-  step's mean collision force, at its midpoint t_k + dt/2. Files without the attribute
-  were written when the correction began the next step (-1/2, ``unrecorded_offset``).
+  step's mean collision force, at its midpoint t_k + dt/2. A dataset without the
+  attribute is read with -1/2 (``unrecorded_offset``): its sample k is then the correction
+  made at the start of step k, which undoes the motion of step k - 1.
 
 Projected at t_k instead of t_k + offset dt, a stream sigma = gamma0 (G' sin + G'' cos)
 gives G' - (2 pi offset/n) G'' and G'' + (2 pi offset/n) G' to first order (n samples

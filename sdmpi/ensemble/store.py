@@ -250,7 +250,7 @@ class RunFile:
         """Prepare a task's commits from checkpoint ``slot`` (-1: from scratch): take the
         slot's sample checksums as the running ones."""
         ckpt = self.file[f"checkpoints/{task_key(task_id)}"]
-        if "sample_crc" in ckpt:  # files written before checksums existed have none
+        if "sample_crc" in ckpt:  # a file without checksums is read and resumed unverified
             table = ckpt["sample_crc"]
             rows = table[slot] if slot >= 0 else np.zeros(table.shape[1:], "u4")
             self._checksums[task_id] = (rows, int(table.attrs["block"]))
@@ -381,7 +381,7 @@ class RunSummary:
     tasks: tuple
     progress: np.ndarray
     slots: tuple  # current slot per task; -1 when nothing is committed
-    checksummed: bool = False  # False: written before checksums existed (not verified)
+    checksummed: bool = False  # False: the file has no checksums (not verified)
     damage: tuple = ()
     resume: tuple = ()
 
