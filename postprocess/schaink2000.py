@@ -180,20 +180,25 @@ def statements(newt, maxw, phi_red, fixed):
     phi = float(newt.phi[0])
     rows = []
     w, g1, e1 = series(newt, phi, "total", "G_prime")
-    hi = (w >= PLATEAU_FROM * (1 - 1e-9)) & (g1 > 0)      # a log needs G' > 0
+    hi = (w > PLATEAU_FROM * (1 + 1e-9)) & (g1 > 0)      # the paper's "omega > 8 pi"; a log needs G' > 0
     _, slope, slope_err, _ = fig5_omega_half.line_fit(np.log(w[hi]), np.log(g1[hi]),
                                                       e1[hi] / np.abs(g1[hi]))
     few = hi.sum() < 2 or not np.isfinite(slope_err)
-    ratio = g1[hi][-1] / g1[hi][0] if hi.sum() >= 2 else math.nan
-    ratio_err = abs(ratio) * math.hypot(e1[hi][-1] / g1[hi][-1], e1[hi][0] / g1[hi][0]) \
-        if hi.sum() >= 2 else math.nan
+    plateau, plateau_err, chi2, dof = constant_fit(g1[hi], e1[hi])
+    at = np.isclose(w, PLATEAU_FROM, rtol=1e-9)
+    below = ""
+    if at.any() and np.isfinite(plateau):
+        g8, e8 = float(g1[at][0]), float(e1[at][0])
+        ratio, ratio_err = g8 / plateau, abs(g8 / plateau) * math.hypot(e8 / g8, plateau_err / plateau)
+        below = f"; at 8 pi {pm(g8, e8)}, G'(8 pi)/plateau = {pm(ratio, ratio_err)}"
     rows.append((
         "G' plateau above 8 pi (Fig. 4)",
         "G' attains a plateau value for omega > 8 pi",
         "G' (total) at omega/pi = " + ", ".join(f"{x / math.pi:.3g}: {pm(a, b)}"
                                                 for x, a, b in zip(w[hi], g1[hi], e1[hi]))
-        + f"; G'(max)/G'(8 pi) = {pm(ratio, ratio_err)}; d ln G'/d ln omega = "
-        f"{pm(slope, slope_err)}",
+        + f"; d ln G'/d ln omega = {pm(slope, slope_err)}; plateau (weighted mean) "
+        f"{pm(plateau, plateau_err)}, chi2/dof of a constant {chi2:.3g} (dof {dof}, p = "
+        f"{p_value(chi2, dof):.3g})" + below,
         trend(slope, slope_err, few, want="flat")))
 
     wh, h, he = series(newt, phi, "hydrodynamic", "eta_prime")
