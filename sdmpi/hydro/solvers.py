@@ -28,8 +28,9 @@ from scipy.linalg import lapack
 from .krylov import DEFAULT_TOL
 from .resistance import grand_resistance, split_resistance
 
-#: `auto` picks petsc-krylov from this many particles on (where it overtakes dense on one
-#: rank in bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
+#: `auto` picks petsc-krylov from this many particles on, for its memory (it forms no
+#: dense 11N x 11N matrix); on one rank at the default tolerances dense stays the faster up to
+#: N ~ 1000 (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
 AUTO_KRYLOV_MIN_N = 300
 
 
