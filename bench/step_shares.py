@@ -51,44 +51,53 @@ PARTS = {
 }
 
 
+def timed(function, add, depth):
+    """function wrapped so that the CPU time of each call is passed to add(seconds); a call
+    made while another function sharing the counter `depth` (a one-element list) is being
+    timed is not timed again."""
+    def call(*args, **kwargs):
+        if depth[0]:
+            return function(*args, **kwargs)
+        depth[0] += 1
+        t0 = time.process_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            add(time.process_time() - t0)
+            depth[0] -= 1
+    return call
+
+
 def instrument(totals):
-    """Wrap every part's functions so that their CPU time is added to totals[part]."""
+    """Wrap every part's functions so that their CPU time is added to totals[part].
+    Returns a function that puts the originals back."""
+    originals, depth = [], [0]
     for part, targets in PARTS.items():
         totals[part] = 0.0
         for owner, name in targets:
             original = getattr(owner, name)
+            originals.append((owner, name, original))
 
-            def timed(*args, _original=original, _part=part, **kwargs):
-                t0 = time.process_time()
-                try:
-                    return _original(*args, **kwargs)
-                finally:
-                    totals[_part] += time.process_time() - t0
+            def add(seconds, _part=part):
+                totals[_part] += seconds
 
-            setattr(owner, name, timed)
+            setattr(owner, name, timed(original, add, depth))
 
-
-#: the SciPy LAPACK and BLAS routines sdmpi calls (through the modules scipy.linalg.lapack, .blas)
-LINEAR_ALGEBRA = {lapack: ("dpotrf", "dpotri", "dpotrs", "dtrtrs"), blas: ("dtrsm", "dsyrk", "dgemv", "dgemm")}
+    def restore():
+        for owner, name, original in originals:
+            setattr(owner, name, original)
+    return restore
 
 
 def instrument_kernels(clock):
-    """Wrap every compiled kernel (module docstring) so that its CPU time is added to
-    clock[0] (calls made while one is already timed count once)."""
+    """Wrap every compiled kernel (module docstring: the numba dispatchers of sdmpi's
+    modules and the double-precision routines of scipy.linalg.lapack and .blas, through
+    which sdmpi calls them) so that its CPU time is added to clock[0] (calls made while one
+    is already timed count once)."""
     depth = [0]
 
-    def timed(kernel):
-        def call(*args, **kwargs):
-            if depth[0]:
-                return kernel(*args, **kwargs)
-            depth[0] += 1
-            t0 = time.process_time()
-            try:
-                return kernel(*args, **kwargs)
-            finally:
-                clock[0] += time.process_time() - t0
-                depth[0] -= 1
-        return call
+    def add(seconds):
+        clock[0] += seconds
 
     for info in pkgutil.walk_packages(sdmpi.__path__, "sdmpi."):
         if info.name.endswith("__main__"):
@@ -96,10 +105,11 @@ def instrument_kernels(clock):
         module = importlib.import_module(info.name)
         for name, obj in list(vars(module).items()):
             if isinstance(obj, CPUDispatcher):
-                setattr(module, name, timed(obj))
-    for module, names in LINEAR_ALGEBRA.items():
-        for name in names:
-            setattr(module, name, timed(getattr(module, name)))
+                setattr(module, name, timed(obj, add, depth))
+    for module in (lapack, blas):
+        for name in dir(module):
+            if name.startswith("d") and callable(getattr(module, name)):
+                setattr(module, name, timed(getattr(module, name), add, depth))
 
 
 def step_realisation(n):
@@ -145,9 +155,10 @@ def main():
     results = {"command": "python bench/step_shares.py", "job": JOB,
                "date": time.strftime("%Y-%m-%d", time.gmtime()), "sizes": {}, "kernels": {}}
     totals = {}
-    instrument(totals)
+    restore = instrument(totals)
     for n in args.sizes:
         results["sizes"][str(n)] = shares(n, max(10, int(300 * (27 / n) ** 2)), totals)
+    restore()  # the kernel pass times the step without the parts' wrappers
     clock = [0.0]
     instrument_kernels(clock)
     for n in args.kernel_sizes:
