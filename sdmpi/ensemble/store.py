@@ -38,6 +38,7 @@ from ..config import JobError, Task, enumerate_tasks, job_hash, parse_job, resum
 from ..config import stresses, units
 from . import trajectory
 from .faults import fault
+from .h5 import new_dataset, open_read, parallel_hdf5
 
 FORMAT = "sdmpi-run"
 FORMAT_VERSION = 1
@@ -105,11 +106,6 @@ def _nan_if_none(x):
 # --------------------------------------------------------------------------- create
 
 
-def parallel_hdf5() -> bool:
-    """Whether this h5py is built with MPI (parallel HDF5, the ``mpio`` driver)."""
-    return bool(h5py.get_config().mpi)
-
-
 def _open_collective(path, mode: str, comm, **kwargs) -> h5py.File:
     """``h5py.File`` opened collectively over ``comm`` through MPI-IO; on one rank
     without parallel HDF5, opened directly (the same file: the layout does not depend
@@ -137,8 +133,7 @@ def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versi
         scales = units.scales(job)
         if scales is not None:  # [physical]: SI value of each reduced unit
             f.attrs["physical_units"] = json.dumps(scales.as_dict())
-        progress = f.create_dataset("progress", (len(tasks),), "i8", fillvalue=0,
-                                    track_times=False)
+        progress = new_dataset(f, "progress", (len(tasks),), "i8", fillvalue=0)
         progress.attrs["description"] = "samples committed per task (valid up to)"
         for task in tasks:
             _create_task(f, job, task, layouts[task.task_id])
@@ -153,36 +148,34 @@ def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
         "realisation": task.realisation, "dt": task.dt, "n_steps": task.n_steps,
         "discard_steps": task.discard_steps, "n_particles": layout.n_particles,
         "box": np.array(layout.box), "gamma0": _nan_if_none(job.shear.gamma0)})
-    radii = group.create_dataset("radii", data=np.array(layout.radii or
-                                                        (1.0,) * layout.n_particles, dtype="f8"),
-                                 track_times=False)
+    radii = new_dataset(group, "radii", data=np.array(layout.radii or
+                                                      (1.0,) * layout.n_particles, dtype="f8"))
     radii.attrs.update({"unit": "a", "description": "sphere radius of each particle"})
     samples = group.create_group("samples")
     for name, (shape, dtype, unit, description) in layout.sample_fields.items():
-        ds = samples.create_dataset(name, (task.n_steps, *shape), dtype, track_times=False)
+        ds = new_dataset(samples, name, (task.n_steps, *shape), dtype)
         ds.attrs.update({"unit": unit, "description": description})
         offset = stresses.sample_offset(name)
         if offset is not None:  # the time sample k represents, t_k + offset dt
             ds.attrs["sample_offset"] = offset
     ckpt = f.create_group(f"checkpoints/{key}")
-    ckpt.create_dataset("slot_step", (2,), "i8", fillvalue=-1, track_times=False)
+    new_dataset(ckpt, "slot_step", (2,), "i8", fillvalue=-1)
     block = checksum_block(job, task)
     fields = sorted(layout.sample_fields)
-    table = ckpt.create_dataset("sample_crc", (2, -(-task.n_steps // block), len(fields)), "u4",
-                                fillvalue=0, track_times=False)
+    table = new_dataset(ckpt, "sample_crc", (2, -(-task.n_steps // block), len(fields)), "u4",
+                        fillvalue=0)
     table.attrs.update({"block": block, "fields": " ".join(fields), "description":
                         "per slot: CRC-32 of each sample dataset's rows [b*block, "
                         "min((b+1)*block, slot step)) for block b"})
     names = sorted(layout.state_fields)
-    slot_crc = ckpt.create_dataset("state_crc", (2, len(names) + 1), "u4", fillvalue=0,
-                                   track_times=False)
+    slot_crc = new_dataset(ckpt, "state_crc", (2, len(names) + 1), "u4", fillvalue=0)
     slot_crc.attrs.update({"fields": " ".join(names + ["sample_crc"]), "description":
                            "per slot: CRC-32 of each state dataset, then of the slot's row "
                            "of sample_crc"})
     for slot in (0, 1):
         sg = ckpt.create_group(f"slot{slot}")
         for name, (shape, dtype) in layout.state_fields.items():
-            sg.create_dataset(name, shape, dtype, track_times=False)
+            new_dataset(sg, name, shape, dtype)
 
 
 #: bytes per task for groups, attributes and dataset headers (measured: about 12 KiB)
@@ -215,6 +208,9 @@ class RunFile:
 
     def __init__(self, path, comm):
         self.file = _open_collective(path, "r+", comm)
+        # serial HDF5 keeps raw data in its own buffers until the file is flushed; MPI-IO
+        # writes them through at once (and a flush there would be collective)
+        self._buffered = not parallel_hdf5()
         self._fd = os.open(path, os.O_RDONLY)  # for fsync, independent of MPI-IO
         self._progress = self.file["progress"]
         self._checksums = {}  # task id -> (sample checksum table, block) being extended
@@ -289,9 +285,16 @@ class RunFile:
             ckpt["state_crc"][slot] = crcs
         fault("state")
         slot_step[slot] = stop
+        self._flush()
         os.fsync(self._fd)                        # all of the above on disk first
         fault("commit")
         self._progress[task_id] = stop
+        self._flush()                             # readers of the live file see it
+
+    def _flush(self) -> None:
+        """Hand HDF5's buffered writes to the operating system (serial HDF5 only)."""
+        if self._buffered:
+            self.file.flush()
 
 
 def checksum_slot(f, task_id: int, slot: int, step: int) -> None:

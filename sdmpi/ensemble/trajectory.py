@@ -25,6 +25,7 @@ from .. import __version__
 from ..config import enumerate_tasks
 from ..hydro.basis import from_five
 from ..hydro.geometry import Lattice
+from .h5 import new_dataset
 
 H5MD_VERSION = (1, 1)
 #: the optional elements: output key -> (element name, value shape per particle, unit)
@@ -112,8 +113,8 @@ def _create_task(f, job, task, layout, frames: int) -> None:
     step, time = edges["step"], edges["time"]
     for element, (shape, unit) in elements(job).items():
         _time_element(particles, element, frames, (n, *shape), unit, step, time)
-    radius = particles.create_dataset("radius", data=np.array(layout.radii or (1.0,) * n,
-                                                              dtype="f8"), track_times=False)
+    radius = new_dataset(particles, "radius", data=np.array(layout.radii or (1.0,) * n,
+                                                            dtype="f8"))
     radius.attrs["unit"] = "a"
     strain = _time_element(f.require_group("observables").create_group(name), "strain",
                            frames, (), "1", step, time)
@@ -127,11 +128,11 @@ def _time_element(parent, name, frames, shape, unit, step=None, time=None):
     *shape), preallocated; step and time hard-linked from another element when given."""
     group = parent.create_group(name)
     if step is None:
-        step = group.create_dataset("step", (frames,), "i8", track_times=False)
-        time = group.create_dataset("time", (frames,), "f8", track_times=False)
+        step = new_dataset(group, "step", (frames,), "i8")
+        time = new_dataset(group, "time", (frames,), "f8")
     else:
         group["step"], group["time"] = step, time
-    value = group.create_dataset("value", (frames, *shape), "f8", track_times=False)
+    value = new_dataset(group, "value", (frames, *shape), "f8")
     value.attrs["unit"] = unit
     return group
 

@@ -1,0 +1,102 @@
+"""What a SIGKILL leaves committed, on both ways of writing the run file.
+
+Each run is killed by the fault injector (sdmpi.ensemble.faults) at a known point; the
+file is then read as it is on disk, before any resume: every checkpoint completed before
+the kill must be there (its /progress, its samples bit for bit, its verified state), and
+nothing else. Then the resume must end with the data of an uninterrupted run. The serial
+path (h5py without MPI: the file opened directly, HDF5's own raw-data buffers in between)
+is forced on a machine with parallel h5py, as tests/test_serial_h5py.py does.
+"""
+
+import math
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+from test_ensemble import DRIVER, HERE, N_STEPS, _env, task_data
+from test_serial_h5py import SERIAL
+
+CHECKPOINT_EVERY = 10
+
+
+def run(path_kind, *args, env=None):
+    head = [sys.executable, "-c", SERIAL, str(HERE)] if path_kind == "serial" \
+        else [sys.executable, str(DRIVER)]
+    return subprocess.run([*head, *map(str, args)], capture_output=True, text=True,
+                          env=_env(env), timeout=120)
+
+
+def commits_before(point: str, k: int) -> int:
+    """Checkpoints a one-rank run completes before the fault injector kills it at the
+    k-th ``point``: each task (N_STEPS steps, run one after the other) commits at every
+    multiple of CHECKPOINT_EVERY and at its end."""
+    per_task = [s for s in range(1, N_STEPS + 1) if s % CHECKPOINT_EVERY == 0 or s == N_STEPS]
+    if point == "commit":
+        return k - 1
+    assert point == "step"  # killed after the k-th step, before its sample is buffered
+    ends = [j * N_STEPS + s for j in range(8) for s in per_task]
+    return sum(1 for c in ends if c < k)
+
+
+def committed_checkpoints(progress) -> int:
+    """Checkpoints behind each task's /progress (commits at multiples of
+    CHECKPOINT_EVERY and at the task's end)."""
+    return sum(math.ceil(int(p) / CHECKPOINT_EVERY) for p in progress)
+
+
+@pytest.fixture(scope="module")
+def job_file(tmp_path_factory):
+    from test_ensemble import JOB
+    path = tmp_path_factory.mktemp("job") / "job.toml"
+    path.write_text(JOB.replace("checkpoint_every = 10",
+                                f"checkpoint_every = {CHECKPOINT_EVERY}"))
+    return path
+
+
+@pytest.fixture(scope="module")
+def reference(job_file, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref") / "ref.h5"
+    res = run("parallel", "run", job_file, "-o", out)
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+@pytest.mark.parametrize("path_kind", ["serial", "parallel"])
+@pytest.mark.parametrize("kill", ["step:25", "commit:7", "step:203", "commit:33"])
+def test_kill_keeps_every_completed_checkpoint(reference, job_file, tmp_path, path_kind,
+                                               kill):
+    from sdmpi.ensemble.store import inspect
+
+    out = tmp_path / "killed.h5"
+    res = run(path_kind, "run", job_file, "-o", out, env={"SDMPI_TEST_KILL": kill})
+    assert res.returncode != 0, f"not killed:\n{res.stdout}"
+    point, k = kill.split(":")
+    summary = inspect(out)  # as the kill left it on disk
+    assert summary.damage == ()
+    assert committed_checkpoints(summary.progress) == commits_before(point, int(k))
+    with h5py.File(out, "r") as f, h5py.File(reference, "r") as ref:
+        for task, done in zip(summary.tasks, summary.progress):
+            key = f"tasks/{task.task_id:06d}/samples"
+            for name in ref[key]:
+                np.testing.assert_array_equal(f[key][name][:done], ref[key][name][:done],
+                                              err_msg=f"{name} of task {task.task_id}")
+    res = run(path_kind, "run", job_file, "-o", out)
+    assert res.returncode == 0, res.stderr
+    assert task_data(out) == task_data(reference)
+
+
+def test_serial_path_allocates_every_dataset_at_creation(job_file, tmp_path):
+    """Writing values while stepping must change no HDF5 metadata: every dataset of a
+    new run file has its storage (contiguous) before the first step."""
+    out = tmp_path / "new.h5"
+    res = run("serial", "run", job_file, "-o", out, env={"SDMPI_TEST_KILL": "step:1"})
+    assert res.returncode != 0
+    unallocated = []
+    with h5py.File(out, "r") as f:
+        f.visititems(lambda name, obj: unallocated.append(name)
+                     if isinstance(obj, h5py.Dataset) and obj.size and obj.id.get_offset() is None
+                     else None)
+    assert unallocated == []
