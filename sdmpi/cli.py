@@ -333,6 +333,21 @@ def _info(args) -> int:
     return EXIT_OK
 
 
+def session_lines(sessions) -> list[str]:
+    """``sdmpi info``'s history of the sessions that wrote a run file, each with how its
+    sdmpi and library stack differ from the session before."""
+    from .ensemble.store import stack_differences
+
+    lines = [f"sessions: {len(sessions)} (the stack of each, against the one before)"]
+    for before, now in zip((None, *sessions), sessions):
+        changed = [] if before is None else stack_differences(before["versions"],
+                                                              now["versions"])
+        said = "as created" if before is None else (
+            "; ".join(changed) if changed else "same stack")
+        lines.append(f"  {now['time']}  {now['mode']:<6}  {said}")
+    return lines
+
+
 def info_text(run, running=None) -> str:
     """The ``sdmpi info`` report of an inspected run file (:class:`RunSummary`);
     ``running``: who is writing it now (see sdmpi.ensemble.progress.lock_holder)."""
@@ -374,6 +389,7 @@ def info_text(run, running=None) -> str:
     else:
         lines.append("checksums: every committed sample and checkpoint verified")
     lines.append("versions: " + ", ".join(f"{k} {v}" for k, v in run.versions.items()))
+    lines += session_lines(run.sessions)
     lines.append(f"units: time {a['time_unit']}, stress {a['stress_unit']}, "
                  f"stress components {a['component_order']}")
     return "\n".join(lines)

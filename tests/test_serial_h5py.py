@@ -1,13 +1,13 @@
-"""Run files without parallel HDF5: with an h5py built without MPI, one rank runs (the
-file opened directly instead of through MPI-IO) and gives the same data; several ranks
-are refused before anything is written, with a message naming what is missing."""
+"""Run files without parallel HDF5: with an h5py built without MPI the file is opened
+directly instead of through MPI-IO; on several ranks world rank 0 writes what every rank
+commits. Either way the data are those of a parallel-HDF5 run."""
 
 import subprocess
 import sys
 
 import pytest
 
-from test_ensemble import HERE, JOB, MPIRUN, _env, needs_mpi, sdmpi, task_data
+from test_ensemble import HERE, JOB, MPIRUN, _env, logs, needs_mpi, sdmpi, task_data
 
 #: tests/ensemble_run.py with h5py's MPI support reported missing
 SERIAL = ("import sys; sys.path.insert(0, sys.argv.pop(1)); from sdmpi import cli; "
@@ -16,11 +16,11 @@ SERIAL = ("import sys; sys.path.insert(0, sys.argv.pop(1)); from sdmpi import cl
           "sys.exit(cli.main(sys.argv[1:], realisation_factory=DoubleRealisation))")
 
 
-def serial_sdmpi(*args, ranks=None):
+def serial_sdmpi(*args, ranks=None, env=None):
     cmd = [sys.executable, "-c", SERIAL, str(HERE), *map(str, args)]
     if ranks:
         cmd = [MPIRUN, "--oversubscribe", "-n", str(ranks), *cmd]
-    return subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=120)
+    return subprocess.run(cmd, capture_output=True, text=True, env=_env(env), timeout=120)
 
 
 @pytest.fixture
@@ -43,11 +43,23 @@ def test_one_rank_runs_without_parallel_hdf5(job_file, tmp_path):
 
 @pytest.mark.mpi
 @needs_mpi
-def test_several_ranks_without_parallel_hdf5_are_refused(job_file, tmp_path):
-    out = tmp_path / "run.h5"
-    res = serial_sdmpi("run", job_file, "-o", out, ranks=2)
-    assert res.returncode == 2, res.stderr
-    assert "sdmpi run on 2 ranks needs h5py built with MPI (parallel HDF5)" in res.stderr
-    assert "h5py.get_config().mpi is False" in res.stderr and "one rank runs" in res.stderr
-    assert "Traceback" not in res.stderr
-    assert not out.exists()
+def test_several_ranks_without_parallel_hdf5_write_through_rank_0(job_file, tmp_path):
+    """Two ranks, serial h5py: rank 0 writes every rank's commits; the file's data are
+    those of a one-rank run, and a SIGKILL of either rank, then a resume on two ranks,
+    ends with the same data."""
+    serial, parallel = tmp_path / "serial2.h5", tmp_path / "parallel.h5"
+    assert sdmpi("run", job_file, "-o", parallel).returncode == 0
+    res = serial_sdmpi("run", job_file, "-o", serial, ranks=2)
+    assert res.returncode == 0, res.stderr
+    assert "complete (8 tasks)" in res.stdout
+    assert task_data(serial) == task_data(parallel)
+    assert {p.name for p in logs(serial).glob("rank-*.log")} == {"rank-0.log", "rank-1.log"}
+    killed = tmp_path / "killed.h5"
+    for kill in ("commit:3", "step:30"):  # rank 1 counts its own points (writer: rank 0)
+        res = serial_sdmpi("run", job_file, "-o", killed, ranks=2,
+                           env={"SDMPI_TEST_KILL": kill})
+        assert res.returncode != 0
+        assert sdmpi("info", killed).returncode == 0
+    res = serial_sdmpi("run", job_file, "-o", killed, ranks=2)
+    assert res.returncode == 0, res.stderr
+    assert task_data(killed) == task_data(parallel)

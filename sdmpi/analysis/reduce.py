@@ -97,6 +97,7 @@ import numpy as np
 from ..config import Job, units
 from ..config.schema import toml_name
 from ..config.stresses import CONTRIBUTIONS, sample_offset, unrecorded_offset
+from ..ensemble.h5 import open_read
 from .errors import SOURCES, Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
 from .projection import project_periods, viscosities
@@ -406,15 +407,6 @@ def check_same_system(summaries) -> None:
                 f"alone. Differences:\n  " + "\n  ".join(diff))
 
 
-def _open_h5(path):
-    """The run file, read-only, for reading sample datasets."""
-    import h5py
-    try:  # read a file that a running job holds open (it writes no metadata while stepping)
-        return h5py.File(path, "r", locking=False)
-    except TypeError:  # h5py/HDF5 without the locking option
-        return h5py.File(path, "r")
-
-
 def _read_xy(f, task, committed, names, columns=XY):
     """(len(names), committed) xy stress of one task, committed samples only (with
     ``columns = slice(None)``: (len(names), committed, 6), all components); checks
@@ -546,7 +538,7 @@ def reduce_runs(paths, medium=None) -> Reduction:
     task_id = np.zeros_like(committed)
     partial = []
     for i, s in enumerate(summaries):
-        with _open_h5(s.path) as f:
+        with open_read(s.path) as f:
             for col, (fi, tasks) in enumerate(zip(file_index, columns)):
                 if fi != i:
                     continue
@@ -705,7 +697,7 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
     first = task.discard_steps // n
     cols = np.flatnonzero(red.file_index == file_index)
     done = int(red.committed[:, cols][red.task_id[:, cols] == task_id][0])
-    with _open_h5(path) as f:
+    with open_read(path) as f:
         xy = read_stress(f, job, task, done, red.viewed)
         offsets = np.concatenate([[0.0], sample_offsets(f, job, task, red.viewed), [0.0]])
     n_periods = max(done // n - first, 0)

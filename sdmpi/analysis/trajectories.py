@@ -34,6 +34,7 @@ import h5py
 import numpy as np
 
 from ..config import parse_job
+from ..ensemble.h5 import open_read
 from ..hydro.geometry import Lattice
 
 
@@ -67,7 +68,7 @@ class Trajectory:
 
 def groups(path) -> list[str]:
     """The particles groups of an H5MD file."""
-    with h5py.File(path, "r") as f:
+    with open_read(path) as f:
         return sorted(f["particles"]) if "particles" in f else []
 
 
@@ -84,7 +85,7 @@ def read(path, group: str | None = None) -> Trajectory:
     if group not in names:
         raise ValueError(f"{path}: no particles group {group!r} (it has "
                          f"{', '.join(names[:5]) or 'none'})")
-    with h5py.File(path, "r") as f:
+    with open_read(path) as f:
         g = f[f"particles/{group}"]
         position = g["position"]
         frames = _committed_frames(f, group, len(position["value"]))

@@ -66,10 +66,10 @@ def group_samples(red, g):
     """{field: concatenated committed samples of every task of group g}, and the steps
     and total time they span (sum of committed x dt); missing fields are absent."""
     from ..ensemble.store import task_key
-    from .reduce import _open_h5
+    from ..ensemble.h5 import open_read
     out, steps, time = {f: [] for f in FIELDS}, 0, 0.0
     for i, path in enumerate(red.files):      # validated by the reduction already
-        with _open_h5(path) as f:
+        with open_read(path) as f:
             for col in np.flatnonzero(red.file_index == i):
                 group = f[f"tasks/{task_key(int(red.task_id[g, col]))}"]
                 done = int(red.committed[g, col])
@@ -85,7 +85,7 @@ def near_contact_g(red, g):
     """g in the GAP_SHELLS of group g from the committed trajectory frames of its tasks
     (module docstring); NaN when the run holds no trajectories."""
     from ..ensemble.store import task_key
-    from .reduce import _open_h5
+    from ..ensemble.h5 import open_read
     from .trajectories import groups, read
     counts, ideal = np.zeros(len(GAP_SHELLS) - 1), np.zeros(len(GAP_SHELLS) - 1)
     edges = np.asarray(GAP_SHELLS)
@@ -96,7 +96,7 @@ def near_contact_g(red, g):
             if f"task_{key}" not in present:
                 continue
             traj = read(path, f"task_{key}")
-            with _open_h5(path) as f:
+            with open_read(path) as f:
                 radii = f[f"tasks/{key}/radii"][()]
             a, b = np.triu_indices(len(radii), k=1)
             contact = radii[a] + radii[b]

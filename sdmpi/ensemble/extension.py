@@ -58,6 +58,10 @@ def extend(path: Path, job, job_text: str, versions: str) -> store.RunSummary:
                      old.attrs["created"])
         with h5py.File(part, "r+") as new:
             new.attrs["extended"] = json.dumps(history)
+            sessions = new["sessions"]
+            rows = [json.dumps(s).encode() for s in store.read_sessions(old)]
+            rows.append(store.session_row("extend", _now(), versions))
+            sessions[:min(len(rows), len(sessions))] = rows[-len(sessions):]
             for task, done in zip(summary.tasks, summary.progress):
                 _copy_task(old, new, task.task_id, int(done), job.output.trajectory_every)
             new["progress"][:] = old["progress"][()]

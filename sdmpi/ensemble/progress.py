@@ -149,12 +149,14 @@ class Progress:
         elif self.is_leader and now - self._last_send >= SEND_EVERY:
             self._send(final=False)
 
-    def finish(self) -> None:
+    def finish(self, idle=None) -> None:
         """Leaders: send the final count; rank 0: wait for every leader's final count,
-        printing meanwhile, then print the last line."""
+        printing (and calling ``idle()``) meanwhile, then print the last line."""
         if self.rank == 0:
             while len(self.finished) < len(self.others):
                 self._poll()
+                if idle is not None:
+                    idle()
                 now = time.monotonic()
                 self._start_clock(now)
                 if self._due(now):

@@ -27,6 +27,7 @@ import dataclasses
 import datetime
 import errno
 import hashlib
+import importlib.metadata
 import json
 import os
 import platform
@@ -52,7 +53,8 @@ from ..dynamics.realisation import RealisationFailed
 from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
-from .progress import PipeSafe, Progress, RunLocked, logs_dir, rank_logger, take_lock
+from .progress import (PipeSafe, Progress, RunLocked, lock_holder, logs_dir, rank_logger,
+                       take_lock)
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
 
@@ -137,11 +139,12 @@ def _agree(comm, job_path, overrides, out: Path, new: bool, extend: bool):
                 lock = take_lock(out)
             if plan.rewind or plan.damaged:
                 store.fall_back(out, dict(plan.rewind), list(plan.damaged))
+            if plan.mode == "resume":
+                store.record_session(out, "resume", plan.created, plan.versions)
             if plan.mode == "extend":
                 plan = _extended(plan, out)
         except RunLocked as err:
-            plan = BadInput(f"{out}: in use by another sdmpi run ({err}); wait for it to "
-                            f"finish or stop it")
+            plan = BadInput(_in_use(out, str(err)))
         except BadInput as err:
             plan = err
         except OSError as err:  # e.g. the log directory cannot be created
@@ -170,25 +173,24 @@ def _execute(comm, plan: Plan, out: Path, factory, stream) -> bool:
 # --------------------------------------------------------------------------- checks (rank 0)
 
 
+def _in_use(out: Path, holder: str) -> str:
+    return f"{out}: in use by another sdmpi run ({holder}); wait for it to finish or stop it"
+
+
 def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) -> Plan:
     try:
         job = load_job(job_path, overrides)
     except JobError as err:
         raise BadInput(str(err)) from None
-    if size > 1 and not store.parallel_hdf5():
-        raise BadInput(f"sdmpi run on {size} ranks needs h5py built with MPI (parallel "
-                       f"HDF5), and this h5py {h5py.version.version} is serial "
-                       "(h5py.get_config().mpi is False); one rank runs without it. "
-                       "Install a parallel h5py against the MPI that mpirun belongs to "
-                       "(Debian: python3-h5py-mpi; conda-forge: h5py=*=mpi_openmpi* or "
-                       "mpi_mpich*; pip: HDF5_MPI=ON CC=mpicc pip install --no-binary=h5py "
-                       "h5py against a parallel HDF5); see docs/hpc.md")
     rpt = job.ensemble.ranks_per_task
     if size % rpt:
         raise BadInput(f"ensemble.ranks_per_task = {rpt} does not divide the {size} MPI "
                        f"ranks; run with a multiple of {rpt} ranks")
     _check_backend(job, job_path)
     _check_output(out, new)
+    holder = lock_holder(out)
+    if holder is not None:  # before reading the file: a live file is never "damaged"
+        raise BadInput(_in_use(out, holder))
     _check_resources(job, job_path, out, new, size, extend)
     plan = _mode(job, out, new, extend)
     if 0 in plan.progress and plan.mode != "complete":  # tasks to start: check their start
@@ -231,8 +233,22 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
             f"task {tid}: recomputing from step {step} (committed up to "
             f"{summary.progress[tid]}), bit for bit as before the damage" for tid, step in rewind)
         damaged = tuple((d.task_id, d.slot) for d in summary.damage if d.what == "state")
+        if mode == "resume":
+            notes += _stack_note(out, summary.sessions[-1], json.loads(meta[0]))
         return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged)
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
+
+
+def _stack_note(out: Path, last: dict, now: dict) -> tuple[str, ...]:
+    """A warning when this session's sdmpi or library stack is not the one that last
+    wrote the run file: the numbers differ in their last bits between stacks."""
+    changed = store.stack_differences(last["versions"], now)
+    if not changed:
+        return ()
+    return (f"{out} was last written ({last['mode']}, {last['time']}) by another sdmpi or "
+            f"library stack ({'; '.join(changed)}): the tasks resumed here are valid "
+            "statistically, but not bit for bit what one stack would have computed "
+            "(recorded in the file; 'sdmpi info' lists every session)",)
 
 
 def _extended(plan: Plan, out: Path) -> Plan:
@@ -344,13 +360,25 @@ def source_digest(root: Path = Path(__file__).resolve().parents[1]) -> str:
 
 
 def versions() -> dict[str, str]:
-    """Versions of sdmpi (its number and its source digest) and of the stack it runs on."""
+    """Versions of sdmpi (its number and its source digest) and of the library stack it
+    runs on (Python, numpy, scipy, numba, h5py and its HDF5, mpi4py and its MPI library,
+    petsc4py when installed): a run's numbers are bit-for-bit reproducible for one such
+    stack."""
     import mpi4py
+    import numba
+    import scipy
 
-    return {"sdmpi": __version__, "sdmpi source": source_digest(), "python": platform.python_version(),
-            "numpy": np.__version__, "h5py": h5py.version.version,
-            "hdf5": h5py.version.hdf5_version, "mpi4py": mpi4py.__version__,
-            "MPI": MPI.Get_library_version().split(",")[0].splitlines()[0].strip()}
+    try:
+        petsc4py = importlib.metadata.version("petsc4py")
+    except importlib.metadata.PackageNotFoundError:
+        petsc4py = "not installed"
+    return {"sdmpi": __version__, "sdmpi source": source_digest(),
+            "python": platform.python_version(), "numpy": np.__version__,
+            "scipy": scipy.__version__, "numba": numba.__version__,
+            "h5py": h5py.version.version, "hdf5": h5py.version.hdf5_version,
+            "mpi4py": mpi4py.__version__,
+            "MPI": MPI.Get_library_version().split(",")[0].splitlines()[0].strip(),
+            "petsc4py": petsc4py}
 
 
 # --------------------------------------------------------------------------- stopping
@@ -440,7 +468,7 @@ class _Driver:
                 if leader else {}
             if plan.mode == "new":
                 self._create(layouts)
-            run_file = store.RunFile(self.out, comm)
+            run_file = store.RunFile.open(self.out, comm)
             try:
                 if plan.mode == "resume":
                     self._check_layouts(run_file, layouts)
@@ -457,7 +485,7 @@ class _Driver:
                     unfinished += not self._run_task(tasks[tid], realisations.pop(tid),
                                                      run_file, group, leader, progress)
                 wall = time.perf_counter() - t0
-                progress.finish()
+                progress.finish(idle=run_file.serve)
             finally:
                 self.t_checksum = run_file.t_checksum
                 run_file.close()
@@ -473,8 +501,12 @@ class _Driver:
         for part in self.comm.allgather(layouts):
             merged.update(part)
         part = self.out.with_name(self.out.name + ".part")
-        store.create(part, self.job, self.plan.job_text, merged, self.comm,
-                     self.plan.versions, self.plan.created)
+        if store.parallel_hdf5():
+            store.create(part, self.job, self.plan.job_text, merged, self.comm,
+                         self.plan.versions, self.plan.created)
+        elif self.rank == 0:  # serial h5py: rank 0 writes the file for all
+            store.create(part, self.job, self.plan.job_text, merged, MPI.COMM_SELF,
+                         self.plan.versions, self.plan.created)
         self.comm.Barrier()
         if self.rank == 0:
             os.replace(part, self.out)
@@ -507,7 +539,7 @@ class _Driver:
             buffers = {k: np.empty((min(chunk, n), *shape), dtype)
                        for k, (shape, dtype, _, _) in real.sample_fields().items()}
             if self.job.output.trajectory_every:
-                recorder = trajectory.Recorder(self.job, task, real.box, run_file.file)
+                recorder = trajectory.Recorder(self.job, task, real.box, run_file.write)
         self.log.info(f"task {tid}: {'resumed at' if start else 'started at'} step {start} of {n}")
         t_task = time.perf_counter()
         io_before = self.t_io
@@ -521,6 +553,7 @@ class _Driver:
                     recorder.before(step, real)
                 sample = real.advance(1)
                 fault("step")
+                run_file.serve()  # the writer rank of a serial h5py: others' commits
                 if leader:
                     for k, buf in buffers.items():
                         buf[step - committed] = sample[k][0]

@@ -39,6 +39,7 @@ from ..config import stresses, units
 from . import trajectory
 from .faults import fault
 from .h5 import new_dataset, open_read, parallel_hdf5
+from .progress import lock_holder
 
 FORMAT = "sdmpi-run"
 FORMAT_VERSION = 1
@@ -49,6 +50,9 @@ STRESS_UNITS = {"t_D": "eta_m/t_D", "1/gamma_dot": "eta_m gamma_dot"}
 
 #: at most this many checksum blocks per task (larger blocks for longer tasks)
 MAX_CHECKSUM_BLOCKS = 4096
+#: rows of /sessions, one per session that wrote the file (creation, resume, extension;
+#: when full, the last row holds the latest), and the bytes of each (a JSON text)
+MAX_SESSIONS, SESSION_BYTES = 256, 4096
 
 
 class StoreError(Exception):
@@ -99,11 +103,53 @@ def checksum_block(job, task: Task) -> int:
     return max(job.output.checkpoint_every, -(-task.n_steps // MAX_CHECKSUM_BLOCKS))
 
 
+def session_row(mode: str, when: str, versions: str) -> bytes:
+    """One row of /sessions: ``mode`` ("new", "resume", "extend"), ``when`` (UTC ISO 8601)
+    and ``versions`` (the JSON text of sdmpi.ensemble.runner.versions())."""
+    row = json.dumps({"mode": mode, "time": when, "versions": json.loads(versions)}).encode()
+    if len(row) > SESSION_BYTES:
+        raise ValueError(f"a /sessions row holds {SESSION_BYTES} bytes, this one {len(row)}")
+    return row
+
+
+def read_sessions(f) -> list[dict]:
+    """The sessions that wrote the open run file ``f``, oldest first (a file without
+    /sessions: its creation, from its root attributes)."""
+    if "sessions" not in f:
+        return [{"mode": "new", "time": f.attrs["created"],
+                 "versions": json.loads(f.attrs["versions"])}]
+    return [json.loads(row) for row in f["sessions"][()] if row]
+
+
+def record_session(path, mode: str, when: str, versions: str) -> None:
+    """Append a session to /sessions of the run file at ``path`` (one process, under the
+    run's lock, no other writer: raw data only, synced). Files without /sessions are left
+    as they are."""
+    with h5py.File(path, "r+") as f:
+        if "sessions" not in f:
+            return
+        rows = f["sessions"]
+        used = sum(1 for row in rows[()] if row)
+        rows[min(used, len(rows) - 1)] = session_row(mode, when, versions)
+        f.flush()
+    _fsync(path)
+
+
+def stack_differences(old: dict, new: dict) -> list[str]:
+    """``"name old -> new"`` for every version that differs between two versions dicts."""
+    return [f"{k} {old.get(k, '(absent)')} -> {new.get(k, '(absent)')}"
+            for k in list(old) + [k for k in new if k not in old] if old.get(k) != new.get(k)]
+
+
 def _nan_if_none(x):
     return math.nan if x is None else x
 
 
 # --------------------------------------------------------------------------- create
+
+
+#: MPI tag of the commits sent to the writer rank (RemoteRunFile)
+COMMIT_TAG = 7301
 
 
 def _open_collective(path, mode: str, comm, **kwargs) -> h5py.File:
@@ -135,6 +181,11 @@ def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versi
             f.attrs["physical_units"] = json.dumps(scales.as_dict())
         progress = new_dataset(f, "progress", (len(tasks),), "i8", fillvalue=0)
         progress.attrs["description"] = "samples committed per task (valid up to)"
+        sessions = new_dataset(f, "sessions", (MAX_SESSIONS,), f"S{SESSION_BYTES}")
+        sessions[0] = session_row("new", created, versions)
+        sessions.attrs["description"] = (
+            "one JSON text per session that wrote the file: mode (new, resume, extend), "
+            "time (UTC), versions (sdmpi and its library stack); empty rows unused")
         for task in tasks:
             _create_task(f, job, task, layouts[task.task_id])
         trajectory.create(f, job, tasks, layouts)
@@ -201,26 +252,65 @@ def run_file_bytes(job) -> float:
 
 
 class RunFile:
-    """An existing run file opened for stepping (collective open and close over ``comm``).
+    """An existing run file opened for stepping: :meth:`open` gives each rank its handle.
 
-    Between open and close only raw data are written, each task by its owner alone.
+    Between open and close only raw data are written, each task's by its owner alone.
+    A commit is an ordered list of writes, syncs and fault points (:meth:`commit`); this
+    class applies it to the file at once. With parallel HDF5 every rank holds a
+    :class:`RunFile` (collective MPI-IO open); with a serial h5py on several ranks world
+    rank 0 holds the one writable handle and applies, between its own steps
+    (:meth:`serve`), the commits the other ranks send it (:class:`RemoteRunFile`), in the
+    order each rank sent them: the same writes as with parallel HDF5, so the same file.
     """
 
-    def __init__(self, path, comm):
-        self.file = _open_collective(path, "r+", comm)
+    def __init__(self, path, comm, *, writable: bool = True, senders: int = 0):
+        self.comm = comm
+        if writable:
+            self.file = _open_collective(path, "r+", comm) if senders == 0 \
+                else h5py.File(path, "r+")
+            self._fd = os.open(path, os.O_RDONLY)  # for fsync, independent of MPI-IO
+        else:
+            self.file, self._fd = open_read(path), None
         # serial HDF5 keeps raw data in its own buffers until the file is flushed; MPI-IO
         # writes them through at once (and a flush there would be collective)
         self._buffered = not parallel_hdf5()
-        self._fd = os.open(path, os.O_RDONLY)  # for fsync, independent of MPI-IO
-        self._progress = self.file["progress"]
+        self._senders = senders  # ranks whose commits this one applies, until they close
         self._checksums = {}  # task id -> (sample checksum table, block) being extended
+        self._pending = []    # operations of the next commit (trajectory frames first)
         self.t_checksum = 0.0  # s spent computing checksums
 
+    @classmethod
+    def open(cls, path, comm) -> "RunFile":
+        """Collective over ``comm``: this rank's handle of the run file at ``path``."""
+        if parallel_hdf5() or comm.size == 1:
+            return cls(path, comm)
+        if comm.rank == 0:
+            return cls(path, comm, senders=comm.size - 1)
+        return RemoteRunFile(path, comm)
+
     def close(self) -> None:
-        """Collective: close the file."""
-        os.close(self._fd)
-        self._progress = None
+        """Collective: apply what the other ranks still send, then close the file."""
+        while self._senders:
+            self.serve(wait=True)
+        if self._fd is not None:
+            os.close(self._fd)
         self.file.close()
+
+    def serve(self, wait: bool = False) -> None:
+        """The writer: apply every commit the other ranks have sent (``wait``: at least
+        one message, blocking). Other handles: nothing to do."""
+        if not self._senders:
+            return
+        from mpi4py import MPI  # initialised by the driver (sdmpi.ensemble.runner)
+
+        status = MPI.Status()
+        while wait or self.comm.iprobe(source=MPI.ANY_SOURCE, tag=COMMIT_TAG, status=status):
+            ops = self.comm.recv(source=MPI.ANY_SOURCE, tag=COMMIT_TAG)
+            if ops is None:  # that rank has closed
+                self._senders -= 1
+            else:
+                self._apply(ops)
+            wait = False
 
     def layout_problems(self, task_id: int, layout: TaskLayout) -> list[str]:
         """How the file's datasets for a task differ from ``layout`` (empty: they match)."""
@@ -256,23 +346,28 @@ class RunFile:
         group = self.file[f"tasks/{task_key(task_id)}/samples"]
         return {name: group[name] for name in group}
 
+    def write(self, path: str, rows, values) -> None:
+        """Write ``values`` into ``rows`` of the dataset at ``path`` with the next commit,
+        ahead of its samples (trajectory frames, sdmpi.ensemble.trajectory.Recorder)."""
+        self._pending.append(("write", path, rows, values))
+
     def commit(self, task_id: int, datasets: dict, start: int, stop: int, buffers: dict,
                state: dict, slot: int) -> None:
         """Commit samples ``start:stop`` (rows ``0:stop-start`` of ``buffers``) and the
         realisation's ``state`` at step ``stop`` into checkpoint ``slot`` (not the current
         one), then move ``/progress`` to ``stop``. A kill anywhere in between leaves the
         previous checkpoint current and intact."""
-        n = stop - start
+        n, ops = stop - start, self._pending
+        self._pending = []
         for i, (name, ds) in enumerate(datasets.items()):
-            ds[start:stop] = buffers[name][:n]
+            ops.append(("write", ds.name, slice(start, stop), buffers[name][:n]))
             if i == 0:
-                fault("samples")
-        ckpt = self.file[f"checkpoints/{task_key(task_id)}"]
-        slot_step = ckpt["slot_step"]
-        slot_step[slot] = -1                      # invalid while its state is rewritten
-        group = ckpt[f"slot{slot}"]
+                ops.append(("fault", "samples"))
+        key = f"checkpoints/{task_key(task_id)}"
+        ops.append(("write", f"{key}/slot_step", slot, -1))  # invalid while rewritten
+        group = self.file[f"{key}/slot{slot}"]
         for name, value in state.items():
-            group[name][()] = value
+            ops.append(("write", f"{key}/slot{slot}/{name}", (), value))
         if task_id in self._checksums:
             t0 = time.perf_counter()
             table, block = self._checksums[task_id]
@@ -281,20 +376,58 @@ class RunFile:
                                   datasets[name].dtype)
             crcs = [crc32(state[k], group[k].dtype) for k in sorted(state)] + [crc32(table)]
             self.t_checksum += time.perf_counter() - t0
-            ckpt["sample_crc"][slot] = table
-            ckpt["state_crc"][slot] = crcs
-        fault("state")
-        slot_step[slot] = stop
-        self._flush()
-        os.fsync(self._fd)                        # all of the above on disk first
-        fault("commit")
-        self._progress[task_id] = stop
-        self._flush()                             # readers of the live file see it
+            ops += [("write", f"{key}/sample_crc", slot, table),
+                    ("write", f"{key}/state_crc", slot, crcs)]
+        ops += [("fault", "state"), ("write", f"{key}/slot_step", slot, stop),
+                ("sync",),                                      # all of the above on disk
+                ("fault", "commit"), ("write", "progress", task_id, stop),
+                ("flush",)]                                     # readers of a live file see it
+        self._submit(ops)
+
+    def _submit(self, ops: list) -> None:
+        self._apply(ops)
+
+    def _apply(self, ops: list) -> None:
+        for op in ops:
+            if op[0] == "write":
+                _, path, rows, values = op
+                self.file[path][rows] = values
+            elif op[0] == "fault":
+                fault(op[1])
+            else:
+                self._flush()
+                if op[0] == "sync":
+                    os.fsync(self._fd)
 
     def _flush(self) -> None:
         """Hand HDF5's buffered writes to the operating system (serial HDF5 only)."""
         if self._buffered:
             self.file.flush()
+
+
+class RemoteRunFile(RunFile):
+    """A rank's handle when a serial h5py gives world rank 0 the only writable one: the
+    file is read directly (states, checksum tables, layouts), and each commit is sent to
+    rank 0, which applies it (:meth:`RunFile.serve`)."""
+
+    #: commits in flight at most; the next one waits for the oldest to be received
+    IN_FLIGHT = 4
+
+    def __init__(self, path, comm):
+        super().__init__(path, comm, writable=False)
+        self._requests = []
+
+    def _submit(self, ops: list) -> None:
+        if len(self._requests) >= self.IN_FLIGHT:
+            self._requests.pop(0).wait()
+        self._requests.append(self.comm.isend(ops, dest=0, tag=COMMIT_TAG))
+
+    def close(self) -> None:
+        """Collective: everything sent, then tell rank 0 this rank is done."""
+        for request in self._requests:
+            request.wait()
+        self.comm.send(None, dest=0, tag=COMMIT_TAG)
+        self.file.close()
 
 
 def checksum_slot(f, task_id: int, slot: int, step: int) -> None:
@@ -387,6 +520,7 @@ class RunSummary:
     checksummed: bool = False  # False: the file has no checksums (not verified)
     damage: tuple = ()
     resume: tuple = ()
+    sessions: tuple = ()  # dicts: mode, time, versions (read_sessions)
 
     @property
     def complete(self) -> bool:
@@ -413,26 +547,54 @@ def is_run_file(path) -> bool:
     return head.startswith(HDF5_SIGNATURE) and FORMAT.encode() in head
 
 
+#: reads of a live file (a run holds its lock) before a finding is reported, and the
+#: pause between them [s]: a checkpoint that moves while the file is read is read again
+LIVE_READS, LIVE_PAUSE = 5, 0.5
+
+
 def inspect(path) -> RunSummary:
     """Open ``path`` read-only, check that it is an intact sdmpi run file, summarise it.
 
     Raises :class:`StoreError` for a file that is not HDF5, truncated, not a run file, of
-    an unknown format version, or inconsistent (damaged)."""
+    an unknown format version, or inconsistent (damaged). A file that a running job is
+    writing (it holds the run's lock, :func:`sdmpi.ensemble.progress.lock_holder`) is
+    read without HDF5's file lock, only its current checkpoints are verified (the other
+    slot may be being rewritten), and a read that disagrees with itself is repeated
+    (LIVE_READS times, LIVE_PAUSE apart) before :class:`StoreError` says the file is being
+    written; a live file is never reported damaged."""
     path = str(path)
+    holder = lock_holder(path)
+    if holder is None:
+        return _inspect_once(path, live=False)
+    for _ in range(LIVE_READS):
+        try:
+            summary = _inspect_once(path, live=True)
+            if not summary.damage:
+                return summary
+        except StoreError:
+            pass
+        if lock_holder(path) is None:  # the run ended meanwhile: a plain read decides
+            return _inspect_once(path, live=False)
+        time.sleep(LIVE_PAUSE)
+    raise StoreError(f"{path}: being written by a running job ({holder}), which changed it "
+                     f"during each of {LIVE_READS} reads; try again, or wait for it to stop")
+
+
+def _inspect_once(path: str, live: bool) -> RunSummary:
     try:
-        f = h5py.File(path, "r")
+        f = open_read(path)
     except OSError as err:
         raise StoreError(f"{path}: not a readable HDF5 file, or truncated/corrupted ({err})")
     with f:
         try:
-            return _inspect(f, path)
+            return _inspect(f, path, live)
         except StoreError:
             raise
         except Exception as err:  # h5py raises OSError, KeyError, ValueError, ... on damage
             raise StoreError(f"{path}: damaged run file ({type(err).__name__}: {err})") from None
 
 
-def _inspect(f, path) -> RunSummary:
+def _inspect(f, path, live: bool) -> RunSummary:
     attrs = {k: f.attrs[k] for k in f.attrs}
     if attrs.get("format") != FORMAT:
         raise StoreError(f"{path}: an HDF5 file, but not an sdmpi run file "
@@ -476,25 +638,27 @@ def _inspect(f, path) -> RunSummary:
     damage, resume = [], []
     for task, done, slot in zip(tasks, progress, slots):
         if checksummed:
-            found, start = _verify_task(f, task, int(done))
+            found, start = _verify_task(f, task, int(done), live)
             damage += found
             resume.append(start)
         else:
             resume.append((int(done), slot))
     return RunSummary(path, job, text, attrs, json.loads(attrs["versions"]), tasks, progress,
-                      tuple(slots), checksummed, tuple(damage), tuple(resume))
+                      tuple(slots), checksummed, tuple(damage), tuple(resume),
+                      tuple(read_sessions(f)))
 
 
-def _verify_task(f, task, done: int):
+def _verify_task(f, task, done: int, live: bool = False):
     """Verify one task's checkpoint slots (state) and committed samples against their
-    checksums. Returns (list of :class:`Damage`, (step, slot) to resume from)."""
+    checksums (``live``: the current slot alone). Returns (list of :class:`Damage`,
+    (step, slot) to resume from)."""
     tid, key = task.task_id, task_key(task.task_id)
     ckpt = f[f"checkpoints/{key}"]
     slot_step = ckpt["slot_step"][()]
     damage, intact = [], []
     for slot in sorted((0, 1), key=lambda s: -slot_step[s]):
         step = int(slot_step[slot])
-        if not 0 < step <= done:
+        if not 0 < step <= done or (live and step != done):
             continue  # never written, being written, or ahead of /progress (not committed)
         if _slot_intact(ckpt, slot):
             intact.append((step, slot))

@@ -144,15 +144,18 @@ class Recorder:
     :meth:`write` puts the frames collected since the last call into the file (before
     the checkpoint commit that makes them valid)."""
 
-    def __init__(self, job, task, box, file):
+    def __init__(self, job, task, box, write):
+        """``write(path, rows, values)`` puts values into rows of the run file's dataset
+        at ``path`` (sdmpi.ensemble.store.RunFile.write)."""
         from ..dynamics.realisation import protocol_of
 
         self.every = job.output.trajectory_every
         self.dt, self.box = task.dt, np.asarray(box, dtype=float)
         self.protocol = protocol_of(job, task)
         self.elements = elements(job)
-        self.group = file[f"particles/{group_name(task.task_id)}"]
-        self.strain = file[f"observables/{group_name(task.task_id)}/strain/value"]
+        self.sink = write
+        self.group = f"particles/{group_name(task.task_id)}"
+        self.strain = f"observables/{group_name(task.task_id)}/strain/value"
         self.pending = []   # frames (dicts) not yet written
         self._frame = None  # the frame of the current step, until after()
 
@@ -181,14 +184,15 @@ class Recorder:
             return
         first = self.pending[0]["step"] // self.every
         stop = first + len(self.pending)
-        frames = self.pending
-        self.group["box/edges/step"][first:stop] = [fr["step"] for fr in frames]
-        self.group["box/edges/time"][first:stop] = [fr["time"] for fr in frames]
-        self.group["box/edges/value"][first:stop] = [
-            Lattice(self.box, fr["strain"]).vectors for fr in frames]
-        self.strain[first:stop] = [fr["strain"] for fr in frames]
+        frames, rows, edges = self.pending, slice(first, stop), f"{self.group}/box/edges"
+        self.sink(f"{edges}/step", rows, np.array([fr["step"] for fr in frames]))
+        self.sink(f"{edges}/time", rows, np.array([fr["time"] for fr in frames]))
+        self.sink(f"{edges}/value", rows,
+                  np.stack([Lattice(self.box, fr["strain"]).vectors for fr in frames]))
+        self.sink(self.strain, rows, np.array([fr["strain"] for fr in frames]))
         for element in self.elements:
-            self.group[f"{element}/value"][first:stop] = np.stack([fr[element] for fr in frames])
+            self.sink(f"{self.group}/{element}/value", rows,
+                      np.stack([fr[element] for fr in frames]))
         self.pending = []
 
 
