@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test bench schaink2000 clean
+.PHONY: setup run test pip-check bench schaink2000 clean
 
 setup: $(VENV)/.installed
 
@@ -47,6 +47,22 @@ run: setup
 
 test: setup
 	$(VPY) -m pytest -q tests
+	$(MAKE) pip-check
+
+# The pip install path (docs/hpc.md): a virtualenv without system packages, sdmpi and its
+# dependencies from PyPI wheels (serial h5py), then SIGKILLs at random instants on one
+# and two ranks (tests/durability_check.py).
+PIP_VENV  := .venv-pip
+pip-check: $(PIP_VENV)/.installed
+	$(PIP_VENV)/bin/pip install -q --no-deps --force-reinstall .
+	cd $(PIP_VENV) && NUMBA_CACHE_DIR=$(CURDIR)/.numba_cache_pip \
+	  bin/python $(CURDIR)/tests/durability_check.py
+
+$(PIP_VENV)/.installed: pyproject.toml
+	$(PY) -m venv $(PIP_VENV)
+	$(PIP_VENV)/bin/pip install -q --upgrade pip
+	$(PIP_VENV)/bin/pip install -q .
+	touch $@
 
 bench: setup
 	$(VPY) bench/bench_hydro.py --out bench/results.json
@@ -68,4 +84,4 @@ schaink2000: setup
 	  --phi-scan out/schaink2000/phi_scan.h5 --fixed-dt out/schaink2000/fixed_dt.h5 -o $(STUDY_OUT)
 
 clean:
-	rm -rf $(VENV) .numba_cache build *.egg-info
+	rm -rf $(VENV) $(PIP_VENV) .numba_cache .numba_cache_pip build *.egg-info

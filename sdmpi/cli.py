@@ -70,9 +70,10 @@ def _add_validate(subparsers) -> None:
         epilog="exit status: 0 if the job is valid (resource warnings included: the job may "
                "run elsewhere), 2 if not (or the file is unreadable)")
     add_job_arguments(parser)
-    parser.add_argument("--ranks", type=int, default=1, metavar="P",
+    parser.add_argument("--ranks", type=int, default=None, metavar="P",
                         help="MPI ranks the job will run on, all on this machine (for the "
-                             "memory check and the wall-time estimate; default 1)")
+                             "memory check and the wall-time estimate; default: the fewest "
+                             "the job can run on, ensemble.ranks_per_task)")
     parser.add_argument("-o", "--output", default="run.h5", metavar="RUN.h5",
                         help="where the run file will go (for the disk-space check; "
                              "default ./run.h5; nothing is written)")
@@ -97,9 +98,14 @@ def _validate(args) -> int:
     except JobError as err:
         print(err, file=sys.stderr)
         return EXIT_BAD_INPUT
+    rpt = job.ensemble.ranks_per_task
+    if args.ranks is None:
+        args.ranks = rpt
+        if rpt > 1:
+            print(f"checking for {rpt} ranks, the fewest this job runs on "
+                  f"(ensemble.ranks_per_task = {rpt}); --ranks P checks another count")
     bad = [f"--ranks {args.ranks}: must be at least 1"] if args.ranks < 1 else []
     bad += [f"--time-steps {args.time_steps}: must be 0 or more"] if args.time_steps < 0 else []
-    rpt = job.ensemble.ranks_per_task
     if args.ranks % rpt:
         bad.append(f"--ranks {args.ranks}: must be a multiple of ensemble.ranks_per_task "
                    f"= {rpt} (sdmpi run would refuse it)")

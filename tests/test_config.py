@@ -458,6 +458,20 @@ def test_cli_validate_ok(capsys):
     assert f"; {steps} time steps in all;" in out
 
 
+def test_cli_validate_checks_the_fewest_ranks_a_job_runs_on(capsys):
+    """Without --ranks, validate checks ensemble.ranks_per_task ranks (a job of two
+    ranks per task is valid as it stands) and says so; a count it cannot run on is
+    refused with exit 2."""
+    sets = ["--set", 'solver.backend="petsc-dense"', "--set", "ensemble.ranks_per_task=2"]
+    assert main(["validate", str(DEMO), *sets]) == 0
+    out = capsys.readouterr().out
+    assert "checking for 2 ranks, the fewest this job runs on" in out and "valid" in out
+    assert main(["validate", str(DEMO), *sets, "--ranks", "3"]) == 2
+    assert "must be a multiple of ensemble.ranks_per_task = 2" in capsys.readouterr().err
+    assert main(["validate", str(DEMO)]) == 0
+    assert "checking for" not in capsys.readouterr().out
+
+
 def test_cli_validate_names_the_krylov_far_field(capsys):
     """For petsc-krylov the summary says which far field runs: by N (dense below
     krylov.DENSE_FAR_FIELD_MAX_N, spectral from there on) or as solver.far_field says."""

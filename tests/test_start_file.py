@@ -40,7 +40,7 @@ def write_xyz(path, frames, lattice=f'Lattice="{SIDE!r} 0 0 0 {SIDE!r} 0 0 0 {SI
     lines = []
     for frame in frames:
         lines += [str(len(frame)), lattice]
-        lines += [f"S {x!r} {y!r} {z!r} 1.0" for x, y, z in frame]
+        lines += [f"S {float(x)!r} {float(y)!r} {float(z)!r} 1.0" for x, y, z in frame]
     path.write_text("\n".join(lines) + "\n")
     return path
 

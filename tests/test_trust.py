@@ -56,6 +56,7 @@ def test_trust_report_equals_a_direct_count_on_a_small_run(tmp_path, capsys):
             assert abs(np.mean(gaps < float(row["min_gap_p10"])) - 0.1) <= 1 / len(gaps) + 0.01
             assert float(row["solver_iterations_per_step"]) == 0.0     # dense backend
             if mids / steps > OVERLAPS_PER_STEP_WARN:
+                assert "docs/reduce.md#trust-report" in err
                 assert f"omega = {omega:.6g}: {mids / steps:.3g} overlapping pairs corrected " \
                     "per step at the Brownian midpoint" in err
 
@@ -127,3 +128,14 @@ def test_near_contact_g_from_trajectories_equals_a_brute_force_count(tmp_path):
             assert counts[2] > 0  # the outer shell is populated: the test compares numbers
     plain = trust_rows(reduce_runs([sdmpi_run(tmp_path / "plain.h5")]))
     assert all(np.isnan(r["g_gap_1e-1"]) for r in plain)
+
+
+def test_group_labels_name_the_control_variable():
+    from types import SimpleNamespace
+
+    from sdmpi.analysis.trust import group_labels
+
+    rows = [{"phi": 0.45, "omega": 25.132741228718345}]
+    assert group_labels(SimpleNamespace(columns=("phi", "omega")), rows) == ["φ = 0.45, ω = 25.13"]
+    rows = [{"phi": 0.3, "rate": 2.0}]
+    assert group_labels(SimpleNamespace(columns=("phi", "rate")), rows) == ["φ = 0.3, γ̇ = 2"]

@@ -155,7 +155,8 @@ def warnings_of(red, rows) -> list[str]:
             if row[key] > OVERLAPS_PER_STEP_WARN:
                 out.append(f"{where}: {row[key]:.3g} overlapping pairs corrected per step at "
                            f"the {name} (above {OVERLAPS_PER_STEP_WARN:g}): the time step is "
-                           f"large for the closest pairs; consider a smaller dt")
+                           f"large for the closest pairs; if the moduli matter at this "
+                           f"level, check them at a smaller dt (docs/reduce.md#trust-report)")
         if row["min_gap_min"] < DEEP_OVERLAP:
             out.append(f"{where}: a step started with an overlap of {-row['min_gap_min']:.3g} "
                        f"radii (deeper than {-DEEP_OVERLAP:g})")
@@ -173,13 +174,21 @@ def write_trust_csv(red, rows, path) -> Path:
     return Path(path)
 
 
+def group_labels(red, rows) -> list[str]:
+    """The plot label of each trust row's group: "φ = 0.45, ω = 25.13" (steady shear:
+    the rate, γ̇)."""
+    control = red.columns[1]
+    symbol = {"omega": "ω", "rate": "γ̇"}.get(control, control)
+    return [f"φ = {r['phi']:g}, {symbol} = {r[control]:.4g}" for r in rows]
+
+
 def plot_trust(red, rows, path) -> Path:
     """trust.png: the distribution of the per-step smallest gap per group (left) and the
     overlap corrections per unit time at the start and the midpoint (right)."""
     from matplotlib.figure import Figure
     fig = Figure(figsize=(11.0, 4.8), layout="constrained")
     a1, a2 = fig.subplots(1, 2)
-    labels = [f"φ = {r['phi']:g}, {red.columns[1][0]} = {r[red.columns[1]]:.4g}" for r in rows]
+    labels = group_labels(red, rows)
     for row, label in zip(rows, labels):
         gaps = row["_gaps"]
         if gaps.size:

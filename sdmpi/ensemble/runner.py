@@ -424,6 +424,7 @@ class _Driver:
         self.stop = _Stop()
         self.t_step = self.t_io = self.t_checksum = 0.0  # s: stepping, HDF5 writes +
         # checkpoints, the checksums' part of the latter
+        self.served = (0, 0.0)  # serial h5py, rank 0: other ranks' commits applied, s
 
     def say(self, text: str) -> None:
         """Rank 0: print (and log) one line."""
@@ -452,7 +453,7 @@ class _Driver:
 
         if not kernels_cached():
             self.say("compiling the numba kernels (the first run of this installation, "
-                     "or one without a writable cache: about 30 s before the first step)")
+                     "or one without a writable cache: about a minute before the first step)")
         self.stop.install()
         try:
             # with ranks_per_task > 1 every rank of a group builds and steps the same
@@ -487,8 +488,9 @@ class _Driver:
                 wall = time.perf_counter() - t0
                 progress.finish(idle=run_file.serve)
             finally:
-                self.t_checksum = run_file.t_checksum
                 run_file.close()
+                self.t_checksum = run_file.t_checksum
+                self.served = (run_file.n_served, run_file.t_served)
         finally:
             self.stop.restore()
         unfinished = comm.allreduce(unfinished if leader else 0)
@@ -594,6 +596,11 @@ class _Driver:
                       f"checkpoints {self.t_io:.3g} s (checksums {self.t_checksum:.3g} s)")
         io_text = (f"HDF5 writes + checkpoints {io_all:.3g} s = {share:.2f}% of "
                    f"{wall_all:.3g} s rank time (checksums {crc_all:.2g} s of it)")
+        if self.served[0]:
+            self.log.info(f"applied {self.served[0]} commits of other ranks in "
+                          f"{self.served[1]:.3g} s (serial h5py: this rank writes for all)")
+            io_text += (f"; rank 0 applied {self.served[0]} commits of the other ranks in "
+                        f"{self.served[1]:.3g} s")
         if unfinished == 0:
             self.say(f"{self.out}: complete ({n_tasks} tasks); {io_text}")
         else:

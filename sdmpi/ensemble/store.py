@@ -278,6 +278,7 @@ class RunFile:
         self._checksums = {}  # task id -> (sample checksum table, block) being extended
         self._pending = []    # operations of the next commit (trajectory frames first)
         self.t_checksum = 0.0  # s spent computing checksums
+        self.t_served, self.n_served = 0.0, 0  # s spent applying other ranks' commits, and how many
 
     @classmethod
     def open(cls, path, comm) -> "RunFile":
@@ -309,7 +310,10 @@ class RunFile:
             if ops is None:  # that rank has closed
                 self._senders -= 1
             else:
+                t0 = time.perf_counter()
                 self._apply(ops)
+                self.t_served += time.perf_counter() - t0
+                self.n_served += 1
             wait = False
 
     def layout_problems(self, task_id: int, layout: TaskLayout) -> list[str]:
