@@ -69,8 +69,8 @@ def size_correction(phi, n, eta):
 
 
 def exact_k(phi):
-    """Fit to exact (multipole, lubrication-corrected) hydrodynamics, infinite system
-    (Abade et al., J. Chem. Phys. 132, 014503 (2010)):
+    """Fit to exact (multipole, lubrication-corrected) hydrodynamics, infinite system,
+    attributed to Abade et al., J. Chem. Phys. 132, 014503 (2010) (docs/validation.md):
     1 - 6.5464 phi (1 - 3.348 phi + 7.426 phi^2 - 10.034 phi^3 + 5.882 phi^4)."""
     return 1 - 6.5464 * phi * (1 - 3.348 * phi + 7.426 * phi ** 2 - 10.034 * phi ** 3 + 5.882 * phi ** 4)
 

@@ -36,10 +36,10 @@ def test_array_far_field_is_the_faxen_corrected_point_lattice(phi):
     vanishes); (a^4/36) lap^2 J = -(a^4/36)(I lap - grad grad)(delta_periodic - 1/V) adds
     nothing at r = 0.
     So K = 1 - HASIMOTO a/L + phi exactly, at any phi; a velocity relative to the mean fluid
-    velocity instead would be K/(1 - phi) (2 phi at first order). Tolerance 1e-6: the Ewald
-    tolerance 1e-10 and HASIMOTO's rounding (5e-8 a/L)."""
+    velocity instead would be K/(1 - phi) (2 phi at first order). Tolerance 3e-8: HASIMOTO's
+    rounding (2e-8 a/L) and the Ewald tolerance 1e-10 (measured: < 6e-9)."""
     a_over_l = (3 * phi / (4 * math.pi)) ** (1 / 3)
-    assert array_k(phi, lubrication=False) == pytest.approx(1 - HASIMOTO * a_over_l + phi, abs=1e-6)
+    assert array_k(phi, lubrication=False) == pytest.approx(1 - HASIMOTO * a_over_l + phi, abs=3e-8)
 
 
 @pytest.mark.parametrize("phi, drag", ZICK_HOMSY[:4])
@@ -62,7 +62,7 @@ def test_array_sd_differs_from_exact_by_the_multipoles_beyond_fts(phi, drag):
 def test_array_sd_overestimates_dense_arrays_by_the_fts_truncation():
     """Beyond phi ~ 0.2 the truncation dominates: at phi = 0.343 and 0.45 the exact array
     settles at 0.065 and 0.036, SD at 0.111 and 0.101 (1.7 and 2.8 times exact), within
-    0.5% of the FTS closed form (the self-image lubrication: -4e-4)."""
+    0.5% of the FTS closed form (the self-image lubrication: -3e-4 and -4e-4)."""
     for phi, drag in ZICK_HOMSY[4:]:
         k = array_k(phi, lubrication=True)
         a_over_l = (3 * phi / (4 * math.pi)) ** (1 / 3)
