@@ -10,8 +10,9 @@ Sangani & Acrivos (1982).
 
 Random suspensions: Monte Carlo starts of sdmpi.dynamics.initial.hard_sphere_fluid
 (independent seeds), the force along x, y and z in turn (K averaged over the three), full
-SD and far field alone, and eta'_inf of the same configurations; one standard error over
-the configurations. K of N spheres in a periodic box differs from the infinite system by
+SD, far field alone (FTS: stresslets from E = 0) and the Rotne-Prager (force-torque) level
+alone (U = M_UF F), and eta'_inf of the same configurations; one standard error over the
+configurations. K of N spheres in a periodic box differs from the infinite system by
 the periodic images of each sphere and its correlation hole (`size_correction`).
 
     python bench/sedimentation.py [--sizes 27 64 125] [--configs 40 20 10]
@@ -29,6 +30,7 @@ import numpy as np
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.hydro import solve_mobility
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
+from sdmpi.hydro.farfield import NDOF, far_field_mobility
 
 PHIS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.45)
 #: Hasimoto's constant: 6 pi U/F = 1 - HASIMOTO a/L for point forces on a simple cubic lattice
@@ -76,7 +78,8 @@ def exact_k(phi):
 
 
 def measure(n, phi, configs, seed=2039):
-    """Per configuration: K (full SD), K (far field alone) and eta'_inf."""
+    """Per configuration: K (full SD), K (far field alone), K (Rotne-Prager level) and
+    eta'_inf."""
     rows = []
     for k in range(configs):
         rng = np.random.default_rng([seed, n, int(round(1000 * phi)), k])
@@ -91,6 +94,9 @@ def measure(n, phi, configs, seed=2039):
                 u, _, _ = solve_mobility(pos, box, forces=forces, lubrication=lubrication)
                 total += u[:, axis].mean()
             row.append(2 * math.pi * total)  # 6 pi <U> averaged over the three axes
+        u_rows = (NDOF * np.arange(n)[:, None] + np.arange(3)).ravel()
+        m_uf = far_field_mobility(pos, np.ones(n), box)[np.ix_(u_rows, u_rows)]
+        row.append(2 * math.pi * np.trace(m_uf.reshape(n, 3, n, 3).sum(axis=(0, 2))) / n)
         row.append(1 + hydrodynamic_viscosity(pos, box))
         rows.append(row)
     return np.array(rows)
@@ -121,14 +127,15 @@ def main():
         for phi in PHIS:
             t = time.perf_counter()
             values = measure(n, phi, configs)
-            (k_sd, e_sd), (k_ff, e_ff), (eta, e_eta) = (summary(values[:, c]) for c in range(3))
+            (k_sd, e_sd), (k_ff, e_ff), (k_rp, e_rp), (eta, e_eta) = (summary(values[:, c]) for c in range(4))
             corr = size_correction(phi, n, eta)
             rows.append({"n_particles": n, "phi": phi, "configs": configs, "k_sd": k_sd, "k_sd_err": e_sd,
-                         "k_far_field": k_ff, "k_far_field_err": e_ff, "eta_inf": eta, "eta_inf_err": e_eta,
+                         "k_far_field": k_ff, "k_far_field_err": e_ff, "k_rotne_prager": k_rp,
+                         "k_rotne_prager_err": e_rp, "eta_inf": eta, "eta_inf_err": e_eta,
                          "s0": structure_factor_zero(phi), "size_correction": corr,
                          "k_sd_infinite": k_sd + corr, "exact_infinite": exact_k(phi)})
             print(f"N = {n:4d} phi = {phi:.2f}: K_SD = {k_sd:.4f} +- {e_sd:.4f}, far field {k_ff:.4f} +- {e_ff:.4f}, "
-                  f"eta'_inf {eta:.3f}; + size correction {corr:.4f} = {k_sd + corr:.4f}; exact {exact_k(phi):.4f} "
+                  f"Rotne-Prager {k_rp:.4f}, eta'_inf {eta:.3f}; + size correction {corr:.4f} = {k_sd + corr:.4f}; exact {exact_k(phi):.4f} "
                   f"({time.perf_counter() - t:.0f} s)", flush=True)
     Path(args.out).write_text(json.dumps({"command": "python bench/sedimentation.py " + " ".join(sys.argv[1:]),
                                           "lattice": lattice, "rows": rows}, indent=1) + "\n")
