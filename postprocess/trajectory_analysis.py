@@ -64,14 +64,15 @@ def main(argv=None) -> int:
     np.savetxt(args.output / "msd.csv", np.column_stack([lags, t, msd, diffusion]),
                delimiter=",", header="lag_frames,lag_time,msd_x,msd_y,msd_z,D_yz",
                comments="", fmt="%.10g")
-    plot(args.output, r, g, t, msd, diffusion)
+    plot(args.output, r, g, t, msd, diffusion, f"{args.file.name} {group or ''}".strip())
     print(f"{args.file} {group or ''}: {len(traj.positions)} frames of "
           f"{traj.positions.shape[1]} particles; g(r) up to r = {r_max:.4g} a; "
           f"D_s(t = {t[0]:.4g}) = {diffusion[0]:.4g} D0 -> {args.output}")
     return 0
 
 
-def plot(outdir, r, g, t, msd, diffusion) -> None:
+def plot(outdir, r, g, t, msd, diffusion, title: str) -> None:
+    """gr.png and msd.png in ``outdir``, titled with the run file and task."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -80,7 +81,7 @@ def plot(outdir, r, g, t, msd, diffusion) -> None:
     fig, ax = plt.subplots(figsize=(5, 3.5))
     ax.plot(r, g)
     ax.axhline(1.0, color="0.6", lw=0.8)
-    ax.set(xlabel="r / a", ylabel="g(r)")
+    ax.set(xlabel="r / a", ylabel="g(r)", title=f"{title}: pair distribution")
     fig.tight_layout()
     fig.savefig(outdir / "gr.png", dpi=120)
     plt.close(fig)
@@ -91,6 +92,7 @@ def plot(outdir, r, g, t, msd, diffusion) -> None:
     left.legend()
     right.semilogx(t, diffusion)
     right.set(xlabel="t / t_D", ylabel="D(t) / D0 (y, z)")
+    fig.suptitle(f"{title}: mean-squared displacement")
     fig.tight_layout()
     fig.savefig(outdir / "msd.png", dpi=120)
     plt.close(fig)
