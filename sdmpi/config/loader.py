@@ -9,12 +9,15 @@ failed, so each mistake is reported once.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import datetime
 import difflib
 import math
+import os
 import re
 import tomllib
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,35 +31,57 @@ from .schema import SECTIONS, Choice, Job, Physical, Text, toml_name
 # --------------------------------------------------------------------------- entry points
 
 
-def load_job(path, overrides=()) -> Job:
-    """Read, override and validate the job file at ``path``; raise :class:`JobError`."""
-    source = str(path)
+def load_job(source: str | os.PathLike | Mapping, overrides: Iterable[str] = ()) -> Job:
+    """Read, override and validate a job.
+
+    Args:
+        source: the path of a job file (TOML, UTF-8), or a job as a mapping of section
+            name -> table, the form ``tomllib.load`` returns (tables as dicts, arrays as
+            lists); the mapping is not modified.
+        overrides: ``"SECTION.KEY=LITERAL"`` strings (``--set``; LITERAL is a TOML value),
+            applied over the source in order.
+
+    Returns:
+        The validated, frozen :class:`Job`, in sdmpi's reduced units (docs/job_keys.md).
+
+    Raises:
+        JobError: every problem found (key, value, why, what is allowed) at once.
+    """
+    if isinstance(source, Mapping):
+        return _validated(copy.deepcopy(dict(source)), overrides, source="job")
+    name = str(source)
     try:
-        data = Path(path).read_bytes()
+        data = Path(source).read_bytes()
     except OSError as err:
         reason = err.strerror or str(err)
-        raise JobError([Problem(source, f"cannot read the job file: {reason}")], source) from None
+        raise JobError([Problem(name, f"cannot read the job file: {reason}")], name) from None
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as err:
         why = f"not UTF-8 text (bad byte at offset {err.start}); TOML files are UTF-8"
-        raise JobError([Problem(source, why)], source) from None
+        raise JobError([Problem(name, why)], name) from None
     if not text.strip():
         why = ("the job file is empty; write at least a [job] table with name = \"...\" "
                "(every other key has a default: docs/job_keys.md)")
-        raise JobError([Problem(source, why)], source)
-    return parse_job(text, overrides, source=source)
+        raise JobError([Problem(name, why)], name)
+    return parse_job(text, overrides, source=name)
 
 
 def parse_job(text: str, overrides=(), *, source: str = "job") -> Job:
     """Validate the TOML ``text`` with ``overrides`` (strings 'section.key=LITERAL')."""
-    problems = []
-    settings = parse_overrides(overrides, problems)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
-        problems.insert(0, _syntax_problem(err, text, source))
+        problems = [_syntax_problem(err, text, source)]
+        parse_overrides(overrides, problems)
         raise JobError(problems, source) from None
+    return _validated(raw, overrides, source)
+
+
+def _validated(raw: dict, overrides, source: str) -> Job:
+    """The Job of the parsed TOML ``raw`` (changed in place) with ``overrides``."""
+    problems = []
+    settings = parse_overrides(overrides, problems)
     for section, name, value in settings:
         table = raw.setdefault(section, {})
         if isinstance(table, dict):
