@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 import sdmpi
-from test_ensemble import _env
-from test_sample_streams import fresh_lubrication_tables
+from .runs import child_env, fresh_lubrication_tables
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "jobs" / "demo.toml"
@@ -33,7 +32,7 @@ def test_same_samples_as_sdmpi_run(tmp_path):
     cmd = [sys.executable, "-m", "sdmpi.cli", "run", str(DEMO), "-o", str(out)]
     for item in RUN:
         cmd += ["--set", item]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=600)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=600)
     assert res.returncode == 0, res.stderr
     job = sdmpi.load_job(DEMO, RUN)
     tasks = sdmpi.tasks(job)
@@ -128,7 +127,7 @@ def test_example_script_steps_and_plots(tmp_path):
     """docs/examples/step_and_plot.py runs as documented and writes its figure."""
     out = tmp_path / "stress.png"
     res = subprocess.run([sys.executable, str(ROOT / "docs" / "examples" / "step_and_plot.py"), str(out)],
-                         capture_output=True, text=True, env=_env(), cwd=tmp_path, timeout=300)
+                         capture_output=True, text=True, env=child_env(), cwd=tmp_path, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "100 steps to t = 1.000 t_D" in res.stdout
     assert out.read_bytes().startswith(b"\x89PNG") and out.stat().st_size > 10_000

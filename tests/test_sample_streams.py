@@ -20,7 +20,7 @@ Regenerate the references only when a change is meant to alter the streams (a de
 fixed, new physics), from the commit that makes that change, and say so in its message:
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \\
-        python tests/test_sample_streams.py --write
+        python -m tests.test_sample_streams --write     # from the repository's top directory
 """
 
 import hashlib
@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from .runs import fresh_lubrication_tables
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / "tests" / "data" / "sample_streams.json"
@@ -75,12 +77,6 @@ def _le_bytes(array):
     """The bytes of an array in little-endian order (platform-independent digests)."""
     array = np.ascontiguousarray(array)
     return array.astype(array.dtype.newbyteorder("<"), copy=False).tobytes()
-
-
-def fresh_lubrication_tables():
-    """Empty the process's lubrication tables (module docstring)."""
-    from sdmpi.hydro import lubrication
-    lubrication._STORE = lubrication._TableStore()
 
 
 def stream(case):
