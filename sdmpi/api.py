@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import Job, Task, enumerate_tasks, load_job
+from .config import Job, Task, enumerate_tasks
 from .config.stresses import CONTRIBUTIONS, contribution_datasets
 from .dynamics import realisation as _dynamics
+from .dynamics.checks import load_job
 from .ensemble import start_file
 
 __all__ = ["Realisation", "Samples", "load_job", "tasks"]
@@ -71,7 +72,8 @@ class Realisation:
     (``numpy.random.SeedSequence(job.job.seed, spawn_key=(task_id,))``) depend on the job
     and the task only. It steps on this process alone (a PETSc backend solves on this
     rank); ``sdmpi run`` gives the same numbers for the same task with
-    ``ensemble.ranks_per_task = 1``.
+    ``ensemble.ranks_per_task = 1``, bit for bit when this process has stepped the same
+    realisations before it (its lubrication tables: docs/api.md).
 
     Args:
         job: a validated job (:func:`load_job`).
