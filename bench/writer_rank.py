@@ -44,17 +44,12 @@ realisations = {tasks}
 [output]
 checkpoint_every = {every}
 """
-SERIAL = ("import sys; sys.path.insert(0, sys.argv.pop(1)); from sdmpi import cli; "
-          "from sdmpi.ensemble import store; store.parallel_hdf5 = lambda: False; "
-          "from ensemble_double import DoubleRealisation; "
-          "sys.exit(cli.main(sys.argv[1:], realisation_factory=DoubleRealisation))")
 IO = re.compile(r"HDF5 writes \+ checkpoints ([\d.e+-]+) s = ([\d.]+)% of ([\d.e+-]+) s rank time")
 SERVED = re.compile(r"rank 0 applied (\d+) commits of the other ranks in ([\d.e+-]+) s")
 
 
 def run(serial: bool, job: Path, out: Path, step_ms: float) -> str:
-    head = [sys.executable, "-c", SERIAL, str(TESTS)] if serial \
-        else [sys.executable, str(TESTS / "ensemble_run.py")]
+    head = [sys.executable, str(TESTS / "ensemble_run.py"), *(["--serial-h5py"] if serial else [])]
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                SDMPI_DOUBLE_SLEEP=str(step_ms / 1000))
     res = subprocess.run(["mpirun", "--oversubscribe", "-n", "2", *head, "run", str(job),

@@ -31,8 +31,9 @@ import json  # noqa: E402
 import sys  # noqa: E402
 
 from . import __version__
-from .config import JobError, enumerate_tasks, job_hash, load_job
+from .config import JobError, enumerate_tasks, job_hash
 from .config.stresses import CONTRIBUTIONS
+from .dynamics.checks import load_job
 
 EXIT_OK = 0
 EXIT_FAILED = 1

@@ -14,13 +14,14 @@ import sys
 
 import numpy as np
 
-from petsc_check import N, STRAIN, configuration, print_per_rank
 from sdmpi.hydro.farfield import NDOF, far_field_mobility, self_mobility
 from sdmpi.hydro.geometry import Lattice
 from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, long_waves
 from sdmpi.hydro.lubrication import lubrication_matrix, lubrication_sparse
 from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
 from sdmpi.hydro.solvers import make_solver
+
+from .petsc_check import N, STRAIN, configuration, print_per_rank
 
 TOL = 1e-8  # requested relative (preconditioned) residual
 #: relative error of the far-field product: rounding (dense), the Ewald tolerance (spectral)

@@ -14,25 +14,11 @@ import h5py
 import numpy as np
 import pytest
 
-import test_ensemble as ens
 from sdmpi.ensemble.store import inspect
 
+from . import runs as ens
+
 TRIALS = 40
-
-
-@pytest.fixture(scope="module")
-def job_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("job") / "job.toml"
-    path.write_text(ens.JOB)
-    return path
-
-
-@pytest.fixture(scope="module")
-def reference(job_file, tmp_path_factory):
-    out = tmp_path_factory.mktemp("ref") / "ref.h5"
-    res = ens.sdmpi("run", job_file, "-o", out)
-    assert res.returncode == 0, res.stderr
-    return out
 
 
 def committed_regions(path):
@@ -67,9 +53,9 @@ def flip(path, offset, bit):
         fh.write(bytes([byte ^ (1 << bit)]))
 
 
-def test_random_bit_flips_are_all_detected(reference, tmp_path):
-    regions = committed_regions(reference)
-    with h5py.File(reference, "r") as f:
+def test_random_bit_flips_are_all_detected(ensemble_reference, tmp_path):
+    regions = committed_regions(ensemble_reference)
+    with h5py.File(ensemble_reference, "r") as f:
         block = int(f["checkpoints/000000/sample_crc"].attrs["block"])
     rng = np.random.default_rng(18)
     injected = detected = 0
@@ -78,7 +64,7 @@ def test_random_bit_flips_are_all_detected(reference, tmp_path):
         tid, kind, name, offset, size, row = kinds[rng.integers(len(kinds))]
         at = int(rng.integers(size))
         damaged = tmp_path / f"flip{trial}.h5"
-        shutil.copy(reference, damaged)
+        shutil.copy(ensemble_reference, damaged)
         flip(damaged, offset + at, int(rng.integers(8)))
         injected += 1
         found = inspect(damaged).damage
@@ -97,14 +83,14 @@ def test_random_bit_flips_are_all_detected(reference, tmp_path):
 
 @pytest.mark.parametrize("kind, ranks", [("samples", None),
                                          pytest.param("state", 2, marks=pytest.mark.mpi)])
-def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, kind, ranks):
+def test_damage_reported_then_repaired_by_resume(ensemble_reference, ensemble_job, tmp_path, kind, ranks):
     if ranks and ens.MPIRUN is None:
         pytest.skip("mpirun not found")
-    regions = [r for r in committed_regions(reference) if r[0] == 5 and r[1] == kind
+    regions = [r for r in committed_regions(ensemble_reference) if r[0] == 5 and r[1] == kind
                and r[2] in ("stress_brownian", "positions")]
     _, _, name, offset, size, _ = regions[0]
     out = tmp_path / "run.h5"
-    shutil.copy(reference, out)
+    shutil.copy(ensemble_reference, out)
     flip(out, offset + size // 2, 3)
     info = ens.sdmpi("info", out)
     assert info.returncode == 2 and "DAMAGED" in info.stderr and "task 5: " in info.stderr
@@ -114,21 +100,21 @@ def test_damage_reported_then_repaired_by_resume(reference, job_file, tmp_path, 
         assert "task 5: samples/stress_brownian of steps 20..29 fail" in reduced.stderr
     else:  # the checksums of the last interval were in the damaged checkpoint
         assert "task 5: samples of steps 40..47 cannot be verified" in reduced.stderr
-    res = ens.sdmpi("run", job_file, "-o", out, ranks=ranks)
+    res = ens.sdmpi("run", ensemble_job, "-o", out, ranks=ranks)
     assert res.returncode == 0, res.stderr
     assert "WARNING: damaged: task 5" in res.stdout
     restart = 0 if kind == "samples" else 40  # samples: before the damage; state: older slot
     assert f"task 5: recomputing from step {restart} (committed up to 48)" in res.stdout
-    assert ens.task_data(out) == ens.task_data(reference)  # nothing lost
+    assert ens.task_data(out) == ens.task_data(ensemble_reference)  # nothing lost
     info = ens.sdmpi("info", out)
     assert info.returncode == 0 and "checksums: every committed sample" in info.stdout
 
 
-def test_damaged_state_of_a_stopped_run_falls_back(reference, job_file, tmp_path):
+def test_damaged_state_of_a_stopped_run_falls_back(ensemble_reference, ensemble_job, tmp_path):
     """A run stopped mid-way, its current checkpoint's random-generator state damaged:
     the resume falls back to the other slot and still ends bit for bit."""
     out = tmp_path / "run.h5"
-    res = ens.sdmpi("run", job_file, "-o", out, env={"SDMPI_TEST_KILL": "step:25"})
+    res = ens.sdmpi("run", ensemble_job, "-o", out, env={"SDMPI_TEST_KILL": "step:25"})
     assert res.returncode != 0
     summary = inspect(out)
     tid = next(t for t, p in enumerate(summary.progress) if 0 < p < ens.N_STEPS)
@@ -138,14 +124,14 @@ def test_damaged_state_of_a_stopped_run_falls_back(reference, job_file, tmp_path
     assert [d.what for d in summary.damage] == ["state", "samples"]
     done = int(summary.progress[tid])
     assert summary.resume[tid][0] == done - 10  # the other slot, one checkpoint earlier
-    res = ens.sdmpi("run", job_file, "-o", out)
+    res = ens.sdmpi("run", ensemble_job, "-o", out)
     assert res.returncode == 0, res.stderr
-    assert ens.task_data(out) == ens.task_data(reference)
+    assert ens.task_data(out) == ens.task_data(ensemble_reference)
 
 
-def test_files_without_checksums_are_read_unverified(reference, tmp_path):
+def test_files_without_checksums_are_read_unverified(ensemble_reference, tmp_path):
     out = tmp_path / "old.h5"
-    shutil.copy(reference, out)
+    shutil.copy(ensemble_reference, out)
     with h5py.File(out, "r+") as f:
         for key in f["checkpoints"]:
             del f[f"checkpoints/{key}/sample_crc"], f[f"checkpoints/{key}/state_crc"]
@@ -155,11 +141,11 @@ def test_files_without_checksums_are_read_unverified(reference, tmp_path):
     assert info.returncode == 0 and "checksums: none" in info.stdout
 
 
-def test_damaged_unused_slot_of_a_complete_run_is_discarded(reference, job_file, tmp_path):
+def test_damaged_unused_slot_of_a_complete_run_is_discarded(ensemble_reference, ensemble_job, tmp_path):
     """The older checkpoint slot of a complete task, damaged: nothing to recompute, the
     run marks the slot as never written and the file verifies again, data untouched."""
     out = tmp_path / "run.h5"
-    shutil.copy(reference, out)
+    shutil.copy(ensemble_reference, out)
     with h5py.File(out, "r") as f:
         ckpt = f["checkpoints/000003"]
         older = int(np.argmin(ckpt["slot_step"][()]))
@@ -167,8 +153,8 @@ def test_damaged_unused_slot_of_a_complete_run_is_discarded(reference, job_file,
     flip(out, offset + 7, 6)
     assert [str(d) for d in inspect(out).damage] == [
         f"task 3: checkpoint slot {older} (state at step 40) fails its checksum"]
-    res = ens.sdmpi("run", job_file, "-o", out)
+    res = ens.sdmpi("run", ensemble_job, "-o", out)
     assert res.returncode == 0 and "already complete" in res.stdout, res.stderr
     assert "WARNING: damaged: task 3: checkpoint slot" in res.stdout
     assert inspect(out).damage == ()
-    assert ens.task_data(out) == ens.task_data(reference)
+    assert ens.task_data(out) == ens.task_data(ensemble_reference)

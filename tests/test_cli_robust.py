@@ -13,13 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import test_ensemble as ens
 from sdmpi.hydro import solve_mobility
+
+from . import runs as ens
 
 
 def python_m(*args, **kwargs):
     return subprocess.run([sys.executable, "-m", "sdmpi", *map(str, args)], capture_output=True,
-                          text=True, env=ens._env(), **kwargs)
+                          text=True, env=ens.child_env(), **kwargs)
 
 
 def test_python_m_sdmpi(tmp_path):
@@ -49,7 +50,7 @@ def test_info_into_a_closed_pipe(tmp_path):
     out = tmp_path / "run.h5"
     assert ens.sdmpi("run", job, "-o", out).returncode == 0
     proc = subprocess.Popen([sys.executable, str(ens.DRIVER), "info", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ens._env())
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ens.child_env())
     proc.stdout.close()  # long before the report is written (imports take ~1 s)
     stderr = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 0 and stderr == "", stderr
@@ -61,7 +62,7 @@ def test_run_into_a_closed_pipe(tmp_path):
     job.write_text(ens.JOB)
     out = tmp_path / "run.h5"
     proc = subprocess.Popen([sys.executable, str(ens.DRIVER), "run", str(job), "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ens._env())
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ens.child_env())
     proc.stdout.close()
     stderr = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 0 and stderr == "", stderr
@@ -115,7 +116,7 @@ def test_read_only_install():
         work.chmod(0o777)
         job = work / "job.toml"
         job.write_text(ens.JOB)
-        env = {k: v for k, v in ens._env().items() if k != "NUMBA_CACHE_DIR"}
+        env = {k: v for k, v in ens.child_env().items() if k != "NUMBA_CACHE_DIR"}
         env["HOME"] = "/nonexistent"
         nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
         out = work / "run.h5"
@@ -144,7 +145,7 @@ def test_sigterm_to_mpirun_exits_1_resumable(tmp_path):
     proc = subprocess.Popen([ens.MPIRUN, "--oversubscribe", "-n", "2", sys.executable,
                              str(ens.DRIVER), "run", str(job), "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=ens._env({"SDMPI_DOUBLE_SLEEP": "0.02"}))
+                            env=ens.child_env({"SDMPI_DOUBLE_SLEEP": "0.02"}))
     deadline = time.monotonic() + 30
     while not out.exists() and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sdmpi.config import JobError, enumerate_tasks, parse_job
+from sdmpi.config import JobError, enumerate_tasks
+from sdmpi.dynamics.checks import parse_job
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.forces import (FORCE_UNIT, Combined, DoubleLayer, Repulsion, VanDerWaals,

@@ -547,3 +547,22 @@ def test_maxwell_medium_with_interparticle_forces_is_refused():
     with pytest.raises(JobError, match="interparticle.kind.*Maxwell medium"):
         parse_job('[medium]\nkind = "maxwell"\nmodes = [{eta = 1.0, lambda = 0.5}]\n'
                   '[interparticle]\nkind = "repulsion"\nf0 = 1.0\ntau = 300.0\n')
+
+
+def test_config_imports_nothing_from_the_physics():
+    """`sdmpi.config` sits below `hydro` and `dynamics` (DESIGN.md): none of its modules
+    imports them, not even inside a function (physics checks live in `dynamics.checks`)."""
+    import ast
+
+    config = Path(__file__).resolve().parents[1] / "sdmpi" / "config"
+    for path in sorted(config.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                names = [("." * node.level) + (node.module or "")]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            for name in names:
+                assert not name.startswith(("..dynamics", "..hydro", "sdmpi.dynamics", "sdmpi.hydro")), \
+                    f"{path.name}:{node.lineno} imports {name}"

@@ -14,8 +14,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sdmpi.config import JobError, enumerate_tasks, load_job, parse_job
+from sdmpi.cli import main
+from sdmpi.config import JobError, enumerate_tasks
 from sdmpi.dynamics import Realisation
+from sdmpi.dynamics.checks import load_job, parse_job
 from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.contacts import (ContactLaw, CriticalLoadRepulsion, FrictionalContacts,
                                      contact_model, sliding_mobility, sliding_velocity, tangent)
@@ -25,7 +27,7 @@ from sdmpi.hydro.basis import to_five
 from sdmpi.hydro.lubrication import close_pairs
 from sdmpi.hydro.resistance import grand_resistance
 from sdmpi.hydro.solvers import DenseSolver
-from test_ensemble_real import sdmpi
+from .test_ensemble_real import sdmpi
 
 ROOT = Path(__file__).resolve().parents[1]
 MPIRUN = shutil.which("mpirun")
@@ -220,6 +222,23 @@ def test_frictional_keys_are_validated(extra, fragments):
     text = str(info.value)
     for fragment in fragments:
         assert fragment in text, text
+
+
+def test_physics_problems_are_reported_with_the_others(tmp_path, capsys):
+    """The contact springs' check (`sdmpi.dynamics.checks`) runs in the loader's single
+    pass: `sdmpi validate` and `sdmpi run` list it with a problem of another key, exit 2,
+    and run writes nothing."""
+    job = tmp_path / "job.toml"
+    job.write_text(BASE + FRICTION.format(mu=0.1, k_n=1.0, k_t=5000.0, f_r0=1.0)
+                   + "[integration]\ndt = 0.001\n[hydrodynamics]\nmin_gap = 1e-3\n")
+    bad = ["--set", "system.n_particles=0"]
+    assert main(["validate", str(job), *bad]) == 2
+    err = capsys.readouterr().err
+    assert "2 problems" in err and "system.n_particles = 0" in err and "interparticle.k_t" in err \
+        and "too stiff" in err, err
+    res = sdmpi("run", job, "-o", tmp_path / "run.h5", *bad)
+    assert res.returncode == 2 and "too stiff" in res.stderr and "system.n_particles" in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["job.toml"]
 
 
 def test_brownian_frictional_job_is_refused():

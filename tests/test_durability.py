@@ -16,17 +16,18 @@ import h5py
 import numpy as np
 import pytest
 
-from test_ensemble import DRIVER, HERE, N_STEPS, _env, task_data
-from test_serial_h5py import SERIAL
+from .runs import DRIVER, JOB, N_STEPS, child_env, sdmpi, task_data
 
 CHECKPOINT_EVERY = 10
 
 
+def driver(path_kind) -> list[str]:
+    """The command of sdmpi with the test double, on the serial or the parallel path."""
+    return [sys.executable, str(DRIVER), *(["--serial-h5py"] if path_kind == "serial" else [])]
+
+
 def run(path_kind, *args, env=None):
-    head = [sys.executable, "-c", SERIAL, str(HERE)] if path_kind == "serial" \
-        else [sys.executable, str(DRIVER)]
-    return subprocess.run([*head, *map(str, args)], capture_output=True, text=True,
-                          env=_env(env), timeout=120)
+    return sdmpi(*(["--serial-h5py"] if path_kind == "serial" else []), *args, env=env)
 
 
 def commits_before(point: str, k: int) -> int:
@@ -49,7 +50,6 @@ def committed_checkpoints(progress) -> int:
 
 @pytest.fixture(scope="module")
 def job_file(tmp_path_factory):
-    from test_ensemble import JOB
     path = tmp_path_factory.mktemp("job") / "job.toml"
     path.write_text(JOB.replace("checkpoint_every = 10",
                                 f"checkpoint_every = {CHECKPOINT_EVERY}"))
@@ -110,11 +110,9 @@ def test_live_file_is_read_while_it_is_written(job_file, tmp_path, path_kind):
     import time
 
     out = tmp_path / "live.h5"
-    head = [sys.executable, "-c", SERIAL, str(HERE)] if path_kind == "serial" \
-        else [sys.executable, str(DRIVER)]
-    proc = subprocess.Popen([*head, "run", str(job_file), "-o", str(out)],
+    proc = subprocess.Popen([*driver(path_kind), "run", str(job_file), "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=_env({"SDMPI_DOUBLE_SLEEP": "0.03"}))
+                            env=child_env({"SDMPI_DOUBLE_SLEEP": "0.03"}))
     try:
         seen = []
         deadline = time.monotonic() + 60

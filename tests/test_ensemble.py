@@ -6,7 +6,6 @@ one-rank run that was never interrupted.
 """
 
 import fcntl
-import hashlib
 import os
 import shutil
 import signal
@@ -20,98 +19,17 @@ import pytest
 
 from sdmpi.config import load_job, parse_job
 
-HERE = Path(__file__).resolve().parent
-DRIVER = HERE / "ensemble_run.py"
-MPIRUN = shutil.which("mpirun")
-needs_mpi = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
-
-JOB = """\
-[job]
-name = "ensemble-test"
-seed = 7
-
-[system]
-n_particles = 8
-phi = [0.2, 0.3]
-
-[medium]
-kind = "maxwell"
-modes = [{eta = 0.6, lambda = 0.5}, {eta = 0.4, lambda = 2.0}]
-
-[shear]
-omega = [2.0, 8.0]
-
-[integration]
-steps_per_period = 16
-periods = 3
-discard_periods = 1
-
-[ensemble]
-realisations = 2
-
-[output]
-per_particle = true
-checkpoint_every = 10
-"""
-N_TASKS, N_STEPS = 8, 48
-
-
-def sdmpi(*args, ranks=None, env=None, timeout=120):
-    """Run ``sdmpi ARGS`` with the double: plain (one rank) or under mpirun -n RANKS."""
-    cmd = [sys.executable, str(DRIVER), *map(str, args)]
-    if ranks:
-        cmd = [MPIRUN, "--oversubscribe", "-n", str(ranks), *cmd]
-    return subprocess.run(cmd, capture_output=True, text=True, env=_env(env), timeout=timeout)
-
-
-def _env(extra=None):
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("SDMPI_", "OMPI_COMM"))}
-    env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMPI_MCA_rmaps_base_oversubscribe="1")
-    env.update(extra or {})
-    return env
-
-
-def task_data(path):
-    """Every dataset under /tasks, and /progress, as bytes."""
-    out = {}
-    with h5py.File(path, "r") as f:
-        f["tasks"].visititems(
-            lambda name, obj: out.__setitem__(name, obj[()].tobytes())
-            if isinstance(obj, h5py.Dataset) else None)
-        out["progress"] = f["progress"][()].tobytes()
-    return out
-
-
-def digest(path):
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+from .runs import DRIVER, JOB, MPIRUN, N_STEPS, N_TASKS, child_env, digest, needs_mpi, sdmpi, task_data
 
 
 def logs(path):
     return Path(str(path) + ".logs")
 
 
-@pytest.fixture(scope="module")
-def job_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("job") / "job.toml"
-    path.write_text(JOB)
-    return path
-
-
-@pytest.fixture(scope="module")
-def reference(job_file, tmp_path_factory):
-    """An uninterrupted one-rank run."""
-    out = tmp_path_factory.mktemp("ref") / "ref.h5"
-    res = sdmpi("run", job_file, "-o", out)
-    assert res.returncode == 0, res.stderr
-    assert "complete (8 tasks)" in res.stdout
-    return out
-
-
-def test_reference_layout(reference, job_file):
-    with h5py.File(reference, "r") as f:
+def test_reference_layout(ensemble_reference, ensemble_job):
+    with h5py.File(ensemble_reference, "r") as f:
         assert f.attrs["format"] == "sdmpi-run" and f.attrs["format_version"] == 1
-        assert parse_job(f.attrs["job_text"]) == load_job(job_file)
+        assert parse_job(f.attrs["job_text"]) == load_job(ensemble_job)
         assert list(f["progress"][()]) == [N_STEPS] * N_TASKS
         samples = f["tasks/000005/samples"]
         assert samples["stresslets"].shape == (N_STEPS, 8, 5)
@@ -120,16 +38,16 @@ def test_reference_layout(reference, job_file):
         assert f["tasks/000005"].attrs["realisation"] == 1
         assert sorted(f["checkpoints/000005"]) == ["sample_crc", "slot0", "slot1", "slot_step",
                                                    "state_crc"]
-    assert (logs(reference) / "rank-0.log").read_text().count("complete") == N_TASKS
+    assert (logs(ensemble_reference) / "rank-0.log").read_text().count("complete") == N_TASKS
 
 
 @needs_mpi
 @pytest.mark.mpi
-def test_two_ranks_bit_identical(reference, job_file, tmp_path):
+def test_two_ranks_bit_identical(ensemble_reference, ensemble_job, tmp_path):
     out = tmp_path / "two.h5"
-    res = sdmpi("run", job_file, "-o", out, ranks=2)
+    res = sdmpi("run", ensemble_job, "-o", out, ranks=2)
     assert res.returncode == 0, res.stderr
-    assert task_data(out) == task_data(reference)
+    assert task_data(out) == task_data(ensemble_reference)
     assert {p.name for p in logs(out).glob("rank-*.log")} == {"rank-0.log", "rank-1.log"}
 
 
@@ -147,22 +65,22 @@ KILLS = [
 @pytest.mark.mpi
 @pytest.mark.parametrize("kills, ranks, overrides", KILLS,
                          ids=["step", "samples", "state", "commit", "three-kills"])
-def test_sigkill_then_resume_bit_identical(reference, job_file, tmp_path, kills, ranks,
+def test_sigkill_then_resume_bit_identical(ensemble_reference, ensemble_job, tmp_path, kills, ranks,
                                            overrides):
     out = tmp_path / "killed.h5"
     for spec, kill_ranks in kills:
-        res = sdmpi("run", job_file, "-o", out, ranks=kill_ranks,
+        res = sdmpi("run", ensemble_job, "-o", out, ranks=kill_ranks,
                     env={"SDMPI_TEST_KILL": spec})
         assert res.returncode != 0, f"{spec}: not killed\n{res.stdout}"
         info = sdmpi("info", out)
         assert info.returncode == 0, info.stderr  # intact after the kill
         assert "resumable" in info.stdout
     sets = [a for o in overrides for a in ("--set", o)]
-    res = sdmpi("run", job_file, "-o", out, *sets, ranks=ranks)
+    res = sdmpi("run", ensemble_job, "-o", out, *sets, ranks=ranks)
     assert res.returncode == 0, res.stderr
     assert "resuming" in res.stdout
-    assert task_data(out) == task_data(reference)
-    assert current_checksums(out) == current_checksums(reference)
+    assert task_data(out) == task_data(ensemble_reference)
+    assert current_checksums(out) == current_checksums(ensemble_reference)
 
 
 def current_checksums(path):
@@ -179,35 +97,35 @@ def current_checksums(path):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_signal_checkpoints_and_resumes(reference, job_file, tmp_path, sig):
+def test_signal_checkpoints_and_resumes(ensemble_reference, ensemble_job, tmp_path, sig):
     out = tmp_path / "stopped.h5"
-    _stop_midway(sig, [sys.executable, str(DRIVER), "run", job_file, "-o", out], out)
+    _stop_midway(sig, [sys.executable, str(DRIVER), "run", ensemble_job, "-o", out], out)
     info = sdmpi("info", out)
     assert info.returncode == 0 and "resumable" in info.stdout
     with h5py.File(out, "r") as f:
         assert 0 < f["progress"][()].sum() < N_TASKS * N_STEPS
-    res = sdmpi("run", job_file, "-o", out, ranks=2 if MPIRUN else None)
+    res = sdmpi("run", ensemble_job, "-o", out, ranks=2 if MPIRUN else None)
     assert res.returncode == 0, res.stderr
-    assert task_data(out) == task_data(reference)
+    assert task_data(out) == task_data(ensemble_reference)
 
 
 @needs_mpi
 @pytest.mark.mpi
-def test_sigusr1_to_mpirun_stops_cleanly(reference, job_file, tmp_path):
+def test_sigusr1_to_mpirun_stops_cleanly(ensemble_reference, ensemble_job, tmp_path):
     out = tmp_path / "stopped.h5"
     cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, str(DRIVER), "run",
-           job_file, "-o", out]
+           ensemble_job, "-o", out]
     _stop_midway(signal.SIGUSR1, cmd, out)
-    res = sdmpi("run", job_file, "-o", out)
+    res = sdmpi("run", ensemble_job, "-o", out)
     assert res.returncode == 0, res.stderr
-    assert task_data(out) == task_data(reference)
+    assert task_data(out) == task_data(ensemble_reference)
 
 
 def _stop_midway(sig, cmd, out):
     """Start a slowed-down run, signal it once it is stepping, expect exit 3."""
     proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
-                            env=_env({"SDMPI_DOUBLE_SLEEP": "0.01"}))
+                            env=child_env({"SDMPI_DOUBLE_SLEEP": "0.01"}))
     deadline = time.monotonic() + 30
     while not out.exists() and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -239,16 +157,16 @@ def test_bad_job_file(tmp_path, name):
     assert sorted(os.listdir(tmp_path)) == ["bad.toml"]  # nothing written
 
 
-def test_bad_override(job_file, tmp_path):
-    res = sdmpi("run", job_file, "-o", tmp_path / "run.h5", "--set", "system.phi=2.0")
+def test_bad_override(ensemble_job, tmp_path):
+    res = sdmpi("run", ensemble_job, "-o", tmp_path / "run.h5", "--set", "system.phi=2.0")
     assert res.returncode == 2 and "system.phi" in res.stderr and "--set" in res.stderr
     assert os.listdir(tmp_path) == []
 
 
-def test_bad_output_paths(job_file, tmp_path):
-    res = sdmpi("run", job_file, "-o", tmp_path / "missing" / "run.h5")
+def test_bad_output_paths(ensemble_job, tmp_path):
+    res = sdmpi("run", ensemble_job, "-o", tmp_path / "missing" / "run.h5")
     assert res.returncode == 2 and "does not exist" in res.stderr
-    res = sdmpi("run", job_file, "-o", tmp_path)
+    res = sdmpi("run", ensemble_job, "-o", tmp_path)
     assert res.returncode == 2 and "is a directory" in res.stderr
     res = sdmpi("run", tmp_path / "nope.toml", "-o", tmp_path / "run.h5")
     assert res.returncode == 2 and "cannot read" in res.stderr
@@ -289,14 +207,14 @@ BAD_FILES = {"foreign HDF5": (_foreign, "not an sdmpi run file"),
 
 
 @pytest.mark.parametrize("name", BAD_FILES)
-def test_bad_run_file_refused_untouched(reference, job_file, tmp_path, name):
+def test_bad_run_file_refused_untouched(ensemble_reference, ensemble_job, tmp_path, name):
     make, message = BAD_FILES[name]
     out = tmp_path / "run.h5"
-    make(out, reference)
+    make(out, ensemble_reference)
     before = digest(out)
     info = sdmpi("info", out)
     assert info.returncode == 2 and message in info.stderr, info.stderr
-    res = sdmpi("run", job_file, "-o", out)
+    res = sdmpi("run", ensemble_job, "-o", out)
     assert res.returncode == 2 and message in res.stderr, res.stderr
     # --new is offered only for what is (or was, before damage) an sdmpi run file
     assert ("--new" in res.stderr) == (name not in ("foreign HDF5", "text")), res.stderr
@@ -304,34 +222,34 @@ def test_bad_run_file_refused_untouched(reference, job_file, tmp_path, name):
     assert os.listdir(tmp_path) == ["run.h5"]
 
 
-def test_other_job_refused_then_new(reference, job_file, tmp_path):
+def test_other_job_refused_then_new(ensemble_reference, ensemble_job, tmp_path):
     out = tmp_path / "run.h5"
-    shutil.copy(reference, out)
+    shutil.copy(ensemble_reference, out)
     before = digest(out)
-    res = sdmpi("run", job_file, "-o", out, "--set", "job.seed=8")
+    res = sdmpi("run", ensemble_job, "-o", out, "--set", "job.seed=8")
     assert res.returncode == 2
     assert "different job" in res.stderr and "job.seed: file has 7, this job has 8" in res.stderr
     assert digest(out) == before
-    res = sdmpi("run", job_file, "-o", out, "--set", "job.seed=8", "--new")
+    res = sdmpi("run", ensemble_job, "-o", out, "--set", "job.seed=8", "--new")
     assert res.returncode == 0, res.stderr
     assert "seed = 8" in sdmpi("info", out, "--job").stdout
 
 
-def test_complete_run_is_left_alone(reference, job_file):
-    before = digest(reference)
-    res = sdmpi("run", job_file, "-o", reference, "--set", "output.checkpoint_every=3")
+def test_complete_run_is_left_alone(ensemble_reference, ensemble_job):
+    before = digest(ensemble_reference)
+    res = sdmpi("run", ensemble_job, "-o", ensemble_reference, "--set", "output.checkpoint_every=3")
     assert res.returncode == 0 and "already complete" in res.stdout
-    assert digest(reference) == before
+    assert digest(ensemble_reference) == before
 
 
-def test_locked_run_refused(reference, job_file, tmp_path):
+def test_locked_run_refused(ensemble_reference, ensemble_job, tmp_path):
     out = tmp_path / "run.h5"
     logs(out).mkdir()
     with open(logs(out) / "lock", "w") as held:
         held.write("pid 1 on elsewhere\n")
         held.flush()
         fcntl.flock(held, fcntl.LOCK_EX)
-        res = sdmpi("run", job_file, "-o", out)
+        res = sdmpi("run", ensemble_job, "-o", out)
     assert res.returncode == 2 and "in use by another sdmpi run (pid 1 on elsewhere)" in res.stderr
     assert not out.exists()
 
@@ -339,8 +257,8 @@ def test_locked_run_refused(reference, job_file, tmp_path):
 # --------------------------------------------------------------------------- info
 
 
-def test_info(reference, job_file):
-    res = sdmpi("info", reference)
+def test_info(ensemble_reference, ensemble_job):
+    res = sdmpi("info", ensemble_reference)
     assert res.returncode == 0, res.stderr
     text = res.stdout
     assert "sdmpi run file, format 1" in text and "job 'ensemble-test'" in text
@@ -348,9 +266,9 @@ def test_info(reference, job_file):
     assert text.count(" done\n") == N_TASKS
     assert "versions: sdmpi 0.1.0, sdmpi source " in text and "hdf5" in text and "MPI" in text
     assert "units: time t_D, stress eta_m/t_D" in text
-    res = sdmpi("info", reference, "--job")
-    assert parse_job(res.stdout) == load_job(job_file)
-    assert sdmpi("info", reference.parent / "missing.h5").returncode == 2
+    res = sdmpi("info", ensemble_reference, "--job")
+    assert parse_job(res.stdout) == load_job(ensemble_job)
+    assert sdmpi("info", ensemble_reference.parent / "missing.h5").returncode == 2
 
 
 def test_source_digest_tells_code_apart(tmp_path):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from test_ensemble import _env, task_data
+from .runs import child_env, task_data
 
 ROOT = Path(__file__).resolve().parents[1]
 MPIRUN = shutil.which("mpirun")
@@ -21,7 +21,7 @@ def sdmpi(*args, ranks=None, env=None):
     cmd = [sys.executable, "-m", "sdmpi.cli", *map(str, args)]
     if ranks:
         cmd = [MPIRUN, "--oversubscribe", "-n", str(ranks), *cmd]
-    return subprocess.run(cmd, capture_output=True, text=True, env=_env(env), timeout=300)
+    return subprocess.run(cmd, capture_output=True, text=True, env=child_env(env), timeout=300)
 
 
 @pytest.mark.mpi

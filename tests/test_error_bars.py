@@ -12,8 +12,8 @@ from scipy.stats import chi2
 
 from sdmpi.analysis.errors import SOURCES, blocking, combine
 from sdmpi.config import enumerate_tasks, parse_job
-from test_projection import ar1
-from test_reduce import job_text
+from .test_projection import ar1
+from .test_reduce import job_text
 
 #: ensembles per case; binomial sigma of a coverage near 0.68: 0.0074
 M = 4000

@@ -5,8 +5,8 @@ during the extension leaves the run file as it was; refusals write nothing."""
 import h5py
 import pytest
 
-from test_ensemble import JOB, MPIRUN, digest, needs_mpi, sdmpi, task_data
-from test_trajectory import trajectory_data
+from .runs import JOB, digest, needs_mpi, sdmpi, task_data
+from .test_trajectory import trajectory_data
 
 SHORT_JOB = JOB.replace("periods = 3\n", "periods = 2\n").replace(
     "checkpoint_every = 10\n", "checkpoint_every = 10\ntrajectory_every = 5\n"

@@ -12,11 +12,19 @@ from sdmpi.hydro.geometry import Lattice
 HASIMOTO_C1 = 2.837297  # Hasimoto (1959), as quoted in the issue; exact 2.8372974794...
 
 
+def _image_shifts(lattice, reach):
+    """Lattice translations n . L with |n_i| <= ceil(reach |b_i|) + 1: every image of a
+    point of the primary cell that can lie within `reach` of another point of it."""
+    counts = np.ceil(reach * lattice.plane_density).astype(int) + 1
+    ranges = [np.arange(-c, c + 1) for c in counts]
+    n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
+    return n @ lattice.vectors
+
+
 def _random_config(rng, n, box, rmin=0.6, rmax=1.4):
     """Non-overlapping spheres of random radii (random sequential addition)."""
     pos, rad = [], []
-    lat = Lattice(box)
-    shifts = lat.image_shifts(2 * rmax)
+    shifts = _image_shifts(Lattice(box), 2 * rmax)
     while len(pos) < n:
         x, a = rng.uniform(0, 1, 3) * box, rng.uniform(rmin, rmax)
         if all(np.min(np.linalg.norm(p + shifts - x, axis=1)) > a + b + 0.05 for p, b in zip(pos, rad)):

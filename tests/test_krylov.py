@@ -17,9 +17,9 @@ try:
 except PetscUnavailable as err:
     pytest.skip(f"petsc4py not available: {err}", allow_module_level=True)
 
-from krylov_check import FAR_ERROR, TOL, compare  # noqa: E402  (tests/ is on sys.path under pytest)
-from test_ensemble import _env  # noqa: E402
-from test_petsc_dense import (MPIRUN, ROOT, SHORT, _run, assert_isolated_sphere, assert_same_stream,  # noqa: E402
+from .krylov_check import FAR_ERROR, TOL, compare  # noqa: E402
+from .runs import child_env  # noqa: E402
+from .test_petsc_dense import (MPIRUN, ROOT, SHORT, _run, assert_isolated_sphere, assert_same_stream,  # noqa: E402
                               mobility_problem, needs_mpi, rows_on_two_ranks)
 
 from sdmpi.dynamics.models import ResistanceModel  # noqa: E402
@@ -57,7 +57,7 @@ def test_agrees_with_dense_one_rank(phi, far_field):
 @needs_mpi
 @pytest.mark.mpi
 def test_agrees_with_dense_two_ranks():
-    rows = rows_on_two_ranks("krylov_check.py", "0.1", "0.5")
+    rows = rows_on_two_ranks("krylov_check", "0.1", "0.5")
     lone = [out for out in rows if out.get("case") == "lone sphere"]
     assert len(rows) - len(lone) == 8 and len(lone) == 2  # 2 ranks x (2 phi x 2 far fields + 1)
     for out in rows:
@@ -92,7 +92,7 @@ def test_script_holding_a_solver_exits_cleanly():
             "pos = np.array([[0.0, 0, 0], [2.1, 0, 0], [0, 3, 0]])\n"
             "solver = make_solver('petsc-krylov', split_resistance(pos, np.ones(3)))\n"
             "solver.velocities(np.ones((3, 6)), np.zeros((3, 5)))\n")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(),
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=child_env(),
                          timeout=120, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-2000:]
 
@@ -110,7 +110,7 @@ def test_auto_picks_by_size():
 def test_sparse_lubrication_equals_dense():
     """Same pair blocks, summed into a BSR matrix: equal to the dense assembly to rounding
     (self-image pairs and repeated (i, j) images included: small periodic box)."""
-    from petsc_check import STRAIN, configuration
+    from .petsc_check import STRAIN, configuration
     from sdmpi.hydro.geometry import Lattice
 
     pos, side = configuration(0.5)
@@ -141,7 +141,7 @@ def test_lanczos_inverse_square_root():
 def near_contact_start():
     """A split resistance at phi = 0.5 with near-contact pairs (petsc_check.configuration,
     27 spheres, at the strain it was made at) and its box: the start of a Brownian step."""
-    from petsc_check import STRAIN, configuration
+    from .petsc_check import STRAIN, configuration
 
     pos, side = configuration(0.5, 1)
     box = np.full(3, side)
@@ -158,7 +158,7 @@ def test_midpoint_difference_is_accurate():
     although each solve is accurate to ~2e-5 of itself only. Started from the start's
     solution, the midpoint needs fewer iterations (12 vs 19) but its error is independent:
     4e-3 and 3e-2 of the difference."""
-    from petsc_check import STRAIN
+    from .petsc_check import STRAIN
 
     start, box = near_contact_start()
     n = start.n_particles
@@ -213,7 +213,7 @@ def test_long_wave_factor_with_unequal_radii(n):
     in a sheared box, with fewer rows than long-wave columns (n = 20: 60 < 184) and more
     (n = 90); P^T is the transpose of P. (Split over two ranks: krylov_check, in
     test_agrees_with_dense_two_ranks.)"""
-    from krylov_check import long_wave_preconditioner
+    from .krylov_check import long_wave_preconditioner
 
     from sdmpi.hydro.geometry import Lattice
     from sdmpi.hydro.krylov import LongWaveFactor
@@ -307,14 +307,14 @@ def test_two_ranks_per_task_killed_and_resumed_is_bit_identical(tmp_path):
     checkpoint every 5 steps, SIGKILLed after its second commit and resumed: its run file's
     task data equal an uninterrupted 2-rank run's bit for bit (the collective solves and
     the far field's rank split are deterministic for a given rank count)."""
-    from test_ensemble import task_data
+    from .runs import task_data
 
     run = [sys.executable, "-m", "sdmpi.cli", "run", str(ROOT / "jobs" / "demo.toml"), *SHORT, *KRYLOV,
            "--set", "ensemble.ranks_per_task=2", "--set", "output.checkpoint_every=5"]
     mpirun = [MPIRUN, "--oversubscribe", "-n", "2"]
     ref, killed = tmp_path / "ref.h5", tmp_path / "killed.h5"
     for out, env, ok in ((ref, None, True), (killed, {"SDMPI_TEST_KILL": "commit:2"}, False), (killed, None, True)):
-        res = subprocess.run([*mpirun, *run, "-o", str(out)], capture_output=True, text=True, env=_env(env),
+        res = subprocess.run([*mpirun, *run, "-o", str(out)], capture_output=True, text=True, env=child_env(env),
                              timeout=300, cwd=ROOT)
         assert (res.returncode == 0) == ok, res.stderr
     assert "resuming" in res.stdout

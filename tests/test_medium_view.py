@@ -13,9 +13,9 @@ from sdmpi.analysis.medium_view import (MediumError, filtered_stress, label, par
 from sdmpi.analysis.reduce import COMPONENTS, ReduceError, reduce_runs
 from sdmpi.cli import main
 from sdmpi.config import Medium, Mode
-from synthetic_run import write_run
-from test_reduce import MODULI, job_text
-from tiny_runs import MEDIUM_SPEC, maxwell_run, sdmpi_run
+from .synthetic_run import write_run
+from .test_reduce import MODULI, job_text
+from .tiny_runs import MEDIUM_SPEC, maxwell_run, sdmpi_run
 
 
 @pytest.fixture(scope="module")

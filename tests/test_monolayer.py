@@ -22,8 +22,8 @@ from sdmpi.dynamics.shear import rate_of_strain
 from sdmpi.hydro.basis import to_five
 from sdmpi.hydro.resistance import grand_resistance
 from sdmpi.hydro.solvers import make_solver
-from synthetic_run import write_run
-from test_ensemble import _env
+from .synthetic_run import write_run
+from .runs import child_env
 
 ROOT = Path(__file__).resolve().parents[1]
 MPIRUN = shutil.which("mpirun")
@@ -220,10 +220,10 @@ def test_monolayer_job_runs_under_mpirun_and_reduces(tmp_path):
              "--set", "system.phi=[0.4]"]
     cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, "-m", "sdmpi.cli", "run",
            str(ROOT / "jobs" / "monolayer_repulsion.toml"), "-o", str(out), *short]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=300)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=300)
     assert res.returncode == 0, res.stderr
     res = subprocess.run([sys.executable, "-m", "sdmpi.cli", "reduce", str(out), "-o",
-                          str(tmp_path / "red")], capture_output=True, text=True, env=_env(),
+                          str(tmp_path / "red")], capture_output=True, text=True, env=child_env(),
                          timeout=300)
     assert res.returncode == 0, res.stderr
     rows = {r["component"]: r for r in csv.DictReader(open(tmp_path / "red" / "viscosity.csv"))}

@@ -21,8 +21,8 @@ try:
 except PetscUnavailable as err:
     pytest.skip(f"petsc4py not available: {err}", allow_module_level=True)
 
-from petsc_check import compare  # noqa: E402  (tests/ is on sys.path under pytest)
-from test_ensemble import _env  # noqa: E402
+from .petsc_check import compare  # noqa: E402
+from .runs import child_env  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -44,11 +44,12 @@ def test_agrees_with_dense_one_rank(phi):
         assert out[key] < TOL, (key, out)
 
 
-def rows_on_two_ranks(script, *args):
-    """The rows a check script (petsc_check.print_per_rank) prints under mpirun -n 2, all
-    ranks' together, each checked to come from 2 ranks that agree bit for bit."""
-    cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, str(HERE / script), *args]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=120, cwd=ROOT)
+def rows_on_two_ranks(module, *args):
+    """The rows a check module of tests/ (petsc_check.print_per_rank), run as
+    ``python -m tests.MODULE ARGS``, prints under mpirun -n 2, all ranks' together, each
+    checked to come from 2 ranks that agree bit for bit."""
+    cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, "-m", f"tests.{module}", *args]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=120, cwd=ROOT)
     assert res.returncode == 0, res.stderr
     # a library may write a terminal escape (seen: "\x1b[0m") before a line: strip those
     text = re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", res.stdout)
@@ -62,7 +63,7 @@ def rows_on_two_ranks(script, *args):
 @needs_mpi
 @pytest.mark.mpi
 def test_agrees_with_dense_two_ranks():
-    for out in rows_on_two_ranks("petsc_check.py", "0.1", "0.5"):
+    for out in rows_on_two_ranks("petsc_check", "0.1", "0.5"):
         for key in ("velocities", "stresslets", "brownian"):
             assert out[key] < TOL, (key, out)
 
@@ -121,7 +122,7 @@ def _run(out, *extra, ranks=None):
            "-o", str(out), *SHORT, *extra]
     if ranks:
         cmd = [MPIRUN, "--oversubscribe", "-n", str(ranks), *cmd]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=300, cwd=ROOT)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr
     with h5py.File(out, "r") as f:
         (task,) = f["tasks"]

@@ -194,14 +194,14 @@ def test_bidisperse_realisation_steps_and_round_trips():
 @pytest.mark.mpi
 @pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
 def test_bidisperse_job_two_ranks_run_and_reduce(tmp_path):
-    from test_ensemble import _env
+    from .runs import child_env
 
     run, out = tmp_path / "bidisperse.h5", tmp_path / "reduced"
     short = ["--set", "integration.steps_per_period=40", "--set", "integration.periods=2",
              "--set", "output.checkpoint_every=30"]
     cmd = [MPIRUN, "--oversubscribe", "-n", "2", sys.executable, "-m", "sdmpi.cli", "run",
            str(JOB), "-o", str(run), *short]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=300)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=300)
     assert res.returncode == 0, res.stderr
     job = load_job(JOB, overrides=short[1::2])
     with h5py.File(run, "r") as f:
@@ -212,7 +212,7 @@ def test_bidisperse_job_two_ranks_run_and_reduce(tmp_path):
             volume = 4 / 3 * math.pi * np.sum(group["radii"][()] ** 3)
             assert volume / np.prod(group.attrs["box"]) == pytest.approx(0.1, rel=1e-12)
     res = subprocess.run([sys.executable, "-m", "sdmpi.cli", "reduce", str(run), "-o", str(out)],
-                         capture_output=True, text=True, env=_env(), timeout=300)
+                         capture_output=True, text=True, env=child_env(), timeout=300)
     assert res.returncode == 0, res.stderr
     lines = (out / "moduli.csv").read_text().splitlines()
     assert lines[0].startswith("phi,omega,component") and len(lines) == 1 + len(COMPONENTS)

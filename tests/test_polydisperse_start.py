@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from sdmpi.config import JobError, enumerate_tasks, parse_job
+from sdmpi.config import JobError, enumerate_tasks
+from sdmpi.dynamics.checks import parse_job
 from sdmpi.config.schema import START_PHI_LIMIT
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.forces import DoubleLayer, VanDerWaals

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sdmpi.analysis.reduce import confidence_half_width
-from tiny_runs import postprocess_script
+from .tiny_runs import postprocess_script
 
 #: the production scans' shape (docs/validation.md#frictional-contacts): volume fractions,
 #: realisations

@@ -2,22 +2,12 @@
 resume, extension) records its sdmpi and library stack in /sessions; a resume under
 another stack warns once and is recorded; `sdmpi info` lists the history."""
 
-import subprocess
-import sys
-
-from test_ensemble import HERE, JOB, _env, sdmpi
-
-#: ``sdmpi`` with the test double, reporting numpy's version as "0.0-other"
-OTHER_STACK = ("import sys; sys.path.insert(0, sys.argv.pop(1)); from sdmpi import cli; "
-               "from sdmpi.ensemble import runner; real = runner.versions; "
-               "runner.versions = lambda: {**real(), 'numpy': '0.0-other'}; "
-               "from ensemble_double import DoubleRealisation; "
-               "sys.exit(cli.main(sys.argv[1:], realisation_factory=DoubleRealisation))")
+from .runs import JOB, sdmpi
 
 
 def other_stack(*args, env=None):
-    return subprocess.run([sys.executable, "-c", OTHER_STACK, str(HERE), *map(str, args)],
-                          capture_output=True, text=True, env=_env(env), timeout=120)
+    """``sdmpi ARGS`` with the test double, reporting numpy's version as "0.0-other"."""
+    return sdmpi("--stack", "numpy=0.0-other", *args, env=env)
 
 
 def test_resume_under_another_stack_warns_and_is_recorded(tmp_path):

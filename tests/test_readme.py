@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from test_ensemble import _env
+from .runs import child_env
 
 ROOT = Path(__file__).resolve().parents[1]
 MARKER = "<!-- quickstart"
@@ -52,7 +52,7 @@ def test_quickstart_is_the_documented_workflow():
 def test_quickstart_runs(tmp_path):
     for name in ("jobs", "postprocess"):
         (tmp_path / name).symlink_to(ROOT / name)
-    env = _env({"PATH": str(Path(sys.executable).parent) + os.pathsep + os.environ["PATH"]})
+    env = child_env({"PATH": str(Path(sys.executable).parent) + os.pathsep + os.environ["PATH"]})
     script = "set -euo pipefail\n" + "\n".join(shrunk(c) for c in quickstart()) + "\n"
     res = subprocess.run(["bash", "-c", script], cwd=tmp_path, env=env, capture_output=True,
                          text=True, timeout=900)

@@ -21,7 +21,7 @@ from sdmpi.analysis.reduce import (COMPONENTS, MODULI_COLUMNS, PartialRunWarning
 from sdmpi.analysis.report import write_all
 from sdmpi.cli import main
 from sdmpi.config import enumerate_tasks, parse_job
-from synthetic_run import write_run
+from .synthetic_run import write_run
 
 W1, W2 = 2 * math.pi, 8 * math.pi
 

@@ -9,8 +9,8 @@ import pytest
 
 from sdmpi.analysis.reduce import COMPONENTS
 from sdmpi.cli import main
-from synthetic_run import write_run
-from test_reduce import MODULI, job_text
+from .synthetic_run import write_run
+from .test_reduce import MODULI, job_text
 
 FILES = {"moduli.csv", "moduli.h5", "units.json", "errors.csv", "trust.csv"}
 

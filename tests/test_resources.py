@@ -9,68 +9,62 @@ from pathlib import Path
 
 import pytest
 
-import test_ensemble as ens
 from sdmpi.cli import main
 from sdmpi.config import load_job, parse_job, resources
 from sdmpi.ensemble import runner
 from sdmpi.ensemble.store import run_file_bytes
 
+from . import runs as ens
+
 DEMO = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
 
 
-@pytest.fixture()
-def job_file(tmp_path):
-    path = tmp_path / "job.toml"
-    path.write_text(ens.JOB)
-    return path
-
-
-def test_run_file_size_estimate(job_file, tmp_path):
+def test_run_file_size_estimate(ensemble_job, tmp_path):
     """The estimate is within 5% of the file sdmpi writes (the samples are exact)."""
     out = tmp_path / "run.h5"
-    assert ens.sdmpi("run", job_file, "-o", out).returncode == 0
-    assert run_file_bytes(load_job(job_file)) == pytest.approx(out.stat().st_size, rel=0.05)
+    assert ens.sdmpi("run", ensemble_job, "-o", out).returncode == 0
+    assert run_file_bytes(load_job(ensemble_job)) == pytest.approx(out.stat().st_size, rel=0.05)
 
 
-def test_dense_job_too_big_for_memory(job_file, tmp_path, capsys):
+def test_dense_job_too_big_for_memory(ensemble_job, tmp_path, capsys):
     big = ["--set", "system.n_particles=125000"]
-    assert main(["validate", str(job_file), *big]) == 0  # may run elsewhere: a warning
+    assert main(["validate", str(ensemble_job), *big]) == 0  # may run elsewhere: a warning
     out = capsys.readouterr().out
     assert "memory: about 55 TiB per rank" in out  # 4 (11 N)^2 doubles + 300 MiB
     assert "WARNING: system.n_particles = 125000: the job needs about" in out
-    res = ens.sdmpi("run", job_file, "-o", tmp_path / "run.h5", *big)
+    res = ens.sdmpi("run", ensemble_job, "-o", tmp_path / "run.h5", *big)
     assert res.returncode == 2 and "system.n_particles = 125000" in res.stderr, res.stderr
     assert "Nothing written" in res.stderr and "Traceback" not in res.stderr
-    assert sorted(os.listdir(tmp_path)) == ["job.toml"]
+    assert os.listdir(tmp_path) == []  # nothing written
 
 
-def test_free_draining_needs_no_dense_matrices(job_file):
+def test_free_draining_needs_no_dense_matrices(ensemble_job):
     """Free draining solves nothing: a 125000-sphere job needs the base memory and its
     start's cell list, not the 55 TiB of a dense one."""
-    job = load_job(job_file, overrides=["system.n_particles=125000", 'hydrodynamics.model="free-draining"'])
+    job = load_job(ensemble_job, overrides=["system.n_particles=125000", 'hydrodynamics.model="free-draining"'])
     assert resources.memory_per_rank(job, "dense") < 2 ** 30
 
 
-def test_absurdly_dilute_job_refused(job_file, tmp_path, capsys):
+def test_absurdly_dilute_job_refused(ensemble_job, tmp_path, capsys):
     dilute = ["--set", "system.phi=[1e-9]"]
-    assert main(["validate", str(job_file), *dilute]) == 2
+    assert main(["validate", str(ensemble_job), *dilute]) == 2
     err = capsys.readouterr().err
     # a box of side (4 pi N / 3 phi)^(1/3) = 3222 in cells of side 2: 31.2 GiB of heads
     assert "system.phi = 1e-09: so dilute a box needs a start cell list of about 31.2 GiB" in err
     assert "allowed: phi >= 3.12e-08 for N = 8" in err
-    res = ens.sdmpi("run", job_file, "-o", tmp_path / "run.h5", *dilute)
+    res = ens.sdmpi("run", ensemble_job, "-o", tmp_path / "run.h5", *dilute)
     assert res.returncode == 2 and "start cell list" in res.stderr
-    assert sorted(os.listdir(tmp_path)) == ["job.toml"]
+    assert os.listdir(tmp_path) == []  # nothing written
     # the limit itself: a cell list of at most MAX_CELL_BYTES
     job = parse_job(ens.JOB, ["system.phi=[3.13e-8]"])
     assert resources.start_cells_bytes(job) <= resources.MAX_CELL_BYTES
     assert resources.start_problems(job) == []
 
 
-def test_too_many_spheres_for_any_start_names_n_particles(job_file, capsys):
+def test_too_many_spheres_for_any_start_names_n_particles(ensemble_job, capsys):
     """When no volume fraction below the start's limit could bring the start's cell list
     down, the problem is the number of spheres (computed without a tuple of N radii)."""
-    assert main(["validate", str(job_file), "--set", "system.n_particles=1000000000000"]) == 2
+    assert main(["validate", str(ensemble_job), "--set", "system.n_particles=1000000000000"]) == 2
     err = capsys.readouterr().err
     assert "system.n_particles = 1000000000000: needs a start cell list of about" in err, err
     assert "allowed: N below ~" in err and "system.phi" not in err
@@ -91,17 +85,17 @@ def test_disk_problem_names_the_length_key_of_the_protocol(monkeypatch):
         assert len(found) == 1 and str(found[0]).startswith(named), str(found[0])
 
 
-def test_run_file_too_big_for_the_disk(job_file, tmp_path, monkeypatch, capsys):
-    job = load_job(job_file)
+def test_run_file_too_big_for_the_disk(ensemble_job, tmp_path, monkeypatch, capsys):
+    job = load_job(ensemble_job)
     monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(
         10 ** 9, 10 ** 9 - 1000, 1000))
     need = f"{run_file_bytes(job) / 1024:.0f}"  # the estimate is checked against the file elsewhere
     with pytest.raises(runner.BadInput, match=r"integration.periods = 3: the run file needs "
                                               rf"about {need} KiB, but .* has 0.977 KiB free"):
-        runner._check_resources(job, job_file, tmp_path / "run.h5", False, 1)
-    assert main(["validate", str(job_file), "-o", str(tmp_path / "run.h5")]) == 0
+        runner._check_resources(job, ensemble_job, tmp_path / "run.h5", False, 1)
+    assert main(["validate", str(ensemble_job), "-o", str(tmp_path / "run.h5")]) == 0
     assert "WARNING: integration.periods = 3: the run file needs" in capsys.readouterr().out
-    assert os.listdir(tmp_path) == ["job.toml"]
+    assert os.listdir(tmp_path) == []  # nothing written
 
 
 def test_validate_measures_the_cost(capsys):

@@ -20,9 +20,9 @@ from sdmpi.dynamics.realisation import _at_step_rate
 from sdmpi.dynamics.shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
 from sdmpi.hydro.basis import to_five
 from sdmpi.hydro.geometry import Lattice
-from synthetic_run import write_run
-from test_ensemble import JOB, sdmpi as run_double
-from test_reduce import job_text
+from .synthetic_run import write_run
+from .runs import JOB, sdmpi as run_double
+from .test_reduce import job_text
 
 #: steps per period of test_reduce.job_text at 8 pi (spp = 16; 50 at 2 pi, set by dt_max)
 N_PER = 16

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sdmpi.cli import main as sdmpi_main
-from tiny_runs import postprocess_script, sdmpi_run
+from .tiny_runs import postprocess_script, sdmpi_run
 
 TABLES = ["moduli.csv", "errors.csv", "units.json"]
 FIGURES = ["moduli.png", "omega_half.png", "eta_components.png", "maxwell.png",

@@ -188,9 +188,9 @@ def test_independent_of_ranks():
     """Two ranks (spreading and interpolation split by particles, FFTs on rank 0, the
     real-space pairs shared by `real_space_shares`) give the one-rank result up to the
     order of floating-point sums (1e-13), the same bits on every rank."""
-    from test_petsc_dense import rows_on_two_ranks  # tests/ is on sys.path under pytest
+    from .test_petsc_dense import rows_on_two_ranks
 
-    rows = rows_on_two_ranks(Path(__file__).name)
+    rows = rows_on_two_ranks(Path(__file__).stem)
     assert len(rows) == 2 and all(r["diff"] < 1e-13 for r in rows), rows
 
 
@@ -216,6 +216,6 @@ def test_real_space_shares_balance_rank_zeros_ffts():
 if __name__ == "__main__":
     from mpi4py import MPI
 
-    from petsc_check import print_per_rank
+    from .petsc_check import print_per_rank
 
     print_per_rank([rank_check()], MPI.COMM_WORLD)

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from sdmpi.cli import main
-from test_ensemble import JOB, needs_mpi, sdmpi
-from test_ensemble_real import ROOT, SHORT
-from test_ensemble_real import sdmpi as real_sdmpi
+from .runs import JOB, needs_mpi, sdmpi
+from .test_ensemble_real import ROOT, SHORT
+from .test_ensemble_real import sdmpi as real_sdmpi
 
 N, PHI = 8, 0.3
 SIDE = (N * 4 * math.pi / (3 * PHI)) ** (1 / 3)

@@ -21,7 +21,7 @@ from sdmpi.analysis.reduce import (COMPONENTS, STEADY_QUANTITIES, VISCOSITY_COLU
                                    confidence_half_width, reduce_runs, steady_quantities)
 from sdmpi.analysis.report import format_table, write_all
 from sdmpi.config import enumerate_tasks, load_job, parse_job
-from synthetic_run import ar1, write_run
+from .synthetic_run import ar1, write_run
 
 ROOT = Path(__file__).parents[1]
 RATE = 2.0

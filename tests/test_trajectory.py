@@ -10,7 +10,7 @@ from sdmpi.config import JobError, parse_job
 from sdmpi.ensemble.trajectory import frames_done, n_frames
 from sdmpi.hydro.basis import from_five
 from sdmpi.hydro.geometry import Lattice
-from test_ensemble import JOB, MPIRUN, needs_mpi, sdmpi
+from .runs import JOB, MPIRUN, needs_mpi, sdmpi
 
 EVERY = 5
 TRAJ_JOB = JOB.replace("checkpoint_every = 10\n", "checkpoint_every = 10\ntrajectory_every = 5\n"
@@ -140,8 +140,8 @@ def test_trajectory_extras_are_validated():
 def test_real_trajectory_starts_at_the_start_and_stays_in_the_cell(tmp_path):
     from sdmpi.config import enumerate_tasks, load_job
     from sdmpi.dynamics import Realisation
-    from test_ensemble_real import ROOT, SHORT
-    from test_ensemble_real import sdmpi as real_sdmpi
+    from .test_ensemble_real import ROOT, SHORT
+    from .test_ensemble_real import sdmpi as real_sdmpi
 
     job_path = ROOT / "jobs" / "demo.toml"
     sets = [*SHORT, "--set", "ensemble.realisations=1", "--set", "output.trajectory_every=1",

@@ -12,9 +12,9 @@ from sdmpi.analysis.reduce import reduce_runs
 from sdmpi.analysis.trust import OVERLAPS_PER_STEP_WARN, trust_rows, warnings_of
 from sdmpi.cli import main
 from sdmpi.config import enumerate_tasks, parse_job
-from synthetic_run import write_run
-from test_reduce import MODULI, job_text
-from tiny_runs import sdmpi_run
+from .synthetic_run import write_run
+from .test_reduce import MODULI, job_text
+from .tiny_runs import sdmpi_run
 
 
 def read_csv(path):

@@ -19,7 +19,7 @@ import pytest
 from sdmpi.analysis.reduce import PHYSICAL_COLUMNS, VISCOSITY_COLUMNS, reduce_runs
 from sdmpi.config import JobError, canonical_text, load_job, parse_job
 from sdmpi.config.units import BOLTZMANN, scales
-from synthetic_run import write_run
+from .synthetic_run import write_run
 
 ROOT = Path(__file__).parents[1]
 MPIRUN = shutil.which("mpirun")

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from test_ensemble import _env
+from .runs import child_env
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--set", "system.n_particles=8",
@@ -24,7 +24,7 @@ def sdmpi_run(path, *extra, job="schaink2000_newtonian.toml"):
     """Run jobs/<job> shrunk by TINY (and ``extra`` --set items) into ``path``."""
     cmd = [sys.executable, "-m", "sdmpi.cli", "run", str(ROOT / "jobs" / job), "-o",
            str(path), *TINY, *extra]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=600)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=600)
     assert res.returncode == 0, res.stderr
     return path
 

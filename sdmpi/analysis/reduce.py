@@ -96,7 +96,7 @@ import numpy as np
 
 from ..config import Job, units
 from ..config.schema import toml_name
-from ..config.stresses import CONTRIBUTIONS, sample_offset, unrecorded_offset
+from ..config.stresses import CONTRIBUTIONS, contribution_datasets, sample_offset, unrecorded_offset
 from ..ensemble.h5 import open_read
 from .errors import SOURCES, Blocking, Ensemble, blocking, combine
 from .models import maxwell_moduli
@@ -311,17 +311,9 @@ def medium_viscosity(job: Job) -> float:
 
 
 #: the sample datasets of the viscous-medium stress contributions
-VISCOUS_DATASETS = tuple(c.dataset for c in CONTRIBUTIONS)
+VISCOUS_DATASETS = contribution_datasets("newtonian")
 #: contribution datasets a run file may lack, reduced as zero (`StressContribution.absent_is_zero`)
 ABSENT_IS_ZERO = frozenset(c.dataset for c in CONTRIBUTIONS if c.absent_is_zero)
-
-
-def stress_datasets(job: Job) -> tuple:
-    """Sample datasets of the stress contributions (`config.stresses.CONTRIBUTIONS`; the
-    Maxwell-filtered hydrodynamic stress for Maxwell media; see the module docstring)."""
-    if job.medium.kind == "maxwell":
-        return ("stress_hydrodynamic_maxwell",) + VISCOUS_DATASETS[1:]
-    return VISCOUS_DATASETS
 
 
 def sample_offsets(f, job: Job, task, viewed=False):
@@ -331,7 +323,7 @@ def sample_offsets(f, job: Job, task, viewed=False):
     (`unrecorded_offset`) or a dataset it lacks (`sample_offset`)."""
     from ..ensemble.store import task_key
     group = f[f"tasks/{task_key(task.task_id)}/samples"]
-    names = VISCOUS_DATASETS if viewed else stress_datasets(job)
+    names = VISCOUS_DATASETS if viewed else contribution_datasets(job.medium.kind)
     return np.array([float(group[n].attrs.get("sample_offset", unrecorded_offset(n))) if n in group
                      else sample_offset(n) for n in names])
 
@@ -342,7 +334,7 @@ def read_stress(f, job: Job, task, committed, viewed=False, columns=XY):
     or (``viewed``) the viscous stress with the hydrodynamic part filtered by
     ``job.medium`` (:func:`.medium_view.filtered_stress`)."""
     if not viewed:
-        return _read_xy(f, task, committed, stress_datasets(job), columns)
+        return _read_xy(f, task, committed, contribution_datasets(job.medium.kind), columns)
     from .medium_view import filtered_stress
     stress = _read_xy(f, task, committed, VISCOUS_DATASETS, columns)
     stress[0] = filtered_stress(stress[0], job.medium, task.dt)

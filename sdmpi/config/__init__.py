@@ -10,7 +10,9 @@ The schema (sections, keys, defaults, allowed values, units) lives in :mod:`.sch
 ``schema_text()`` (:mod:`.reference`) prints it. Units: sphere radius 1, medium zero-shear
 viscosity 1, time in t_D = a^2/D0 (1/gamma_dot for non-Brownian steady shear);
 ``Job.time_unit`` says which.
-This package uses only the standard library, so validating a job is fast.
+This package uses only the standard library, so validating a job is fast. The checks that
+need the physics (force laws, contact mobilities) live with it, in `sdmpi.dynamics.checks`,
+whose ``load_job`` runs them in the same pass (``sdmpi.load_job``, the command line).
 """
 
 from .canonical import (LAYOUT_KEYS, LENGTH_KEYS, canonical_text, extension_hash, job_hash,

@@ -2,13 +2,16 @@
 
 Each check takes the provisional :class:`~sdmpi.config.schema.Job` and returns a list of
 :class:`~sdmpi.config.problems.Problem`; :data:`CROSS_CHECKS` names the keys each one
-reads, so that the loader skips a check when one of those keys already failed.
+reads, so that the loader skips a check when one of those keys already failed. Checks
+that need the physics of the dynamics (its force laws, its contact mobilities) are
+declared the same way next to it (`sdmpi.dynamics.checks`) and run in the same pass.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 from .problems import Problem
 from .schema import START_PHI_LIMIT, TWO_PI, Job
@@ -236,8 +239,9 @@ def _repulsion_range(job):
 
 
 def _force_range(job):
-    """vdw / dlvo: the cap inside the cut-off, and the shift that truncates the force at
-    the lubrication cut-off negligible (sdmpi.dynamics.forces.TAIL of the contact force)."""
+    """vdw / dlvo: the van der Waals cap inside the cut-off gap of the smallest pair (the
+    force laws' truncation at the cut-off is checked with them,
+    `sdmpi.dynamics.checks`)."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
     if inter.kind not in ("vdw", "dlvo"):
         return []
@@ -247,32 +251,16 @@ def _force_range(job):
         return [Problem("interparticle.cap_gap", "must be smaller than the cut-off gap "
                         f"hydrodynamics.lubrication_cutoff (= {cutoff:g}){of}", inter.cap_gap,
                         allowed=f"0 < cap_gap < {cutoff * smallest:g}")]
-    # the formulas live with the force laws: a layering exception (config -> dynamics),
-    # imported here only for these kinds, rather than a second copy of the force laws
-    from ..dynamics.forces import TAIL, tail_ratios
-    problems = []
-    for path, (ratio, (a_i, a_j)) in tail_ratios(job).items():
-        if ratio > TAIL:
-            what = ("the van der Waals force at the cut-off" if path.endswith("cap_gap")
-                    else "the double-layer force at the cut-off")
-            if job.system.size_classes is not None:
-                what += f" (worst pair: radii {a_i:g} and {a_j:g})"
-            fix = ("a smaller cap_gap" if path.endswith("cap_gap") else "a shorter debye_length")
-            problems.append(Problem(path, f"{what} is {ratio:.2g} of its contact value; "
-                                    f"the force is shifted to vanish at the lubrication cut-off "
-                                    f"(= {cutoff:g}), which needs <= {TAIL:g}",
-                                    getattr(inter, path.split(".")[1]),
-                                    allowed=f"{fix}, or a larger hydrodynamics.lubrication_cutoff"))
-    return problems
+    return []
 
 
 def _frictional(job):
-    """Frictional contacts (sdmpi.dynamics.contacts): non-Brownian, the repulsion decayed
-    within the lubrication cut-off, and a time step the explicit contact springs allow."""
+    """Frictional contacts (sdmpi.dynamics.contacts): non-Brownian, and the repulsion
+    decayed within the lubrication cut-off (the contact springs' stability at the time
+    step is checked with them, `sdmpi.dynamics.checks`)."""
     inter, hyd = job.interparticle, job.hydrodynamics
     if inter.kind != "frictional":
         return []
-    from ..dynamics.contacts import SQUEEZE, sliding_mobility
     problems = []
     if job.brownian.enabled:
         problems.append(Problem("brownian.enabled", "frictional contacts are a non-Brownian "
@@ -286,18 +274,6 @@ def _frictional(job):
                                 inter.repulsion_length, allowed="repulsion_length <= "
                                 f"{hyd.lubrication_cutoff / (12 * math.log(10)):.4g}, or a "
                                 "larger hydrodynamics.lubrication_cutoff"))
-    dt = max(job.time_step(w) for w in job.frequencies)
-    for path, limit, why in (
-            ("interparticle.k_t", 1 / (sliding_mobility(hyd.min_gap) * dt),
-             f"sliding mobility {sliding_mobility(hyd.min_gap):.3g} at hydrodynamics.min_gap"),
-            ("interparticle.k_n", 1 / (SQUEEZE * hyd.min_gap * dt),
-             f"normal mobility {SQUEEZE:g} x hydrodynamics.min_gap at contact")):
-        value = getattr(inter, path.split(".")[1])
-        if value > limit:
-            problems.append(Problem(path, f"is too stiff for the time step dt = {dt:.3g}: the "
-                                    f"explicit step needs dt x stiffness x mobility <= 1 ({why})",
-                                    value, allowed=f"{path.split('.')[1]} <= {limit:.4g}, or a "
-                                    "smaller integration.dt"))
     return problems
 
 
@@ -362,11 +338,15 @@ def _backend(job):
     return []
 
 
-_INTEGRATION = tuple(f"integration.{f.name}" for f in dataclasses.fields(Job().integration))
+#: every integration key (each can change the time step)
+INTEGRATION_KEYS = tuple(f"integration.{f.name}" for f in dataclasses.fields(Job().integration))
 
-# (keys a check reads, check): skipped when one of those keys failed its own checks.
-CROSS_CHECKS = (
-    (("shear.protocol", "shear.omega") + _INTEGRATION, _discard_periods),
+#: (keys a check reads, check): the check is skipped when one of those keys failed its own
+#: checks
+CrossCheck = tuple[tuple[str, ...], Callable[[Job], list[Problem]]]
+
+CROSS_CHECKS: tuple[CrossCheck, ...] = (
+    (("shear.protocol", "shear.omega") + INTEGRATION_KEYS, _discard_periods),
     (("shear.protocol", "integration.n_steps", "integration.discard_steps"), _discard_steps),
     (("medium.kind", "medium.modes"), _maxwell_sum),
     (("output.trajectory_every", "output.trajectory_velocities", "output.trajectory_stresslets",
@@ -375,7 +355,7 @@ CROSS_CHECKS = (
     (("ensemble.ranks_per_task", "solver.backend"), _ranks),
     (("shear.protocol", "shear.rate", "brownian.enabled"), _protocol_units),
     (("shear.protocol", "shear.omega", "brownian.enabled", "medium.kind", "medium.modes",
-      "system.size_classes") + _INTEGRATION, _time_step),
+      "system.size_classes") + INTEGRATION_KEYS, _time_step),
     (("system.n_particles", "system.size_classes"), _size_classes),
     (("system.phi", "system.geometry"), _bulk_start),
     (("system.n_particles", "system.phi", "system.geometry"), _monolayer_start),
@@ -383,14 +363,12 @@ CROSS_CHECKS = (
       "system.size_classes", "shear.protocol", "brownian.enabled", "medium.kind",
       "interparticle.kind", "hydrodynamics.lubrication_cutoff"), _monolayer),
     (("interparticle.kind", "interparticle.tau", "hydrodynamics.lubrication_cutoff"), _repulsion_range),
-    (("interparticle.kind", "interparticle.cap_gap", "interparticle.debye_length",
-      "hydrodynamics.lubrication_cutoff", "system.size_classes"), _force_range),
+    (("interparticle.kind", "interparticle.cap_gap", "hydrodynamics.lubrication_cutoff",
+      "system.size_classes"), _force_range),
     (("hydrodynamics.model", "hydrodynamics.lubrication", "system.geometry", "interparticle.kind",
       "ensemble.ranks_per_task", "brownian.scheme", "solver.backend"), _model),
-    (("interparticle.kind", "interparticle.mu", "interparticle.k_n", "interparticle.k_t",
-      "interparticle.f_r0", "interparticle.repulsion_length", "brownian.enabled",
-      "hydrodynamics.lubrication_cutoff", "hydrodynamics.min_gap", "shear.protocol",
-      "shear.omega") + _INTEGRATION, _frictional),
+    (("interparticle.kind", "interparticle.repulsion_length", "brownian.enabled",
+      "hydrodynamics.lubrication_cutoff"), _frictional),
     (("solver.backend",), _backend),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
 )

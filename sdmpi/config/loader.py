@@ -9,18 +9,21 @@ failed, so each mistake is reported once.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import datetime
 import difflib
 import math
+import os
 import re
 import tomllib
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import units
 from .canonical import toml_literal
-from .checks import CROSS_CHECKS
+from .checks import CROSS_CHECKS, CrossCheck
 from .problems import JobError, Problem
 from .schema import SECTIONS, Choice, Job, Physical, Text, toml_name
 
@@ -28,35 +31,50 @@ from .schema import SECTIONS, Choice, Job, Physical, Text, toml_name
 # --------------------------------------------------------------------------- entry points
 
 
-def load_job(path, overrides=()) -> Job:
-    """Read, override and validate the job file at ``path``; raise :class:`JobError`."""
-    source = str(path)
+def load_job(source: str | os.PathLike | Mapping, overrides: Iterable[str] = (), *,
+             checks: Sequence[CrossCheck] = ()) -> Job:
+    """The validated, frozen :class:`Job` of a job file's path (TOML) or of a mapping of
+    section name -> table (as ``tomllib.load`` returns it; not modified), with the
+    ``--set`` ``overrides`` ("SECTION.KEY=LITERAL") applied in order; raises
+    :class:`JobError` listing every problem. ``checks``: more cross-key checks (keys read,
+    check), run with :data:`.checks.CROSS_CHECKS` in the same pass: those of
+    `sdmpi.dynamics.checks`, whose ``load_job`` (``sdmpi.load_job``) adds them."""
+    if isinstance(source, Mapping):
+        return _validated(copy.deepcopy(dict(source)), overrides, "job", checks)
+    name = str(source)
     try:
-        data = Path(path).read_bytes()
+        data = Path(source).read_bytes()
     except OSError as err:
         reason = err.strerror or str(err)
-        raise JobError([Problem(source, f"cannot read the job file: {reason}")], source) from None
+        raise JobError([Problem(name, f"cannot read the job file: {reason}")], name) from None
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as err:
         why = f"not UTF-8 text (bad byte at offset {err.start}); TOML files are UTF-8"
-        raise JobError([Problem(source, why)], source) from None
+        raise JobError([Problem(name, why)], name) from None
     if not text.strip():
         why = ("the job file is empty; write at least a [job] table with name = \"...\" "
                "(every other key has a default: docs/job_keys.md)")
-        raise JobError([Problem(source, why)], source)
-    return parse_job(text, overrides, source=source)
+        raise JobError([Problem(name, why)], name)
+    return parse_job(text, overrides, source=name, checks=checks)
 
 
-def parse_job(text: str, overrides=(), *, source: str = "job") -> Job:
-    """Validate the TOML ``text`` with ``overrides`` (strings 'section.key=LITERAL')."""
-    problems = []
-    settings = parse_overrides(overrides, problems)
+def parse_job(text: str, overrides=(), *, source: str = "job", checks: Sequence[CrossCheck] = ()) -> Job:
+    """Validate the TOML ``text`` with ``overrides`` (strings 'section.key=LITERAL') and
+    the extra cross-key ``checks`` (:func:`load_job`)."""
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
-        problems.insert(0, _syntax_problem(err, text, source))
+        problems = [_syntax_problem(err, text, source)]
+        parse_overrides(overrides, problems)
         raise JobError(problems, source) from None
+    return _validated(raw, overrides, source, checks)
+
+
+def _validated(raw: dict, overrides, source: str, checks) -> Job:
+    """The Job of the parsed TOML ``raw`` (changed in place) with ``overrides``."""
+    problems = []
+    settings = parse_overrides(overrides, problems)
     for section, name, value in settings:
         table = raw.setdefault(section, {})
         if isinstance(table, dict):
@@ -65,7 +83,7 @@ def parse_job(text: str, overrides=(), *, source: str = "job") -> Job:
             problems.append(Problem(section, "is not a table in the file, so "
                                     f"{section}.{name} cannot be set", table, origin="--set"))
     set_paths = frozenset(f"{s}.{k}" for s, k, _ in settings)
-    job = _resolve(raw, problems, set_paths)
+    job = _resolve(raw, problems, set_paths, checks)
     if problems:
         problems = [_mark_origin(p, set_paths) for p in problems]
         raise JobError(problems, source)
@@ -114,7 +132,7 @@ class _Pass:
     supplied: set = field(default_factory=set)     # reduced keys whose [physical] source failed
 
 
-def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
+def _resolve(raw: dict, problems: list, set_paths=frozenset(), checks=()) -> Job:
     """Check every section and key of ``raw``; return a provisional Job (failed keys at
     their defaults) after running the cross-key checks."""
     st = _Pass(problems, set_paths)
@@ -135,7 +153,7 @@ def _resolve(raw: dict, problems: list, set_paths=frozenset()) -> Job:
         if section == "physical":
             _apply_physical(raw, st)
     job = _with_derived_defaults(Job(**{s: cls(**st.context[s]) for s, cls in SECTIONS}))
-    for deps, check in CROSS_CHECKS:
+    for deps, check in (*CROSS_CHECKS, *checks):
         if not any(d in st.invalid or d.split(".")[0] in st.invalid for d in deps):
             problems.extend(check(job))
     problems[:] = [_mark_derived(p, st.derived) for p in problems]

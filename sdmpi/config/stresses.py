@@ -68,6 +68,16 @@ CONTRIBUTIONS = (
                        unrecorded_offset=-0.5),
 )
 
+def contribution_datasets(medium_kind: str) -> tuple[str, ...]:
+    """The sample dataset of each contribution, in the order of `CONTRIBUTIONS`, for a
+    medium of kind ``medium_kind`` (``medium.kind``): in a Maxwell medium the hydrodynamic
+    stress filtered by its modes (``stress_hydrodynamic_maxwell``)."""
+    datasets = tuple(c.dataset for c in CONTRIBUTIONS)
+    if medium_kind == "maxwell":
+        return (datasets[0] + "_maxwell",) + datasets[1:]
+    return datasets
+
+
 #: stress datasets that are parts or filtered forms of a contribution's, sampled with it
 DERIVED = {"stress_hydrodynamic_maxwell": "stress_hydrodynamic",
            "stresslets": "stress_hydrodynamic",

@@ -36,8 +36,8 @@ as in `forces`, strengths are multiplied by FORCE_UNIT = 6 pi into Stokes units.
 
 Time step (explicit Euler, as the rest of the step): a spring k between two spheres
 relaxes at the rate k m, m the pair's relative mobility along the spring; the step is
-stable for dt k m < 2 and free of overshoot for dt k m <= 1, which the loader requires of
-the touching pair of unit spheres at the minimum gap h_min (job units): normal
+stable for dt k m < 2 and free of overshoot for dt k m <= 1, which the job checks
+(`checks`) require of the touching pair of unit spheres at the minimum gap h_min (job units): normal
 m_n = SQUEEZE h_min (leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units),
 sliding m_t = :func:`sliding_mobility` (h_min), O(1) since tangential lubrication is only
 logarithmic (free spheres: 3.5 = 2 from translation + 1.5 from the rotation the torques

@@ -47,8 +47,8 @@ Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
 
 Shifted-force truncation (van der Waals, double layer): with h_c = cut-off x (a_i+a_j)/2,
 F_s(h) = F(h) - F(h_c) and U_s(h) = U(h) - U(h_c) + F(h_c) (h - h_c) for h < h_c, both 0
-beyond; F_s = -dU_s/dh still, and both are continuous at h_c. The loader requires
-|F(h_c)| <= ``TAIL`` |F(contact)| (contact: the cap for van der Waals, h = 0 for the
+beyond; F_s = -dU_s/dh still, and both are continuous at h_c. The job checks (`checks`)
+require |F(h_c)| <= ``TAIL`` |F(contact)| (contact: the cap for van der Waals, h = 0 for the
 double layer) so that the shift is negligible.
 """
 
@@ -224,7 +224,7 @@ def tail_ratios(job):
     """|F(cut-off)| / |F(contact)| of each truncated part of the job's law, for the pair
     of size classes where it is largest (the cut-off gap is cut-off x the pair's mean
     radius, the van der Waals cap a fixed gap, so the ratio depends on both radii):
-    {"interparticle.<key>": (ratio, (a_i, a_j))} for the loader's check against TAIL."""
+    {"interparticle.<key>": (ratio, (a_i, a_j))} for the job check against TAIL (`checks`)."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
     radii = job.system.class_radii
     pairs = [(a, b) for k, a in enumerate(radii) for b in radii[k:]]

@@ -327,11 +327,6 @@ def _closest_ratio(pos, side, strain, radii):
     return _pairs_ratio(pos, side, strain, radii, i[off], j[off])
 
 
-def min_distance(pos, side, strain=0.0):
-    """Smallest centre distance (Lees-Edwards minimum image) in a cube."""
-    return _contact_ratio(pos, side, strain, np.full(len(pos), 0.5))
-
-
 def min_gap_ratio(pos, side, radii, strain=0.0):
     """Smallest |x_i - x_j| / (a_i + a_j) over pairs (>= 1: no overlap)."""
     return _contact_ratio(pos, side, strain, np.ascontiguousarray(radii, dtype=float))

@@ -46,8 +46,9 @@ from mpi4py import MPI
 from .. import __version__
 from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
-                      extension_hash, load_job, parse_job, resources, resume_hash)
+                      extension_hash, parse_job, resources, resume_hash)
 from ..config.checks import scheme_problems
+from ..dynamics.checks import load_job
 from ..dynamics.models import job_backend
 from ..dynamics.realisation import RealisationFailed
 from . import extension, start_file, store, trajectory

@@ -148,8 +148,11 @@ def _nan_if_none(x):
 # --------------------------------------------------------------------------- create
 
 
-#: MPI tag of the commits sent to the writer rank (RemoteRunFile)
-COMMIT_TAG = 7301
+#: MPI tag of the commits sent to the writer rank (RemoteRunFile), and the writer's
+#: least interval between applying batches of them [s]
+COMMIT_TAG, SERVE_EVERY = 7301, 1.0
+#: the point of a commit's operation list where what precedes is flushed and synced
+SYNC = ("sync",)
 
 
 def _open_collective(path, mode: str, comm, **kwargs) -> h5py.File:
@@ -279,6 +282,7 @@ class RunFile:
         self._pending = []    # operations of the next commit (trajectory frames first)
         self.t_checksum = 0.0  # s spent computing checksums
         self.t_served, self.n_served = 0.0, 0  # s spent applying other ranks' commits, and how many
+        self._last_served = 0.0
 
     @classmethod
     def open(cls, path, comm) -> "RunFile":
@@ -298,23 +302,29 @@ class RunFile:
         self.file.close()
 
     def serve(self, wait: bool = False) -> None:
-        """The writer: apply every commit the other ranks have sent (``wait``: at least
-        one message, blocking). Other handles: nothing to do."""
+        """The writer: apply the commits the other ranks have sent, at most every
+        SERVE_EVERY seconds, all that have arrived as one batch (``wait``: now, after at
+        least one message, blocking). Other handles: nothing to do."""
         if not self._senders:
+            return
+        if not wait and time.monotonic() - self._last_served < SERVE_EVERY:
             return
         from mpi4py import MPI  # initialised by the driver (sdmpi.ensemble.runner)
 
-        status = MPI.Status()
+        batch, status = [], MPI.Status()
         while wait or self.comm.iprobe(source=MPI.ANY_SOURCE, tag=COMMIT_TAG, status=status):
             ops = self.comm.recv(source=MPI.ANY_SOURCE, tag=COMMIT_TAG)
             if ops is None:  # that rank has closed
                 self._senders -= 1
             else:
-                t0 = time.perf_counter()
-                self._apply(ops)
-                self.t_served += time.perf_counter() - t0
-                self.n_served += 1
+                batch.append(ops)
             wait = False
+        if batch:
+            t0 = time.perf_counter()
+            self._apply(batch)
+            self.t_served += time.perf_counter() - t0
+            self.n_served += len(batch)
+        self._last_served = time.monotonic()
 
     def layout_problems(self, task_id: int, layout: TaskLayout) -> list[str]:
         """How the file's datasets for a task differ from ``layout`` (empty: they match)."""
@@ -383,25 +393,34 @@ class RunFile:
             ops += [("write", f"{key}/sample_crc", slot, table),
                     ("write", f"{key}/state_crc", slot, crcs)]
         ops += [("fault", "state"), ("write", f"{key}/slot_step", slot, stop),
-                ("sync",),                                      # all of the above on disk
-                ("fault", "commit"), ("write", "progress", task_id, stop),
-                ("flush",)]                                     # readers of a live file see it
+                SYNC,                                   # all of the above on disk first
+                ("fault", "commit"), ("write", "progress", task_id, stop)]
         self._submit(ops)
 
     def _submit(self, ops: list) -> None:
-        self._apply(ops)
+        self._apply([ops])
 
-    def _apply(self, ops: list) -> None:
+    def _apply(self, commits: list) -> None:
+        """Apply commits (operation lists, :meth:`commit`): what each does before its
+        ``sync`` for all of them, one flush and fsync, then what each does after it."""
+        after = []
+        for ops in commits:
+            cut = ops.index(SYNC)
+            self._run(ops[:cut])
+            after.append(ops[cut + 1:])
+        self._flush()
+        os.fsync(self._fd)  # everything before the syncs is on disk first
+        for ops in after:
+            self._run(ops)
+        self._flush()       # readers of a live file see the new /progress
+
+    def _run(self, ops: list) -> None:
         for op in ops:
             if op[0] == "write":
                 _, path, rows, values = op
                 self.file[path][rows] = values
-            elif op[0] == "fault":
-                fault(op[1])
             else:
-                self._flush()
-                if op[0] == "sync":
-                    os.fsync(self._fd)
+                fault(op[1])
 
     def _flush(self) -> None:
         """Hand HDF5's buffered writes to the operating system (serial HDF5 only)."""

@@ -64,14 +64,6 @@ class Lattice:
         frac -= np.round(frac)
         return frac @ self.vectors
 
-    def image_shifts(self, reach):
-        """Lattice translations n . L with |n_i| <= ceil(reach |b_i|) + 1: every image of a
-        point of the primary cell that can lie within `reach` of another point of it."""
-        counts = np.ceil(reach * self.plane_density).astype(int) + 1
-        ranges = [np.arange(-c, c + 1) for c in counts]
-        n = np.stack(np.meshgrid(*ranges, indexing="ij"), axis=-1).reshape(-1, 3)
-        return n @ self.vectors
-
     @property
     def wave_basis(self):
         """The rows 2 pi b_i (3, 3): the reciprocal lattice is k = n . wave_basis, n integer."""

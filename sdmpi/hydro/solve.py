@@ -1,6 +1,9 @@
 """The public hydrodynamics entry point `solve_mobility` (DESIGN.md contract 1)."""
 
+from __future__ import annotations
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .basis import from_five, to_five
 from .geometry import check_box
@@ -48,23 +51,50 @@ def check_inputs(positions, box, radii, strain, forces, torques, rate_of_strain)
     return pos, box, radii, float(strain), forces, torques, einf
 
 
-def solve_mobility(positions, box, *, radii=None, strain=0.0, forces=None, torques=None,
-                   rate_of_strain=None, lubrication=True, solver="dense",
-                   ewald_tol=DEFAULT_EWALD_TOL, comm=None, tolerance=DEFAULT_TOL):
-    """Velocities and stresslets of N rigid spheres (Stokes units: viscosity 1).
+def solve_mobility(positions: ArrayLike, box: ArrayLike | None, *, radii: ArrayLike | None = None,
+                   strain: float = 0.0, forces: ArrayLike | None = None, torques: ArrayLike | None = None,
+                   rate_of_strain: ArrayLike | None = None, lubrication: bool = True,
+                   solver: str = "dense", ewald_tol: float = DEFAULT_EWALD_TOL, comm=None,
+                   tolerance: float = DEFAULT_TOL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Velocities and stresslets of N rigid spheres in Stokes flow (the FTS problem of
+    Stokesian dynamics: far field by Ewald sums, Durlofsky, Brady & Bossis 1987,
+    Beenakker 1986; exact two-sphere lubrication, Jeffrey & Onishi 1984).
 
-    positions (N, 3); box (3,) periodic Lees-Edwards box at `strain`, or None for
-    unbounded fluid; radii (N,) (default 1); forces, torques (N, 3) exerted on the
-    particles (default 0); rate_of_strain: symmetric traceless E_inf (3, 3) (default 0).
-    Returns U, Omega (N, 3) relative to the imposed linear flow at each centre, and the
-    stresslets S (N, 3, 3). Zero-volume-flux frame. An isolated sphere gives
+    Plain Stokes units: fluid viscosity 1, lengths in any unit (radii in the same unit).
+    Zero-volume-flux frame (the k = 0 Ewald term omitted). An isolated sphere gives
     U = F/(6 pi a), Omega = T/(8 pi a^3), S = (20/3) pi a^3 E_inf.
-    Overlaps deeper than MAX_OVERLAP mean radii raise ValueError; shallower ones and
-    touching pairs are regularised (see `lubrication`).
-    solver: one of `sdmpi.hydro.solvers.CHOICES` ("dense", "petsc-dense", "petsc-krylov",
-    "auto"); comm: the MPI communicator a PETSc backend solves on, collective over it
-    (default: this rank alone, as outside mpirun); tolerance: relative residual of the
-    iterative solves (petsc-krylov)."""
+
+    Args:
+        positions: (N, 3) sphere centres.
+        box: (3,) sides (Lx, Ly, Lz) of a periodic Lees-Edwards box, or None for an
+            unbounded fluid.
+        radii: (N,) sphere radii (default: all 1).
+        strain: Lees-Edwards strain of the box: the image at +Ly is shifted by strain Ly
+            in x.
+        forces: (N, 3) forces exerted on the spheres (default 0).
+        torques: (N, 3) torques exerted on the spheres (default 0).
+        rate_of_strain: (3, 3) symmetric traceless rate of strain E_inf of the imposed
+            linear flow (default 0); simple shear u = gamma_dot y e_x has
+            E_xy = E_yx = gamma_dot/2.
+        lubrication: add the pairwise lubrication (near-field) resistance; False gives
+            the far-field (Rotne-Prager level, FTS) mobility alone.
+        solver: a backend of `sdmpi.hydro.solvers.CHOICES`: "dense" (LAPACK),
+            "petsc-dense", "petsc-krylov" or "auto".
+        ewald_tol: relative accuracy of the Ewald sums.
+        comm: the MPI communicator a PETSc backend solves on, collective over it
+            (default: this process alone).
+        tolerance: relative residual of the iterative solves (petsc-krylov).
+
+    Returns:
+        U: (N, 3) translational velocities relative to the imposed flow at each centre.
+        Omega: (N, 3) angular velocities relative to the imposed vorticity.
+        S: (N, 3, 3) stresslets (symmetric, traceless).
+
+    Raises:
+        ValueError: an argument of the wrong shape, not finite, or spheres overlapping by
+            more than MAX_OVERLAP of their mean radius (shallower overlaps and touching
+            pairs are regularised: docs/numerics.md).
+    """
     pos, box, radii, strain, forces, torques, einf = check_inputs(
         positions, box, radii, strain, forces, torques, rate_of_strain)
     if not 0.0 < tolerance < 1.0:

@@ -639,13 +639,6 @@ def _scalars_kernel(r, a1, a2, lidx, rem, gg, par, pref):
     return out
 
 
-@nb.njit(cache=True)
-def _cross(a, b, out):
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-
-
 #: B^m entries of `basis.BASIS`: 1/sqrt2 and 1/sqrt6
 _R2 = 1.0 / _SQ2
 _R6 = 1.0 / _SQ6

@@ -1,0 +1,184 @@
+"""Reference sample streams: one task of every example job in jobs/ (shrunk to a few
+tens of steps at small N), and variants for the options no example job selects, stepped
+and compared bit for bit with the SHA-256 digests stored in
+tests/data/sample_streams.json. The guard for changes meant to leave every stream as it
+is (refactoring, speed-ups): a single changed bit of any sample fails it.
+
+The digests belong to one floating-point stack (numpy and its BLAS, one BLAS thread, the
+CPU's kernels); the file records the one they were made on, and a failure says whether
+the values still agree to rounding (another stack, or a reordering of floating-point
+operations) or differ outright.
+
+Each case starts from the state of a fresh process, as the first task of `sdmpi run` on a
+rank does: the lubrication tables of `sdmpi.hydro.lubrication` are emptied first. The
+last bits of a stream depend on the tables that earlier realisations in the same process
+built (a size ratio with fewer than 16 pairs in a call takes the exact path until some
+call has built its table), so without that the streams would depend on the order of the
+cases.
+
+Regenerate the references only when a change is meant to alter the streams (a defect
+fixed, new physics), from the commit that makes that change, and say so in its message:
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \\
+        python -m tests.test_sample_streams --write     # from the repository's top directory
+"""
+
+import hashlib
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from .runs import fresh_lubrication_tables
+
+ROOT = Path(__file__).resolve().parents[1]
+REFERENCE = ROOT / "tests" / "data" / "sample_streams.json"
+STEPS = 24
+
+#: case -> (job file in jobs/, --set overrides, task index). N shrunk so that every case
+#: steps in about a second at most once the kernels are compiled; tasks and time steps
+#: chosen so that the streams include collisions (demo_midpoint, demo_far_field,
+#: boehmite_epoxy, schaink2000_collisions), frictional contacts, sliding included (task 13
+#: of the frictional jobs: phi = 0.56), and the last task of a job (its seed's spawn key)
+CASES = {
+    "demo": ("demo.toml", [], -1),
+    "demo_midpoint": ("demo.toml", ['brownian.scheme="midpoint"'], 0),
+    "demo_far_field": ("demo.toml", ['hydrodynamics.model="far-field"',
+                                     "integration.steps_per_period=40"], 0),
+    "demo_per_particle": ("demo.toml", ["output.per_particle=true"], 0),
+    "bidisperse_demo": ("bidisperse_demo.toml", ["system.n_particles=8"], 0),
+    "boehmite_epoxy": ("boehmite_epoxy.toml", [], 0),
+    "dilute_free_draining": ("dilute_free_draining.toml", ["system.n_particles=8"], 0),
+    "frictional_mu0.1": ("frictional_mu0.1.toml", [], 13),
+    "frictional_mu0.3": ("frictional_mu0.3.toml", [], 13),
+    "frictional_mu0.5": ("frictional_mu0.5.toml", [], 13),
+    "large_n_krylov": ("large_n_krylov.toml", ["system.n_particles=8", "ensemble.ranks_per_task=1"], 0),
+    "monolayer_hydro": ("monolayer_hydro.toml", ["system.n_particles=9"], 0),
+    "monolayer_repulsion": ("monolayer_repulsion.toml", ["system.n_particles=9"], 0),
+    "schaink2000_fixed_dt": ("schaink2000_fixed_dt.toml", ["system.n_particles=8"], 0),
+    "schaink2000_frequency_scan": ("schaink2000_frequency_scan.toml", ["system.n_particles=8"], -1),
+    "schaink2000_maxwell": ("schaink2000_maxwell.toml", ["system.n_particles=8"], 0),
+    "schaink2000_newtonian": ("schaink2000_newtonian.toml", ["system.n_particles=8"], 0),
+    "schaink2000_collisions": ("schaink2000_newtonian.toml", [
+        "system.n_particles=8", "integration.steps_per_period=20", "integration.dt_max=0.01"], 0),
+    "schaink2000_phi_scan": ("schaink2000_phi_scan.toml", ["system.n_particles=8"], -1),
+    "steady_brownian": ("steady_brownian.toml", ["system.n_particles=8"], 0),
+    "steady_repulsion": ("steady_repulsion.toml", ["system.n_particles=8"], 0),
+}
+#: the cases whose backend needs petsc4py
+PETSC_CASES = {"large_n_krylov"}
+
+
+def _le_bytes(array):
+    """The bytes of an array in little-endian order (platform-independent digests)."""
+    array = np.ascontiguousarray(array)
+    return array.astype(array.dtype.newbyteorder("<"), copy=False).tobytes()
+
+
+def stream(case):
+    """The case's sample stream and final positions, summarised: {"samples": {dataset:
+    SHA-256}, "positions": SHA-256, "values": {label: repr(float)}}."""
+    from sdmpi.config import enumerate_tasks, load_job
+    from sdmpi.dynamics import Realisation
+
+    fresh_lubrication_tables()
+
+    job_file, overrides, index = CASES[case]
+    job = load_job(ROOT / "jobs" / job_file, overrides)
+    real = Realisation(job, enumerate_tasks(job)[index])
+    samples = real.advance(STEPS)
+    values = {f"{k}[-1, xy]": repr(float(v[-1, 3])) for k, v in samples.items()
+              if k.startswith("stress_")}
+    values["positions[0]"] = repr([float(x) for x in real.positions[0]])
+    return {"samples": {k: hashlib.sha256(_le_bytes(v)).hexdigest() for k, v in sorted(samples.items())},
+            "positions": hashlib.sha256(_le_bytes(real.positions)).hexdigest(),
+            "values": values}
+
+
+def _stack():
+    """The floating-point stack the digests were made on: versions, the BLAS and LAPACK
+    libraries loaded (Linux), the CPU."""
+    import numba
+    import scipy
+    import scipy.linalg  # noqa: F401  (loads LAPACK)
+    try:
+        with open("/proc/self/maps") as maps:
+            libs = sorted({Path(line.split()[-1]).name for line in maps
+                           if "/" in line and any(w in line.split()[-1].rsplit("/", 1)[-1]
+                                                  for w in ("blas", "lapack", "mkl"))})
+    except OSError:
+        libs = []
+    cpu = platform.processor()
+    try:
+        with open("/proc/cpuinfo") as info:
+            cpu = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return {"numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
+            "blas": [lib for lib in libs if not lib.startswith("_") and "cython" not in lib],
+            "machine": platform.machine(), "cpu": cpu,
+            "python": platform.python_version()}
+
+
+def _reference():
+    return json.loads(REFERENCE.read_text())
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return _reference()
+
+
+def test_every_example_job_has_a_case():
+    """A new example job gets a reference stream (add it to CASES, then --write)."""
+    covered = {job for job, _, _ in CASES.values()}
+    assert {p.name for p in (ROOT / "jobs").glob("*.toml")} == covered
+
+
+def test_references_cover_the_cases(reference):
+    assert set(reference["cases"]) == set(CASES)
+    for case, (job_file, overrides, index) in CASES.items():
+        assert reference["cases"][case]["definition"] == [job_file, overrides, index, STEPS], case
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_sample_stream_unchanged(case, reference):
+    assert os.environ.get("OPENBLAS_NUM_THREADS") == "1", "the references need one BLAS thread"
+    if case in PETSC_CASES:
+        from sdmpi.hydro.petsc_dense import PetscUnavailable, load_petsc
+        try:
+            load_petsc()
+        except PetscUnavailable as err:
+            pytest.skip(f"petsc4py not available: {err}")
+    ref = reference["cases"][case]
+    got = stream(case)
+    changed = [k for k in sorted(set(ref["samples"]) | set(got["samples"]))
+               if ref["samples"].get(k) != got["samples"].get(k)]
+    if got["positions"] != ref["positions"]:
+        changed.append("final positions")
+    if changed:
+        values = "\n".join(f"  {k}: reference {ref['values'].get(k)}, now {v}"
+                           for k, v in got["values"].items())
+        pytest.fail(f"{case}: the sample stream changed ({', '.join(changed)}); made on "
+                    f"{reference['stack']}, now {_stack()}\n{values}")
+
+
+def write():
+    """Recompute every case and rewrite tests/data/sample_streams.json."""
+    cases = {}
+    for case, (job_file, overrides, index) in CASES.items():
+        cases[case] = {"definition": [job_file, overrides, index, STEPS], **stream(case)}
+        print(case, file=sys.stderr)
+    REFERENCE.write_text(json.dumps({"stack": _stack(), "cases": cases}, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--write"]:
+        sys.exit(__doc__)
+    if any(os.environ.get(v) != "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")):
+        sys.exit("set OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 first")
+    write()
