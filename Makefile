@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test pip-check bench schaink2000 clean
+.PHONY: setup run test pip-check bench schaink2000 finite-size clean
 
 setup: $(VENV)/.installed
 
@@ -82,6 +82,19 @@ schaink2000: setup
 	done
 	$(VPY) postprocess/schaink2000.py --newtonian out/schaink2000/frequency_scan.h5 \
 	  --phi-scan out/schaink2000/phi_scan.h5 --fixed-dt out/schaink2000/fixed_dt.h5 -o $(STUDY_OUT)
+
+# The finite-size study (docs/validation/finite_size/README.md): the time-step control and
+# the N = 64 and 125 runs on RANKS ranks into out/finite_size/, then its tables and figures
+# into FS_OUT. A stopped study resumes where it stopped when this is run again.
+FS_OUT    ?= docs/validation/finite_size
+finite-size: setup
+	mkdir -p out/finite_size
+	for job in dt_control n64 n125; do \
+	  mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/finite_size_$$job.toml \
+	    -o out/finite_size/$$job.h5 || exit 1; \
+	done
+	$(VPY) postprocess/finite_size.py --runs out/finite_size/n64.h5 out/finite_size/n125.h5 \
+	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
 
 clean:
 	rm -rf $(VENV) $(PIP_VENV) .numba_cache .numba_cache_pip build *.egg-info

@@ -20,24 +20,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from sdmpi.analysis.plots import legend_below  # noqa: E402
 from schaink_common import (describe, figure, parser, phis, pm, print_table,  # noqa: E402
-                            reduce_systems, save, series)
+                            reduce_systems, save, series, weighted_line)
 
 
 def line_fit(x, y, e):
     """Weighted least squares y = a + b x with weights 1/e^2; returns (a, b, b_err,
     chi2/dof), b_err the slope's standard error for these absolute errors (nan where
     undetermined: fewer than 2 usable points; chi2/dof needs 3)."""
-    ok = np.isfinite(y) & np.isfinite(e) & (e > 0)
-    if ok.sum() < 2:
-        return np.nan, np.nan, np.nan, np.nan
-    wts = 1 / e[ok] ** 2
-    A = np.vstack([np.ones(ok.sum()), x[ok]]).T
-    coef = np.linalg.lstsq(A * np.sqrt(wts)[:, None], y[ok] * np.sqrt(wts), rcond=None)[0]
-    dof = ok.sum() - 2
-    chi2 = np.sum(wts * (y[ok] - A @ coef) ** 2) / dof if dof > 0 else np.nan
-    xbar = np.sum(wts * x[ok]) / wts.sum()
-    b_err = np.sum(wts * (x[ok] - xbar) ** 2) ** -0.5
-    return coef[0], coef[1], b_err, chi2
+    fit = weighted_line(x, y, e)
+    return fit.a, fit.b, fit.b_err, fit.chi2
 
 
 def main(argv=None):

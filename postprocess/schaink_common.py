@@ -16,6 +16,7 @@ import math
 import sys
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -72,6 +73,36 @@ def series(red, phi, component, column):
             and math.isclose(r["phi"], phi, rel_tol=1e-9)]
     rows.sort(key=lambda r: r["omega"])
     return tuple(np.array([r[k] for r in rows]) for k in ("omega", column, column + "_err"))
+
+
+class LineFit(NamedTuple):
+    """y = a + b x: intercept and slope with their standard errors, chi^2/dof, dof."""
+
+    a: float
+    a_err: float
+    b: float
+    b_err: float
+    chi2: float
+    dof: int
+
+
+def weighted_line(x, y, e) -> LineFit:
+    """Weighted least squares y = a + b x (weights 1/e^2) over the finite points with
+    positive errors; standard errors for these absolute errors (nan where undetermined:
+    fewer than 2 points; chi^2/dof needs 3)."""
+    x, y, e = (np.asarray(v, dtype=float) for v in (x, y, e))
+    ok = np.isfinite(y) & np.isfinite(e) & (e > 0)
+    if ok.sum() < 2:
+        return LineFit(*(np.nan,) * 5, 0)
+    w, x, y = 1 / e[ok] ** 2, x[ok], y[ok]
+    s, sx, sxx = w.sum(), np.sum(w * x), np.sum(w * x * x)
+    sy, sxy = np.sum(w * y), np.sum(w * x * y)
+    det = s * sxx - sx ** 2
+    a, b = (sxx * sy - sx * sxy) / det, (s * sxy - sx * sy) / det
+    dof = int(ok.sum()) - 2
+    chi2 = float(np.sum(w * (y - a - b * x) ** 2) / dof) if dof > 0 else np.nan
+    return LineFit(float(a), float(np.sqrt(sxx / det)), float(b), float(np.sqrt(s / det)),
+                   chi2, dof)
 
 
 def phis(reductions):

@@ -1,0 +1,82 @@
+"""postprocess/finite_size.py, the regeneration path of docs/validation/finite_size/, on
+tiny real runs (N = 8 and 16 of jobs/finite_size_n64.toml, shrunk; the time-step control at
+80 pi): every table and figure, the per-N tables equal to `sdmpi reduce`'s, the fit in 1/L
+against an independent least-squares solution, byte-identical tables when run again."""
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from sdmpi.cli import main as sdmpi_main
+from .tiny_runs import postprocess_script, sdmpi_run
+
+FIGURES = ["moduli.png", "viscosities.png", "size.png", "N8/maxwell.png"]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("finite_size")
+    small = sdmpi_run(d / "n8.h5", job="finite_size_n64.toml")
+    large = sdmpi_run(d / "n16.h5", "--set", "system.n_particles=16", job="finite_size_n64.toml")
+    control = sdmpi_run(d / "control.h5", "--set", "shear.omega=[251.32741228718345]",
+                        job="finite_size_dt_control.toml")
+    return small, large, control
+
+
+def regenerate(runs, out):
+    small, large, control = runs
+    return postprocess_script("finite_size").main(
+        ["--runs", str(small), str(large), "--control", str(control), "-o", str(out)])
+
+
+def read(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_regeneration_writes_every_table_and_figure(runs, tmp_path):
+    out = tmp_path / "fs"
+    assert regenerate(runs, out) == 0
+    for name in FIGURES:
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, name
+    assert sdmpi_main(["reduce", str(runs[0]), "-o", str(tmp_path / "cli"), "--no-plots",
+                       "--medium", "maxwell:eta=1,lambda=0.5"]) == 0
+    for name in ("moduli.csv", "errors.csv"):
+        assert (out / "N8" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes()
+        assert ((out / "N8" / "maxwell" / name).read_bytes()
+                == (tmp_path / "cli" / "maxwell_lambda0.5" / name).read_bytes())
+    text = (out / "summary.md").read_text()
+    assert "| eta_H | " in text and "Time-step control" in text
+    assert "total G_prime: dt = 5e-4" in text and "nan" not in text.split("Time-step")[1]
+
+    # the fit in 1/L, independently: weighted least squares by numpy
+    quantities = {r["quantity"]: r for r in read(out / "quantities.csv")}
+    fits = {r["quantity"]: r for r in read(out / "extrapolation.csv")}
+    sizes = [8, 16, 27]
+    assert fits["eta_H"]["sizes"] == "8 16 27"
+    side = [(4 * math.pi * n / (3 * 0.45)) ** (1 / 3) for n in sizes]
+    y = np.array([float(quantities["eta_H"][f"N{n}"]) for n in sizes])
+    e = np.array([float(quantities["eta_H"][f"N{n}_err"]) for n in sizes])
+    design = np.vstack([np.ones(3), 1 / np.array(side)]).T
+    cov = np.linalg.inv(design.T @ (design / e[:, None] ** 2))
+    coef = cov @ design.T @ (y / e ** 2)
+    assert float(fits["eta_H"]["Q_inf"]) == pytest.approx(coef[0], rel=1e-9)
+    assert float(fits["eta_H"]["Q_inf_err"]) == pytest.approx(math.sqrt(cov[0, 0]), rel=1e-9)
+    assert float(fits["eta_H"]["c"]) == pytest.approx(coef[1], rel=1e-9)
+    # N = 27 comes from the committed study's table
+    study = [r for r in read("docs/validation/schaink2000/newtonian/moduli.csv")
+             if r["component"] == "hydrodynamic"]
+    w = np.array([float(r["eta_prime_err"]) ** -2 for r in study])
+    mean = np.sum(w * [float(r["eta_prime"]) for r in study]) / w.sum()
+    assert float(quantities["eta_H"]["N27"]) == pytest.approx(mean, rel=1e-9)
+
+
+def test_tables_are_byte_identical_when_regenerated(runs, tmp_path):
+    first, second = tmp_path / "a", tmp_path / "b"
+    assert regenerate(runs, first) == 0 and regenerate(runs, second) == 0
+    for name in ("quantities.csv", "extrapolation.csv", "summary.md", "N16/moduli.csv",
+                 "dt_control/moduli.csv"):
+        assert (first / name).read_bytes() == (second / name).read_bytes(), name
