@@ -84,16 +84,17 @@ schaink2000: setup
 	  --phi-scan out/schaink2000/phi_scan.h5 --fixed-dt out/schaink2000/fixed_dt.h5 -o $(STUDY_OUT)
 
 # The finite-size study (docs/validation/finite_size/README.md): the time-step control and
-# the N = 64 and 125 runs on RANKS ranks into out/finite_size/, then its tables and figures
-# into FS_OUT. A stopped study resumes where it stopped when this is run again.
+# the N = 27, 64 and 125 runs on RANKS ranks into out/finite_size/, then its tables and
+# figures into FS_OUT. A stopped study resumes where it stopped when this is run again.
 FS_OUT    ?= docs/validation/finite_size
 finite-size: setup
 	mkdir -p out/finite_size
-	for job in dt_control n64 n125; do \
+	for job in dt_control n27 n64 n125; do \
 	  mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/finite_size_$$job.toml \
 	    -o out/finite_size/$$job.h5 || exit 1; \
 	done
-	$(VPY) postprocess/finite_size.py --runs out/finite_size/n64.h5 out/finite_size/n125.h5 \
+	$(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
+	  out/finite_size/n125.h5 \
 	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
 
 clean:

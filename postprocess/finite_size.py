@@ -7,11 +7,13 @@
 
 Inputs: run files of `sdmpi run` (complete or partial: whatever is committed is used) of
 the same system (phi = 0.45, gamma0 = 0.02, Brownian hard spheres, Newtonian medium) at
-one N each (jobs/finite_size_n*.toml); ``--reference``: the committed N = 27 frequency scan
-(moduli.csv as `sdmpi reduce` writes it, from `make schaink2000`); ``--control``: the
-time-step control (jobs/finite_size_dt_control.toml: N = 27 at 80 pi with dt = 5e-4 t_D),
-compared with the reference's 80 pi row; ``--eta-inf``: the equilibrium high-frequency
-viscosity eta'_inf(N) (bench/eta_inf.json), the anchor for eta'_H = eta'_inf - 1.
+one N each (jobs/finite_size_n*.toml, one time step dt = 5e-4 t_D at every frequency);
+``--reference``: the committed N = 27 frequency scan (moduli.csv as `sdmpi reduce` writes
+it, from `make schaink2000`; dt = 5e-4 ... 5e-5 t_D, 500 steps per period), the time-step
+reference, and the N = 27 point of the fits when no run file has N = 27; ``--control``:
+the time-step control (jobs/finite_size_dt_control.toml: N = 27 at 80 pi with dt = 5e-4,
+as long as the reference); ``--eta-inf``: the equilibrium high-frequency viscosity
+eta'_inf(N) (bench/eta_inf.json), the anchor for eta'_H = eta'_inf - 1.
 
 Outputs in OUTDIR:
 
@@ -26,7 +28,8 @@ Outputs in OUTDIR:
   degrees of freedom, and N_within: the N from which |c| / L is below the error of Q_inf;
 * ``moduli.png`` (G', G'' against omega, every N), ``viscosities.png`` (eta', eta''),
   ``size.png`` (each quantity against 1/L with its fit);
-* ``summary.md``: the numbers above as text, the time-step control and the eta'_H check.
+* ``summary.md``: the numbers above as text, the eta'_H check, and the time-step controls
+  (the control and an N = 27 run against the reference, frequency by frequency).
 
 Tables are byte-identical when the same inputs are processed again. Units: omega in
 rad/t_D, moduli in eta_m/t_D, viscosities relative to eta_m, L in sphere radii.
@@ -160,8 +163,7 @@ def parse_args(argv):
 def main(argv=None):
     args = parse_args(argv)
     out = Path(args.output)
-    tables = {27: rows_of(args.reference)}
-    notes = []
+    tables, runs, notes = {27: rows_of(args.reference)}, set(), []
     try:
         for path in args.runs:
             red = reduce([path])
@@ -171,6 +173,7 @@ def main(argv=None):
             write_all(maxw, out / f"N{n}" / "maxwell")
             fig8_maxwell_viscosity.draw([maxw], [red], out / f"N{n}" / "maxwell.png")
             tables[n] = rows_of(out / f"N{n}" / "moduli.csv")
+            runs.add(n)
             notes.append(f"N = {n}: {path}, " + ("complete" if red.complete else
                                                  "PARTIAL (committed samples only)"))
         control = None
@@ -192,7 +195,8 @@ def main(argv=None):
     write_extrapolation(fits, out / "extrapolation.csv")
     draw_spectra(tables, out)
     draw_size(values, fits, out / "size.png")
-    (out / "summary.md").write_text(summary(values, fits, control, tables[27], notes))
+    (out / "summary.md").write_text(summary(values, fits, notes) + time_steps(
+        rows_of(args.reference), tables[27] if 27 in runs else None, control))
     print(f"wrote {out / 'summary.md'}")
     return 0
 
@@ -269,12 +273,11 @@ def draw_size(values, fits, path):
     save(fig, path)
 
 
-def summary(values, fits, control, reference, notes) -> str:
+def summary(values, fits, notes) -> str:
     sizes = sorted(values)
     lines = ["# Finite-size study: the numbers", "",
              "Written by postprocess/finite_size.py. phi = 0.45, gamma0 = 0.02; one standard "
-             "error. N = 27: the committed study (docs/validation/schaink2000).", "",
-             *[f"- {note}" for note in notes], "",
+             "error.", "", *[f"- {note}" for note in notes], "",
              "| quantity | " + " | ".join(f"N = {n} (L = {box_side(n):.2f})" for n in sizes)
              + " | Q_inf (fit in 1/L) | N within error |",
              "|---|" + "---|" * len(sizes) + "---|---|"]
@@ -293,16 +296,35 @@ def summary(values, fits, control, reference, notes) -> str:
         z = (a - b) / math.hypot(ea, eb) if math.isfinite(a + b) else math.nan
         lines.append(f"- N = {n}: eta'_H {pm(a, ea)}, eta'_inf - 1 {pm(b, eb)}: "
                      f"difference {z:+.1f} standard errors")
-    if control is not None:
-        lines += ["", "## Time-step control (N = 27, 80 pi): dt = 5e-4 against the study's 5e-5", ""]
-        omega = 10 * EIGHT_PI
-        for comp, col in (("total", "G_prime"), ("hydrodynamic", "eta_prime"),
-                          ("brownian", "eta_prime"), ("total", "eta_dprime")):
-            (a, ea), (b, eb) = at(control, comp, col, omega), at(reference, comp, col, omega)
-            z = (a - b) / math.hypot(ea, eb)
-            lines.append(f"- {comp} {col}: dt = 5e-4 {pm(a, ea)}, dt = 5e-5 {pm(b, eb)}: "
-                         f"{z:+.1f} standard errors")
     return "\n".join(lines) + "\n"
+
+
+#: (component, column) compared between time steps
+CHECKED = (("total", "G_prime"), ("total", "G_dprime"), ("hydrodynamic", "eta_prime"),
+           ("brownian", "eta_prime"))
+
+
+def time_steps(reference, n27, control) -> str:
+    """The time-step controls: each table's values against the reference's (500 steps per
+    period, dt <= 5e-4) at the frequencies both have, as differences in standard errors."""
+    lines = []
+    for title, rows in (("the control (80 pi, as long as the study)", control),
+                        ("the N = 27 run of the study's own protocol at dt = 5e-4", n27)):
+        if rows is None:
+            continue
+        lines += ["", f"## Time step: {title} against the study (dt = 5e-4 ... 5e-5)", "",
+                  "| omega | dt here, study | " + " | ".join(f"{c} {k}" for c, k in CHECKED)
+                  + " |", "|---|---|" + "---|" * len(CHECKED)]
+        for omega in sorted({r["omega"] for r in rows}):
+            cells = []
+            for comp, col in CHECKED:
+                (a, ea), (b, eb) = at(rows, comp, col, omega), at(reference, comp, col, omega)
+                z = (a - b) / math.hypot(ea, eb)
+                cells.append(f"{pm(a, ea)} vs {pm(b, eb)} ({z:+.1f})")
+            study_dt = min(5e-4, 2 * math.pi / omega / 500)
+            lines.append(f"| {omega / math.pi:.0f} pi | 5e-4, {study_dt:.3g} | "
+                         + " | ".join(cells) + " |")
+    return "\n".join(lines) + ("\n" if lines else "")
 
 
 if __name__ == "__main__":

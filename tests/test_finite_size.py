@@ -49,8 +49,9 @@ def test_regeneration_writes_every_table_and_figure(runs, tmp_path):
         assert ((out / "N8" / "maxwell" / name).read_bytes()
                 == (tmp_path / "cli" / "maxwell_lambda0.5" / name).read_bytes())
     text = (out / "summary.md").read_text()
-    assert "| eta_H | " in text and "Time-step control" in text
-    assert "total G_prime: dt = 5e-4" in text and "nan" not in text.split("Time-step")[1]
+    assert "| eta_H | " in text and "## Time step: the control" in text
+    control = text.split("## Time step: the control")[1]
+    assert "| 80 pi | 5e-4, 5e-05 |" in control and "nan" not in control
 
     # the fit in 1/L, independently: weighted least squares by numpy
     quantities = {r["quantity"]: r for r in read(out / "quantities.csv")}

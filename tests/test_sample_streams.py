@@ -61,6 +61,7 @@ CASES = {
     "monolayer_repulsion": ("monolayer_repulsion.toml", ["system.n_particles=9"], 0),
     "schaink2000_fixed_dt": ("schaink2000_fixed_dt.toml", ["system.n_particles=8"], 0),
     "schaink2000_frequency_scan": ("schaink2000_frequency_scan.toml", ["system.n_particles=8"], -1),
+    "finite_size_n27": ("finite_size_n27.toml", ["system.n_particles=8"], 0),
     "finite_size_n64": ("finite_size_n64.toml", ["system.n_particles=8"], -1),
     "finite_size_n125": ("finite_size_n125.toml", ["system.n_particles=8"], 0),
     "finite_size_dt_control": ("finite_size_dt_control.toml", ["system.n_particles=8"], 0),
