@@ -6,10 +6,14 @@ The realisation is the test double (tests/ensemble_double.py: the real sample da
 no physics) slowed to ``--step-ms`` per step, so that stepping takes the time of a real
 step (about 5 ms at N = 27 on one core) and only the writing differs between the runs.
 Both runs' `sdmpi run` summary lines give the HDF5 writes + checkpoints time and, on the
-serial path, the time rank 0 spent applying the other rank's commits. The estimate for P
-ranks: each of the P - 1 other ranks commits once per interval of ``checkpoint_every``
-steps, so rank 0 spends (P - 1) x (time per applied commit) per interval; its share is that
-over the interval's stepping time.
+serial path, the time rank 0 spent applying the other rank's commits. Then, in this
+process, rank 0's work alone: applying batches of K = 1, 10, 100 commits (one checkpoint
+interval of one task each) to a serial run file, t(K) = fixed + K x per commit (the fixed
+part: the flushes and the fsync of a batch). The estimate for P ranks: each of the P - 1
+other ranks commits once per interval of ``checkpoint_every`` steps, and rank 0 applies what
+has arrived at most every SERVE_EVERY seconds, so per interval it spends
+min(P - 1, interval / SERVE_EVERY) x fixed + (P - 1) x per commit; its share is that over
+the interval.
 
     python bench/writer_rank.py --out bench/writer_rank.json
 """
@@ -22,7 +26,10 @@ import re
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
+
+from sdmpi.ensemble.store import SERVE_EVERY, RunFile, TaskLayout, create
 
 HERE = Path(__file__).resolve().parent
 TESTS = HERE.parent / "tests"
@@ -57,6 +64,52 @@ def run(serial: bool, job: Path, out: Path, step_ms: float) -> str:
     return res.stdout
 
 
+class _Collecting(RunFile):
+    """A writable run file whose commits are collected instead of applied."""
+
+    def __init__(self, path):
+        from mpi4py import MPI
+        super().__init__(path, MPI.COMM_SELF)
+        self.collected = []
+
+    def _submit(self, ops):
+        self.collected.append(ops)
+
+
+def batch_seconds(job_path: Path, where: Path, sizes=(1, 10, 100)) -> dict:
+    """Median time for rank 0 to apply a batch of K commits (one checkpoint interval of
+    one task each, K different tasks), on a serial run file of the job in ``where``."""
+    sys.path.insert(0, str(TESTS))
+    from ensemble_double import DoubleRealisation
+    from mpi4py import MPI
+
+    from sdmpi.config import enumerate_tasks, load_job
+
+    job = load_job(str(job_path))
+    tasks = enumerate_tasks(job)[:max(sizes)]
+    reals = {t.task_id: DoubleRealisation(job, t) for t in tasks}
+    layouts = {t.task_id: TaskLayout.of(r) for t, r in zip(tasks, reals.values())}
+    path = where / "batches.h5"
+    create(path, job, "", layouts, MPI.COMM_SELF, json.dumps({}), "now")
+    handle = _Collecting(path)
+    every = job.output.checkpoint_every
+    for t in tasks:
+        handle.begin(t.task_id, -1)
+        samples = reals[t.task_id].advance(every)
+        handle.commit(t.task_id, handle.samples(t.task_id), 0, every, samples,
+                      reals[t.task_id].get_state(), 0)
+    out = {}
+    for k in sizes:
+        times = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            handle._apply(handle.collected[:k])
+            times.append(time.perf_counter() - t0)
+        out[k] = sorted(times)[2]
+    handle.close()
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=27)
@@ -82,11 +135,22 @@ def main() -> None:
             if served:
                 entry["commits_applied"], entry["apply_s"] = int(served[1]), float(served[2])
             result[name] = entry
-    serial = result["serial_h5py"]
-    per_commit = serial["apply_s"] / serial["commits_applied"]
+        many = Path(tmp) / "many.toml"  # a task per commit of the largest batch
+        many.write_text(JOB.format(n=args.n, tasks=100, periods=args.periods, every=args.every))
+        batches = batch_seconds(many, Path(tmp))
+    # t(K) = fixed + K x per_commit, from the smallest and largest batch
+    (k0, t0), (k1, t1) = min(batches.items()), max(batches.items())
+    per_commit = (t1 - t0) / (k1 - k0)
+    fixed = max(t0 - k0 * per_commit, 0.0)
     interval = args.every * args.step_ms / 1000
-    result["apply_ms_per_commit"] = 1000 * per_commit
-    result["rank0_share_at_P"] = {str(p): (p - 1) * per_commit / interval for p in (2, 10, 100, 1000)}
+    result.update(serve_every_s=SERVE_EVERY, batch_ms={str(k): 1000 * t for k, t in batches.items()},
+                  batch_fixed_ms=1000 * fixed, batch_ms_per_commit=1000 * per_commit)
+    # per checkpoint interval: P - 1 commits in at most interval / SERVE_EVERY batches
+    share = {}
+    for p in (2, 10, 100, 1000):
+        n_batches = min(p - 1, interval / SERVE_EVERY)
+        share[str(p)] = (n_batches * fixed + (p - 1) * per_commit) / interval
+    result["rank0_share_at_P"] = share
     args.out.write_text(json.dumps(result, indent=1) + "\n")
     print(json.dumps(result, indent=1))
 
