@@ -193,7 +193,7 @@ def main(argv=None):
     fits = {q: extrapolate(values, q) for q in [*QUANTITIES, "eta_inf_minus_1"]}
     write_quantities(values, out / "quantities.csv")
     write_extrapolation(fits, out / "extrapolation.csv")
-    draw_spectra(tables, out)
+    draw_spectra({n: rows for n, rows in tables.items() if n in runs}, rows_of(args.reference), out)
     draw_size(values, fits, out / "size.png")
     (out / "summary.md").write_text(summary(values, fits, notes) + time_steps(
         rows_of(args.reference), tables[27] if 27 in runs else None, control))
@@ -236,15 +236,20 @@ def write_extrapolation(fits, path):
             w.writerow([q, " ".join(map(str, fit["sizes"])), *[f"{fit[k]:.10g}" for k in keys]])
 
 
-def draw_spectra(tables, out):
+def draw_spectra(tables, reference, out):
+    """G', G'' and eta', eta'' (total) against omega for every N, and the N = 27 study."""
     for name, columns, labels in (
             ("moduli.png", ("G_prime", "G_dprime"), ("G′  [η_m/t_D]", "G″  [η_m/t_D]")),
             ("viscosities.png", ("eta_prime", "eta_dprime"), ("η′/η_m", "η″/η_m"))):
         fig, axes = figure(2, width=10.0, height=4.2)
         for ax, col, label in zip(axes, columns, labels):
+            omega, v, e = column(reference, "total", col)
+            ax.errorbar(omega, v, e, marker="s", ms=3, capsize=2, ls=":", color="0.5",
+                        label="N = 27, study (500 steps per period)")
             for n, rows in sorted(tables.items()):
                 omega, v, e = column(rows, "total", col)
-                ax.errorbar(omega, v, e, marker="o", ms=4, capsize=2, label=f"N = {n}")
+                ax.errorbar(omega, v, e, marker="o", ms=4, capsize=2,
+                            label=f"N = {n}, dt = 5e-4")
             ax.set(xscale="log", xlabel="ω  [rad/t_D]", ylabel=label)
             if col in ("G_prime", "G_dprime"):
                 ax.set_yscale("log")

@@ -52,7 +52,7 @@ STRESS_UNITS = {"t_D": "eta_m/t_D", "1/gamma_dot": "eta_m gamma_dot"}
 MAX_CHECKSUM_BLOCKS = 4096
 #: rows of /sessions, one per session that wrote the file (creation, resume, extension;
 #: when full, the last row holds the latest), and the bytes of each (a JSON text)
-MAX_SESSIONS, SESSION_BYTES = 256, 4096
+MAX_SESSIONS, SESSION_BYTES = 64, 1024
 
 
 class StoreError(Exception):
@@ -241,14 +241,14 @@ STATE_PER_PARTICLE = 16 * 8
 
 def run_file_bytes(job) -> float:
     """Estimated size of a job's run file: every sample dataset and trajectory frame
-    (exact: they are all allocated at creation), two state slots per task and the per-task
-    overhead."""
+    (exact: they are all allocated at creation), two state slots per task, the per-task
+    overhead and /sessions."""
     from ..dynamics.realisation import sample_fields
 
     row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
     per_task = TASK_OVERHEAD + 2 * STATE_PER_PARTICLE * job.system.n_particles
     return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job))
-                 + trajectory.file_bytes(job))
+                 + trajectory.file_bytes(job) + MAX_SESSIONS * SESSION_BYTES)
 
 
 # --------------------------------------------------------------------------- write
