@@ -58,15 +58,25 @@ fraction :data:`WINDOW_FRACTION` of the longest analysed realisation unless give
 hold the whole decay of G: :func:`tail_check` says when G at the end of the window is not
 zero within its errors.
 
-Lag 0 (``lag0``). The sampled Brownian stress of a run with hydrodynamic interactions is an
-unbiased estimate of -kT div(R_SU R_FU^-1) plus zero-mean noise drawn with the step's own
-random displacement (Banchio & Brady, J. Chem. Phys. 118, 10323 (2003)); that noise adds
-its variance to the lag-0 correlation (and correlates with the same step's collision
-impulse) but not to later lags. ``lag0 = "keep"`` uses the lag-0 value (exact for stresses
-without estimator noise: free draining, where the Brownian stress is zero); ``lag0 =
-"lag1"`` replaces it by the lag-1 value, removing the noise (exact for a G smooth over dt;
-for an integrable t^-1/2 singularity it loses about 0.8 c dt^1/2 of int G, c the
-singularity's amplitude). Which one a reduction used is in its metadata.
+Short times (``lag0``). The first lags of the sampled correlations are not those of the
+physical stress, for two reasons. (1) The collision stress is the impulse of the overlap
+correction at the end of each step divided by dt; the overlap it undoes was made by the
+step's own random displacement. Measured at rest (free draining, phi = 0.05, dt = 2e-3,
+docs/validation/green_kubo/), against the exact dilute G(t) averaged over steps: lag 0 is
+2.5 times, lag 1 0.66 times the exact value, lags 2 and beyond agree (within the O(phi^3)
+excess of 10-20%). (2) The sampled Brownian stress of a run with hydrodynamic interactions
+is an unbiased estimate of -kT div(R_SU R_FU^-1) plus zero-mean noise drawn with the step's
+own random displacement (Banchio & Brady, J. Chem. Phys. 118, 10323 (2003)); the noise
+adds its variance to lag 0. So ``lag0 = "contact"`` (the reducer's choice) replaces lags 0
+and 1 by the step means of c t^-1/2 + b fitted (least squares) to lags 2-8
+(:data:`CONTACT_FIT_LAGS`): the short-time form of hard spheres, whose contact boundary
+layer gives G ~ t^-1/2 (Brady 1993; the dilute limit,
+:func:`.models.dilute_hard_sphere_relaxation`), and a constant for stresses that are smooth
+over a few steps. ``lag0 = "keep"`` uses the sampled lags as they are; ``"lag1"`` replaces
+lag 0 alone by lag 1 (it removes white estimator noise, but not the collision stream's
+lag-1 deficit). For a stream whose steps are exact step means the trapezoid from lag 0 is
+right (above), and "contact" then changes int G dt by the fit's error only. Which rule a
+reduction used is in its metadata.
 
 Units: reduced, a = 1, eta_m = 1, t in t_D, kT = 6 pi eta_m a^3/t_D, stresses and moduli
 in eta_m/t_D, omega in 1/t_D.
@@ -91,8 +101,11 @@ WINDOW_FRACTION = 0.125
 MAX_OMEGA_DT = 0.2
 #: the omega grid: 2 pi 2^(j/POINTS_PER_OCTAVE), j integer
 POINTS_PER_OCTAVE = 4
-#: the lag-0 rules (module docstring)
-LAG0_RULES = ("keep", "lag1")
+#: the short-time rules (module docstring; "contact" is the reducer's)
+LAG0_RULES = ("keep", "lag1", "contact")
+#: the lags fitted by the "contact" rule, and the lags it replaces
+CONTACT_FIT_LAGS = tuple(range(2, 9))
+CONTACT_REPLACED = 2
 #: lags reported in relaxation tables: every lag up to this, then ~LAGS_PER_DECADE per decade
 ALL_LAGS_UP_TO = 32
 LAGS_PER_DECADE = 24
@@ -135,14 +148,31 @@ def block_correlations(series, conjugate, max_lag, n_blocks=BASE_BLOCKS):
     return out / (5.0 * length), n_blocks * length
 
 
+def step_averaged_inverse_sqrt(lags):
+    """The correlation at lag m dt of step means of a stress whose G(t) = |t|^-1/2, in units
+    of dt^-1/2: (1/dt) int |t|^-1/2 tri((t - m dt)/dt) dt, tri the unit triangle, =
+    (4/3) [(m + 1)^3/2 - 2 m^3/2 + |m - 1|^3/2] (8/3 at m = 0)."""
+    m = np.asarray(lags, float)
+    return 4.0 / 3.0 * ((m + 1) ** 1.5 - 2 * m ** 1.5 + np.abs(m - 1) ** 1.5)
+
+
 def apply_lag0(g, rule):
-    """G(t) on lags 0 .. M along the last axis with the lag-0 rule applied (module
-    docstring): "keep" returns it unchanged, "lag1" with G(0) := G(dt)."""
+    """G(t) on lags 0 .. M along the last axis with the short-time rule applied (module
+    docstring): "keep" returns it unchanged, "lag1" with G(0) := G(dt), "contact" with
+    lags 0 and 1 replaced by the step means of c t^-1/2 + b fitted (least squares) to the
+    lags CONTACT_FIT_LAGS. Every rule is linear in g."""
     if rule not in LAG0_RULES:
         raise ValueError(f"lag0 = {rule!r}; allowed: {', '.join(LAG0_RULES)}")
     g = np.array(g, float)
     if rule == "lag1":
         g[..., 0] = g[..., 1]
+    elif rule == "contact":
+        fit = np.array(CONTACT_FIT_LAGS)
+        design = np.stack([step_averaged_inverse_sqrt(fit), np.ones(fit.size)], axis=1)
+        coef = g[..., fit] @ np.linalg.pinv(design).T                  # (..., 2): c, b
+        short = np.arange(CONTACT_REPLACED)
+        g[..., short] = coef @ np.stack([step_averaged_inverse_sqrt(short),
+                                         np.ones(short.size)])
     return g
 
 
