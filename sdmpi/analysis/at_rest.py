@@ -288,9 +288,11 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
             values.append(gk.realisation_values(s, dt, volumes[0], gk_kt(), max_lag, omega,
                                                 lags, rule))
         if not any(v is not None for v in values):
-            raise ReduceError(f"phi = {phi:g}: no realisation has enough samples after the "
-                              f"start-up for a window of {max_lag} lags yet "
-                              f"(see the notes); nothing to reduce")
+            raise ReduceError(f"phi = {phi:g}: Green-Kubo with a window of {max_lag} lags "
+                              f"({max_lag * dt:.4g} t_D) needs {need} samples after the "
+                              f"start-up in a realisation (twice the window plus "
+                              f"{gk.BASE_BLOCKS}); the longest has {longest}: nothing to "
+                              f"reduce (a shorter --gk-window, or longer runs)")
         relax, mod = gk.ensemble(values)
         per = np.array([v.relaxation.mean[-1] if v is not None else np.full(lags.size, np.nan)
                         for v in values])

@@ -69,7 +69,8 @@ larger of the two) give one standard error ``*_err`` with ``dof`` degrees of fre
 t_{0.975, R-1} x err_between and t_{0.975, dof_within} x err_within (Student t; the sub-average method of Allen & Tildesley 1987 that
 Dratler & Schowalter 1996 uses). For figures, running averages (1/t) int_0^t of every quantity
 from t = 0 (start-up included) are kept per realisation (:attr:`Reduction.running`).
-Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
+Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused here;
+:mod:`.at_rest` reduces them by Green-Kubo.
 
 Monolayers (``system.geometry = "monolayer"``, sdmpi.dynamics.monolayer) store stresses per
 layer volume 2 a L^2, so their eta is Dratler & Schowalter's (1996) eq. 6 and the ``phi``
@@ -515,8 +516,9 @@ def reduce_runs(paths, medium=None) -> Reduction:
     if job.shear.protocol == "none":
         raise ReduceError(
             f"{paths[0]}: a quiescent job (shear.protocol = \"none\") imposes no "
-            f"deformation, so it has no moduli or viscosity; only oscillatory (moduli.csv) "
-            f"and steady-shear (viscosity.csv) jobs are reduced")
+            f"deformation, so it has no projected moduli or viscosity; its moduli follow "
+            f"by Green-Kubo (sdmpi.analysis.at_rest.reduce_at_rest, which `sdmpi reduce` "
+            f"uses for it)")
     kind = "oscillatory" if job.shear.protocol == "oscillatory" else "steady"
     columns_read = XY if kind == "oscillatory" else slice(None)
 
