@@ -284,6 +284,19 @@ def test_several_files_task_and_bad_input(tiny_runs, tmp_path, capsys):
     assert main(["reduce", *map(str, tiny_runs), "-o", str(out), "--task", "1"]) == 0
     rows = (out / "moduli_gk.csv").read_text().splitlines()[1:]
     assert {r.split(",")[3] for r in rows} == {"4"}              # 2 files x 2 realisations
+    view = tmp_path / "view"       # another medium: its own medium and Einstein rows
+    assert main(["reduce", str(tiny_runs[0]), "-o", str(view), "--no-plots",
+                 "--medium", "maxwell:eta=1,lambda=0.5"]) == 0
+    table = [r.split(",") for r in
+             (view / "maxwell_lambda0.5" / "moduli_gk.csv").read_text().splitlines()[1:]]
+    medium = {r[1]: (float(r[4]), float(r[6])) for r in table if r[2] == "medium"}
+    w = float(table[0][1])
+    assert medium[table[0][1]] == pytest.approx((0.5 * w * w / (1 + 0.25 * w * w),
+                                                 w / (1 + 0.25 * w * w)), rel=1e-12)
+    for r in table:
+        if r[2] == "hydrodynamic":
+            assert (float(r[4]), float(r[6])) == pytest.approx(
+                tuple(0.5 * x for x in medium[r[1]]), rel=1e-12)     # 5/2 phi, phi = 0.2
     for args in (["--task", "7"], ["--gk-window", "-1"], ["--gk-window", "100"]):
         bad = tmp_path / "bad"
         assert main(["reduce", str(tiny_runs[0]), "-o", str(bad), *args]) == 2

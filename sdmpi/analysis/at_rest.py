@@ -264,7 +264,7 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
             with _open_h5(paths[i]) as f:
                 from ..ensemble.store import task_key
                 volumes.append(float(np.prod(f[f"tasks/{task_key(t.task_id)}"].attrs["box"])))
-                stress = read_stress(f, job, t, done, False, slice(None))[1:]
+                stress = read_stress(f, job, t, done, viewed, slice(None))[1:]
             series.append(stress[:, t.discard_steps:])
             if done < t.n_steps:
                 partial.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}, realisation "
