@@ -326,31 +326,10 @@ def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
     assert all(r[4] == "nan" for r in rows if r[2] in ("hydrodynamic", "total"))
 
 
-DILUTE = """
-[job]
-name = "gk-dilute"
-seed = 19930701
-[system]
-n_particles = 1000
-phi = [0.05]
-[medium]
-kind = "newtonian"
-[shear]
-protocol = "none"
-[brownian]
-enabled = true
-[integration]
-dt = 0.002
-n_steps = 8200
-discard_steps = 200
-[ensemble]
-realisations = 1
-[hydrodynamics]
-model = "free-draining"
-lubrication_cutoff = 0.01
-[output]
-checkpoint_every = 4100
-"""
+#: the validation's dilute job (docs/validation/green_kubo/), shortened to 16 t_D
+DILUTE = ROOT / "docs" / "validation" / "green_kubo" / "dilute_rest.toml"
+DILUTE_SETS = ("integration.n_steps=8200", "integration.discard_steps=200",
+               "ensemble.realisations=1", "job.seed=19930701", "output.checkpoint_every=4100")
 #: O(phi^3) and time-step systematics allowed around the exact O(phi^2) result, as a
 #: ratio measured/exact (test docstring)
 DILUTE_BAND = (0.94, 1.29)
@@ -372,9 +351,7 @@ def test_dilute_free_draining_at_rest_gives_the_exact_dilute_relaxation_and_modu
     15-35%). Fails for a wrong V/kT (a factor 2 or 6 pi), a missing or doubled
     five-component average, G' and G'' exchanged, or a wrong sign."""
     from sdmpi.analysis.models import dilute_hard_sphere_relaxation
-    job = tmp_path / "dilute.toml"
-    job.write_text(DILUTE)
-    run = sdmpi_run(job, tmp_path / "dilute.h5")
+    run = sdmpi_run(DILUTE, tmp_path / "dilute.h5", *DILUTE_SETS)
     red = reduce_at_rest([run], window=1.0)
     g = red.groups[0]
     phi2 = g.phi ** 2

@@ -37,15 +37,13 @@ import json
 import math
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..config import canonical_text
 from ..config.stresses import CONTRIBUTIONS
 from . import green_kubo as gk
 from .reduce import (COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
-                     check_same_system, medium_moduli, open_run, read_stress, _open_h5)
+                     medium_moduli, open_runs, read_stress, _open_h5)
 
 #: the configurational contributions correlated at rest (the rows of relaxation.csv
 #: before their sum, "total")
@@ -56,6 +54,8 @@ RELAXATION_COLUMNS = ("phi", "lag", "t", "component", "n_realisations", "G", "G_
 RELAXATION_COMPONENTS = STREAMS + ("total",)
 #: hydrodynamic models whose Green-Kubo moduli are validated (module docstring)
 VALIDATED_MODELS = ("free-draining",)
+#: the shortest window in lags (the contact rule fits lags 2-8)
+MIN_LAGS = 16
 #: the Einstein coefficient: free-draining hydrodynamic stress 5/2 phi x the medium's
 EINSTEIN = 2.5
 
@@ -218,24 +218,13 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
     (the medium and hydrodynamic rows). Raises ReduceError for unusable input; warns
     (:class:`.reduce.PartialRunWarning`) for unfinished tasks."""
     paths = [str(p) for p in paths]
-    if not paths:
-        raise ReduceError("no run file given")
-    summaries = [open_run(p) for p in paths]
-    check_same_system(summaries)
-    job, job_text, viewed = summaries[0].job, summaries[0].job_text, False
+    summaries, job, job_text, viewed = open_runs(paths, medium)
     if job.shear.protocol != "none":
         raise ReduceError(f"{paths[0]}: Green-Kubo needs a run at rest "
                           f"(shear.protocol = \"none\"), not {job.shear.protocol!r}")
     if job.system.geometry != "bulk":
         raise ReduceError(f"{paths[0]}: Green-Kubo needs an isotropic bulk suspension; "
                           f"system.geometry = {job.system.geometry!r} is not reduced at rest")
-    if medium is not None and medium != job.medium:
-        from .medium_view import MediumError, view_job
-        try:
-            job = view_job(job, medium, paths[0])
-        except MediumError as err:
-            raise ReduceError(str(err)) from None
-        job_text, viewed = canonical_text(job), True
     model = job.hydrodynamics.model
     rule = lag0 or "contact"
     if rule not in gk.LAG0_RULES:
@@ -258,41 +247,40 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
     planned = np.array([t.n_steps for _, t in tasks])
     for phi in phis:
         members = [(i, t) for i, t in tasks if t.phi == phi]
-        series, volumes = [], []
-        for i, t in members:
-            done = int(summaries[i].progress[t.task_id])
-            with _open_h5(paths[i]) as f:
-                from ..ensemble.store import task_key
-                volumes.append(float(np.prod(f[f"tasks/{task_key(t.task_id)}"].attrs["box"])))
-                stress = read_stress(f, job, t, done, viewed, slice(None))[1:]
-            series.append(stress[:, t.discard_steps:])
-            if done < t.n_steps:
-                partial.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}, realisation "
-                               f"{t.realisation}) unfinished: {done}/{t.n_steps} steps")
-        dt = members[0][1].dt
-        longest = max(s.shape[1] for s in series)
+        lengths = [max(int(summaries[i].progress[t.task_id]) - t.discard_steps, 0)
+                   for i, t in members]
+        dt, longest = members[0][1].dt, max(lengths)
         max_lag = (int(round(window / dt)) if window is not None
                    else int(gk.WINDOW_FRACTION * longest))
         need = 2 * max_lag + gk.BASE_BLOCKS
+        if max_lag < MIN_LAGS or longest < need:
+            raise ReduceError(
+                f"phi = {phi:g}: Green-Kubo with a window of {max_lag} lags "
+                f"({max_lag * dt:.4g} t_D; at least {MIN_LAGS}) needs {need} samples after "
+                f"the start-up in a realisation (twice the window plus {gk.BASE_BLOCKS}); "
+                f"the longest has {longest}: nothing to reduce ("
+                + ("a longer --gk-window" if max_lag < MIN_LAGS else
+                   "a shorter --gk-window, or longer runs") + ")")
         lags = gk.report_lags(max_lag)
-        omega = gk.omega_grid(dt, max(max_lag, 1) * dt)
-        values = []
-        for (i, t), s in zip(members, series):
-            if max_lag < 1 or s.shape[1] < need:
+        omega = gk.omega_grid(dt, max_lag * dt)
+        values, volume = [], None
+        for (i, t), n in zip(members, lengths):
+            done = int(summaries[i].progress[t.task_id])
+            if done < t.n_steps:
+                partial.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}, realisation "
+                               f"{t.realisation}) unfinished: {done}/{t.n_steps} steps")
+            if n < need:
                 values.append(None)
-                notes.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}) has "
-                             f"{s.shape[1]} samples after the start-up; Green-Kubo needs "
-                             f"{max(need, 2 + gk.BASE_BLOCKS)} (twice the window of "
-                             f"{max_lag} lags plus {gk.BASE_BLOCKS}): contributes nothing")
+                notes.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}) has {n} samples "
+                             f"after the start-up; Green-Kubo needs {need} (twice the window "
+                             f"of {max_lag} lags plus {gk.BASE_BLOCKS}): contributes nothing")
                 continue
-            values.append(gk.realisation_values(s, dt, volumes[0], gk_kt(), max_lag, omega,
-                                                lags, rule))
-        if not any(v is not None for v in values):
-            raise ReduceError(f"phi = {phi:g}: Green-Kubo with a window of {max_lag} lags "
-                              f"({max_lag * dt:.4g} t_D) needs {need} samples after the "
-                              f"start-up in a realisation (twice the window plus "
-                              f"{gk.BASE_BLOCKS}); the longest has {longest}: nothing to "
-                              f"reduce (a shorter --gk-window, or longer runs)")
+            with _open_h5(paths[i]) as f:
+                from ..ensemble.store import task_key
+                volume = float(np.prod(f[f"tasks/{task_key(t.task_id)}"].attrs["box"]))
+                stress = read_stress(f, job, t, done, viewed, slice(None))[1:]
+            values.append(gk.realisation_values(stress[:, t.discard_steps:], dt, volume,
+                                                gk_kt(), max_lag, omega, lags, rule))
         relax, mod = gk.ensemble(values)
         per = np.array([v.relaxation.mean[-1] if v is not None else np.full(lags.size, np.nan)
                         for v in values])
@@ -306,7 +294,7 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
         if r < 4:
             notes.append(f"phi = {phi:g}: only {r} realisation(s): the error bars rest on "
                          f"few runs")
-        groups.append(Group(float(phi), float(dt), volumes[0], max_lag, lags, omega, relax,
+        groups.append(Group(float(phi), float(dt), volume, max_lag, lags, omega, relax,
                             mod, per, tuple(i for i, _ in members),
                             tuple(t.task_id for _, t in members), tail))
     if partial:

@@ -500,19 +500,7 @@ def reduce_runs(paths, medium=None) -> Reduction:
     (including a medium that the job cannot take); warns (:class:`PartialRunWarning`)
     when some tasks are unfinished (details in ``Reduction.notes``)."""
     paths = [str(p) for p in paths]
-    if not paths:
-        raise ReduceError("no run file given")
-    summaries = [open_run(p) for p in paths]
-    check_same_system(summaries)
-    job, job_text, viewed = summaries[0].job, summaries[0].job_text, False
-    if medium is not None and medium != job.medium:
-        from ..config import canonical_text
-        from .medium_view import MediumError, view_job
-        try:
-            job = view_job(job, medium, paths[0])
-        except MediumError as err:
-            raise ReduceError(str(err)) from None
-        job_text, viewed = canonical_text(job), True
+    summaries, job, job_text, viewed = open_runs(paths, medium)
     if job.shear.protocol == "none":
         raise ReduceError(
             f"{paths[0]}: a quiescent job (shear.protocol = \"none\") imposes no "
@@ -605,6 +593,27 @@ def reduce_runs(paths, medium=None) -> Reduction:
                      ("G_prime", "G_dprime") if kind == "oscillatory" else STEADY_QUANTITIES,
                      ens, stacked, np.array(file_index), np.array(realisation), task_id,
                      committed, planned, tuple(notes), running, viewed)
+
+
+def open_runs(paths, medium=None):
+    """Validate the run files ``paths`` of one system (:func:`open_run`,
+    :func:`check_same_system`) and return (summaries, job, job_text, viewed): the first
+    file's job, with ``medium`` (not None and not the run's) applied after the fact
+    (:mod:`.medium_view`; ``viewed`` True). Raises ReduceError."""
+    if not paths:
+        raise ReduceError("no run file given")
+    summaries = [open_run(p) for p in paths]
+    check_same_system(summaries)
+    job, job_text, viewed = summaries[0].job, summaries[0].job_text, False
+    if medium is not None and medium != job.medium:
+        from ..config import canonical_text
+        from .medium_view import MediumError, view_job
+        try:
+            job = view_job(job, medium, paths[0])
+        except MediumError as err:
+            raise ReduceError(str(err)) from None
+        job_text, viewed = canonical_text(job), True
+    return summaries, job, job_text, viewed
 
 
 def _until_stop(stress, path, task):
