@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 from scipy.integrate import quad
 
+from sdmpi.analysis import green_kubo as gk
 from sdmpi.analysis.at_rest import STREAMS, reduce_at_rest
 from sdmpi.analysis.models import dilute_hard_sphere_moduli, dilute_hard_sphere_relaxation
 from sdmpi.analysis.reduce import PartialRunWarning, reduce_runs
@@ -56,8 +57,12 @@ def dilute(path):
         reds = {rule: reduce_at_rest([path], window=window, lag0=rule)
                 for rule in ("contact", "keep", "lag1")}
         g = reds["contact"].groups[0]
+        lags = np.arange(g.max_lag + 1)
+        exact_g = dilute_hard_sphere_relaxation(np.maximum(lags, 1) * g.dt)
+        exact_g[:32] = [step_mean(m, g.dt) for m in range(32)]
         print(f"\nG'/phi^2, G''/phi^2 (collision row), window {g.max_lag * g.dt:g} t_D, "
-              f"against the exact moduli (infinite window)\n")
+              f"against the exact moduli and (in brackets) the exact G(t) put through the "
+              f"same window and rule\n")
         print("| omega | rule | G'/phi^2 | exact | G''/phi^2 | exact |\n|---|---|---|---|---|---|")
         for k, w in enumerate(g.omega):
             if not any(math.isclose(w, x * math.pi) for x in (0.5, 1, 2, 4, 8, 16, 32)):
@@ -67,8 +72,10 @@ def dilute(path):
                 mod = r.groups[0].moduli
                 a1, s1 = mod.mean[COLLISION, 0, k] / phi2, mod.err[COLLISION, 0, k] / phi2
                 a2, s2 = mod.mean[COLLISION, 1, k] / phi2, mod.err[COLLISION, 1, k] / phi2
-                print(f"| {w / math.pi:g} pi | {rule} | {pm(a1, s1)} | {float(e1):.2f} | "
-                      f"{pm(a2, s2)} | {float(e2):.2f} |")
+                t1, t2 = (float(x[0]) for x in gk.transform(gk.apply_lag0(exact_g, rule),
+                                                            g.dt, [w]))
+                print(f"| {w / math.pi:g} pi | {rule} | {pm(a1, s1)} | {float(e1):.2f} "
+                      f"({t1:.2f}) | {pm(a2, s2)} | {float(e2):.2f} ({t2:.2f}) |")
     print()
 
 
@@ -79,6 +86,9 @@ def phi03(rest, osc):
         reds = {rule: reduce_at_rest([rest], lag0=rule) for rule in ("contact", "keep")}
         oscs = [reduce_runs([p]) for p in osc]
     g = reds["contact"].groups[0]
+    raw = reds["keep"].groups[0].relaxation
+    print("G(t) of the collision stress as sampled, lags 0-8 (eta_m/t_D): "
+          + ", ".join(pm(raw.mean[-1, i], raw.err[-1, i], 1) for i in range(9)) + "\n")
     steps = int(reds["contact"].committed.sum())
     print(f"At rest: {int(g.relaxation.n_realisations[-1, 0])} realisations, {steps} steps "
           f"committed, window {g.max_lag * g.dt:g} t_D. Collision rows (eta_m/t_D):\n")
