@@ -1,14 +1,16 @@
 """Green-Kubo at rest against exact and oscillatory results: the tables of README.md.
 
     python docs/validation/green_kubo/compare.py --dilute dilute_rest.h5 \\
-        --rest fd27_rest.h5 --osc fd27_osc8pi.h5 fd27_osc32pi.h5 > results.md
+        --rest fd27_rest.h5 --osc fd27_osc8pi.h5 fd27_osc32pi.h5 \\
+        --rest2 ff27_rest.h5 --osc2 ff27_osc8pi.h5 > results.md
 
 (the run files of the job files here; README.md gives the commands). Dilute: G(t) at
 each short lag, sampled as it is, against the exact O(phi^2) G(t) of hard spheres
 without hydrodynamic interactions averaged over a step
 (sdmpi.analysis.models.dilute_hard_sphere_relaxation), and G', G'' with each short-time
 rule and window against the exact moduli (sdmpi.analysis.models.dilute_hard_sphere_moduli).
-phi = 0.3: the collision rows of Green-Kubo and of oscillatory runs of the same model.
+phi = 0.3: the Brownian and collision rows of Green-Kubo and of oscillatory runs of the
+same model (free draining; far field).
 """
 
 import argparse
@@ -80,31 +82,39 @@ def dilute(path):
 
 
 def phi03(rest, osc):
-    print(f"## Free draining, phi = 0.3: Green-Kubo ({rest}) against oscillatory runs\n")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PartialRunWarning)
         reds = {rule: reduce_at_rest([rest], lag0=rule) for rule in ("contact", "keep")}
         oscs = [reduce_runs([p]) for p in osc]
     g = reds["contact"].groups[0]
+    print(f"## {reds['contact'].job.hydrodynamics.model}, phi = {g.phi:g}: Green-Kubo ({rest}) "
+          f"against oscillatory runs\n")
     raw = reds["keep"].groups[0].relaxation
-    print("G(t) of the collision stress as sampled, lags 0-8 (eta_m/t_D): "
-          + ", ".join(pm(raw.mean[-1, i], raw.err[-1, i], 1) for i in range(9)) + "\n")
+    for row in ("brownian", "collision"):
+        c = STREAMS.index(row)
+        print(f"G_A(t) of the {row} row as sampled (its correlation with the configurational "
+              f"stress), lags 0-8 (eta_m/t_D): "
+              + ", ".join(pm(raw.mean[c, i], raw.err[c, i], 2) for i in range(9)) + "\n")
     steps = int(reds["contact"].committed.sum())
     print(f"At rest: {int(g.relaxation.n_realisations[-1, 0])} realisations, {steps} steps "
-          f"committed, window {g.max_lag * g.dt:g} t_D. Collision rows (eta_m/t_D):\n")
-    print("| omega | route | steps | G' | G'' |\n|---|---|---|---|---|")
+          f"committed, window {g.max_lag * g.dt:g} t_D. Brownian and collision rows "
+          f"(eta_m/t_D):\n")
+    print("| omega | row | route | steps | G' | G'' |\n|---|---|---|---|---|---|")
     for red in oscs:
         w, phi = float(red.control[0]), float(red.phi[0])
         k = int(np.argmin(np.abs(g.omega - w)))
-        for rule, r in reds.items():
-            mod = r.groups[0].moduli
-            print(f"| {w / math.pi:g} pi | Green-Kubo, {rule} | {steps} | "
-                  f"{pm(mod.mean[COLLISION, 0, k], mod.err[COLLISION, 0, k])} | "
-                  f"{pm(mod.mean[COLLISION, 1, k], mod.err[COLLISION, 1, k])} |")
-        cols = [red.value(phi, w, "collision", c) for c in
-                ("G_prime", "G_prime_err", "G_dprime", "G_dprime_err")]
-        print(f"| {w / math.pi:g} pi | oscillatory, gamma0 = {red.job.shear.gamma0:g} | "
-              f"{int(red.committed.sum())} | {pm(*cols[:2])} | {pm(*cols[2:])} |")
+        for row in ("brownian", "collision"):
+            c = STREAMS.index(row)
+            for rule, r in reds.items():
+                mod = r.groups[0].moduli
+                print(f"| {w / math.pi:g} pi | {row} | Green-Kubo, {rule} | {steps} | "
+                      f"{pm(mod.mean[c, 0, k], mod.err[c, 0, k])} | "
+                      f"{pm(mod.mean[c, 1, k], mod.err[c, 1, k])} |")
+            cols = [red.value(phi, w, row, q) for q in
+                    ("G_prime", "G_prime_err", "G_dprime", "G_dprime_err")]
+            print(f"| {w / math.pi:g} pi | {row} | oscillatory, gamma0 = "
+                  f"{red.job.shear.gamma0:g} | {int(red.committed.sum())} | {pm(*cols[:2])} | "
+                  f"{pm(*cols[2:])} |")
     print()
 
 
@@ -113,11 +123,14 @@ def main():
     parser.add_argument("--dilute")
     parser.add_argument("--rest")
     parser.add_argument("--osc", nargs="*", default=[])
+    parser.add_argument("--rest2", help="a second run at rest (another model)")
+    parser.add_argument("--osc2", nargs="*", default=[])
     args = parser.parse_args()
     if args.dilute:
         dilute(args.dilute)
-    if args.rest:
-        phi03(args.rest, args.osc)
+    for rest, osc in ((args.rest, args.osc), (args.rest2, args.osc2)):
+        if rest:
+            phi03(rest, osc)
 
 
 if __name__ == "__main__":
