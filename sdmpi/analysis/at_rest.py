@@ -25,8 +25,9 @@ Short times: lags 0-4 are replaced by the hard-sphere form fitted to lags 5-20 (
 Validation status. Free draining is validated (tests/test_green_kubo.py: the dilute
 O(phi^2) G(t) and moduli; docs/validation/green_kubo/). With hydrodynamic interactions
 (``far-field``, ``stokesian``) the sampled Brownian stress carries per-step estimator
-noise and lubrication changes the short-time form: the result is NOT validated, and the
-reduction says so in a warning, in ``green_kubo.json`` and on the terminal.
+noise (white in far field at phi = 0.3: lag 0 only), lubrication changes the short-time
+form and the hydrodynamic row is missing: the result is NOT validated, and the reduction
+says so in a warning, in ``green_kubo.json`` and on the terminal.
 
 Units: t and 1/omega in t_D, G, G', G'' in eta_m/t_D, eta', eta'' relative to eta_m.
 """
@@ -236,8 +237,9 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
     warn = [] if validated else [
         f"Green-Kubo with hydrodynamics.model = {model!r} and lag-0 rule {rule!r} is NOT "
         f"validated (only free draining is): the sampled Brownian stress carries per-step "
-        f"estimator noise that biases the short lags, and the hydrodynamic row (eta'_inf) "
-        f"is not measured at rest; compare with oscillatory runs before using these moduli"]
+        f"estimator noise (the short-time rule removes it where it is white), lubrication "
+        f"changes the short-time form, and the hydrodynamic row (eta'_inf) is not measured "
+        f"at rest; compare with oscillatory runs before using these moduli"]
 
     tasks = []                                    # (file index, task) over all files
     for i, s in enumerate(summaries):
