@@ -437,6 +437,12 @@ def _add_reduce(subparsers) -> None:
              "SPEC is 'newtonian', 'maxwell:eta=E,lambda=L[;eta=E,lambda=L...]' (eta "
              "relative to eta_m, summing to 1; lambda in t_D) or a TOML file with a "
              "[medium] table; may be repeated (see docs/reduce.md)")
+    parser.add_argument(
+        "--gk-window", type=float, default=None, metavar="T",
+        help="runs at rest (shear.protocol = \"none\"), reduced by Green-Kubo into "
+             "relaxation.csv, moduli_gk.csv and green_kubo.json: the window t_M in t_D over "
+             "which G(t) is integrated (default: 1/8 of the longest analysed realisation; "
+             "see docs/reduce.md)")
     parser.set_defaults(handler=_reduce)
 
 
@@ -453,6 +459,12 @@ def _reduce(args) -> int:
         if len(set(names)) < len(names):
             raise ReduceError(f"--medium: the same medium is given twice ({', '.join(names)})")
         check_output_dir(args.output)
+        from .analysis.at_rest import quiescent
+        if quiescent(args.runs[0]):
+            return _reduce_at_rest(args, zip(media, names))
+        if args.gk_window is not None:
+            raise ReduceError("--gk-window applies only to runs at rest (shear.protocol = "
+                              "\"none\"), reduced by Green-Kubo")
         views = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
@@ -479,6 +491,41 @@ def _reduce(args) -> int:
               file=sys.stderr)
     for note in red.notes + tuple(notes):
         print(f"note: {note}", file=sys.stderr)
+    for path in paths:
+        print(f"wrote {path}")
+    return EXIT_OK
+
+
+def _reduce_at_rest(args, media) -> int:
+    """`sdmpi reduce` of runs at rest: Green-Kubo (sdmpi.analysis.at_rest)."""
+    import warnings
+
+    from .analysis.at_rest import reduce_at_rest, write_at_rest
+    from .analysis.reduce import PartialRunWarning
+    from .analysis.report import format_table
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
+        views = [("", reduce_at_rest(args.runs, window=args.gk_window))]
+        views += [(name, reduce_at_rest(args.runs, window=args.gk_window, medium=medium))
+                  for medium, name in media]
+    paths = []
+    for name, red in views:
+        more, _ = write_at_rest(red, os.path.join(args.output, name), plots=not args.no_plots,
+                                task_id=args.task)
+        paths += more
+    red = views[0][1]
+    for name, view in views:
+        print(("" if not name else f"\n{name} (medium applied after the fact):\n")
+              + format_table(view))
+    if not red.complete:
+        print(f"PARTIAL RUN: {int((red.committed < red.n_steps).sum())} of "
+              f"{red.committed.size} tasks unfinished; reduced what is committed",
+              file=sys.stderr)
+    for note in red.notes:
+        print(f"note: {note}", file=sys.stderr)
+    for warning in red.warnings:
+        print(f"WARNING: {warning}", file=sys.stderr)
     for path in paths:
         print(f"wrote {path}")
     return EXIT_OK

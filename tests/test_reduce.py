@@ -236,10 +236,14 @@ def test_refuses_other_systems_and_shared_seeds(tmp_path):
         reduce_runs([a, a])
 
 
-def test_quiescent_jobs_are_refused(tmp_path):
+def test_quiescent_jobs_have_no_projected_moduli_and_reduce_by_green_kubo(tmp_path):
     run = tmp_path / "run.h5"
     write_run(run, job_text(protocol="none", realisations=1), {})
-    assert main(["reduce", str(run), "-o", str(tmp_path / "out")]) == 2
+    with pytest.raises(ReduceError, match="Green-Kubo"):
+        reduce_runs([run])
+    out = tmp_path / "out"
+    assert main(["reduce", str(run), "-o", str(out), "--no-plots"]) == 0
+    assert (out / "moduli_gk.csv").exists() and not (out / "moduli.csv").exists()
 
 
 # ----------------------------------------------------------------------------- outputs

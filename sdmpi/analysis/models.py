@@ -174,3 +174,28 @@ def dilute_hard_sphere_moduli(omega):
     c1, c2 = dilute_hard_sphere_viscosity(omega)
     w = np.asarray(omega, float)
     return w * c2, w * c1
+
+
+
+def dilute_hard_sphere_relaxation(t):
+    """G(t)/phi^2 of dilute_hard_sphere_moduli at t > 0 (t_D), in eta_m/t_D: the O(phi^2)
+    relaxation modulus of hard spheres without hydrodynamic interactions, whose Laplace
+    transform is eta*(s) = c*(z), z = (2 s t_D)^1/2 (dilute_hard_sphere_viscosity with
+    s = i w). In partial fractions over the roots z_j of z^3 + 4z^2 + 9z + 9,
+
+        c* = (36/5) sum_j A_j/(z - z_j),   A_j = (z_j^2 + 3 z_j + 3)/(3 z_j^2 + 8 z_j + 9),
+
+    and L^-1[1/(s^1/2 + a)] = (pi t)^-1/2 - a exp(a^2 t) erfc(a t^1/2) (a = -z_j/2^1/2,
+    Re a > 0; exp(x^2) erfc(x) = w(i x), the Faddeeva function) give
+
+        G(t)/phi^2 = (36/5) 2^-1/2 sum_j A_j [(pi t)^-1/2 - a_j w(i a_j t^1/2)].
+
+    sum_j A_j = 1, so G ~ (18/5) (2/(pi t))^1/2 as t -> 0; int_0^inf G dt = c*(0) = 12/5."""
+    from scipy.special import wofz
+    t = np.asarray(t, float)
+    roots = np.roots([1.0, 4.0, 9.0, 9.0])
+    amp = (roots ** 2 + 3 * roots + 3) / (3 * roots ** 2 + 8 * roots + 9)
+    a = -roots / np.sqrt(2.0)
+    x = np.sqrt(t)[..., None]
+    terms = amp * (1.0 / np.sqrt(np.pi * t)[..., None] - a * wofz(1j * a * x))
+    return (7.2 / np.sqrt(2.0) * terms.sum(axis=-1)).real

@@ -342,3 +342,58 @@ def plot_running_all(red, outdir) -> list:
     outdir = Path(outdir)
     return [plot_running(red, outdir / f"running_phi{phi:g}.png", phi)
             for phi in dict.fromkeys(red.phi.tolist())]
+
+
+def plot_green_kubo(red, group, path, task_id=None) -> Path:
+    """A run at rest (:mod:`.at_rest`): G(t) per configurational contribution and their
+    sum (log-log, t > 0, one standard error; the thin line: task ``task_id`` of the first
+    file alone), and the Green-Kubo G'(w), G''(w) rows of moduli_gk.csv (log-log)."""
+    from .at_rest import RELAXATION_COMPONENTS
+    fig, (ax_t, ax_w) = _figure(2)
+    t = group.lags * group.dt
+    shown = []
+    for c, name in enumerate(RELAXATION_COMPONENTS):
+        m, e = group.relaxation.mean[c], group.relaxation.err[c]
+        if name != "total" and not np.any(np.abs(m[np.isfinite(m)]) > 0):
+            continue
+        colour, marker = STYLE[name]
+        ax_t.errorbar(t[1:], m[1:], yerr=e[1:], color=colour, marker=marker, ms=3, lw=1,
+                      capsize=2, label=f"{LABEL[name]} (G(0) = {m[0]:.4g})")
+        shown.append(m[1:])
+    if task_id is not None and task_id in group.task_id:
+        r = group.task_id.index(task_id)
+        ax_t.plot(t[1:], group.per_realisation[r, 1:], color="0.5", lw=0.8,
+                  label=f"task {task_id} alone (total)")
+    log_axes(ax_t, np.concatenate(shown))
+    ax_t.set_xlabel("t (t_D)")
+    ax_t.set_ylabel("G(t) (η_m/t_D)")
+    ax_t.set_title(f"relaxation modulus, window {group.max_lag * group.dt:.3g} t_D")
+    legend_below(ax_t)
+    rows = [r for r in red.rows() if r["phi"] == group.phi]
+    values = []
+    for k, name in enumerate(COMPONENTS):
+        sel = [r for r in rows if r["component"] == name]
+        w = np.array([r["omega"] for r in sel])
+        g1 = np.array([r["G_prime"] for r in sel])
+        g2 = np.array([r["G_dprime"] for r in sel])
+        if name not in ("medium", "total") and not np.any(np.abs(g2[np.isfinite(g2)]) > 0):
+            continue
+        colour, marker = STYLE[name]
+        for g, err, fill, q in ((g1, [r["G_prime_err"] for r in sel], "full", "G'"),
+                                (g2, [r["G_dprime_err"] for r in sel], "none", "G''")):
+            ax_w.errorbar(_dodge(w, k), g, yerr=err, color=colour, marker=marker or ".",
+                          fillstyle=fill, ms=4, lw=0.8, capsize=2, label=f"{q} {name}")
+            values.append(g)
+    log_axes(ax_w, np.concatenate(values))
+    ax_w.set_xlabel("ω (1/t_D)")
+    ax_w.set_ylabel("G', G'' (η_m/t_D)")
+    ax_w.set_title("Green-Kubo moduli (filled G', open G'')")
+    legend_below(ax_w)
+    job = red.job
+    n = int(group.relaxation.n_realisations[-1, 0])
+    flag = "" if red.validated else ", NOT VALIDATED for this model"
+    fig.suptitle(f"{job.job.name}: at rest, φ = {group.phi:g}, N = {job.system.n_particles}, "
+                 f"{job.hydrodynamics.model}, lag-0 rule {red.lag0}, realisations {n}"
+                 + ("" if red.complete else ", PARTIAL RUN") + flag, fontsize=10)
+    fig.savefig(path, dpi=110)
+    return Path(path)

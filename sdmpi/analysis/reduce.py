@@ -69,7 +69,8 @@ larger of the two) give one standard error ``*_err`` with ``dof`` degrees of fre
 t_{0.975, R-1} x err_between and t_{0.975, dof_within} x err_within (Student t; the sub-average method of Allen & Tildesley 1987 that
 Dratler & Schowalter 1996 uses). For figures, running averages (1/t) int_0^t of every quantity
 from t = 0 (start-up included) are kept per realisation (:attr:`Reduction.running`).
-Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused.
+Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused here;
+:mod:`.at_rest` reduces them by Green-Kubo.
 
 Monolayers (``system.geometry = "monolayer"``, sdmpi.dynamics.monolayer) store stresses per
 layer volume 2 a L^2, so their eta is Dratler & Schowalter's (1996) eq. 6 and the ``phi``
@@ -483,24 +484,13 @@ def reduce_runs(paths, medium=None) -> Reduction:
     (including a medium that the job cannot take); warns (:class:`PartialRunWarning`)
     when some tasks are unfinished (details in ``Reduction.notes``)."""
     paths = [str(p) for p in paths]
-    if not paths:
-        raise ReduceError("no run file given")
-    summaries = [open_run(p) for p in paths]
-    check_same_system(summaries)
-    job, job_text, viewed = summaries[0].job, summaries[0].job_text, False
-    if medium is not None and medium != job.medium:
-        from ..config import canonical_text
-        from .medium_view import MediumError, view_job
-        try:
-            job = view_job(job, medium, paths[0])
-        except MediumError as err:
-            raise ReduceError(str(err)) from None
-        job_text, viewed = canonical_text(job), True
+    summaries, job, job_text, viewed = open_runs(paths, medium)
     if job.shear.protocol == "none":
         raise ReduceError(
             f"{paths[0]}: a quiescent job (shear.protocol = \"none\") imposes no "
-            f"deformation, so it has no moduli or viscosity; only oscillatory (moduli.csv) "
-            f"and steady-shear (viscosity.csv) jobs are reduced")
+            f"deformation, so it has no projected moduli or viscosity; its moduli follow "
+            f"by Green-Kubo (sdmpi.analysis.at_rest.reduce_at_rest, which `sdmpi reduce` "
+            f"uses for it)")
     kind = "oscillatory" if job.shear.protocol == "oscillatory" else "steady"
     columns_read = XY if kind == "oscillatory" else slice(None)
 
@@ -587,6 +577,27 @@ def reduce_runs(paths, medium=None) -> Reduction:
                      ("G_prime", "G_dprime") if kind == "oscillatory" else STEADY_QUANTITIES,
                      ens, stacked, np.array(file_index), np.array(realisation), task_id,
                      committed, planned, tuple(notes), running, viewed)
+
+
+def open_runs(paths, medium=None):
+    """Validate the run files ``paths`` of one system (:func:`open_run`,
+    :func:`check_same_system`) and return (summaries, job, job_text, viewed): the first
+    file's job, with ``medium`` (not None and not the run's) applied after the fact
+    (:mod:`.medium_view`; ``viewed`` True). Raises ReduceError."""
+    if not paths:
+        raise ReduceError("no run file given")
+    summaries = [open_run(p) for p in paths]
+    check_same_system(summaries)
+    job, job_text, viewed = summaries[0].job, summaries[0].job_text, False
+    if medium is not None and medium != job.medium:
+        from ..config import canonical_text
+        from .medium_view import MediumError, view_job
+        try:
+            job = view_job(job, medium, paths[0])
+        except MediumError as err:
+            raise ReduceError(str(err)) from None
+        job_text, viewed = canonical_text(job), True
+    return summaries, job, job_text, viewed
 
 
 def _until_stop(stress, path, task):

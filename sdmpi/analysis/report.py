@@ -83,15 +83,20 @@ UNITS = {"phi": "1", "omega": "1/t_D", "rate": "1/time unit", "G_prime": "eta_m/
          "eta_err_Pa_s": "Pa s", "eta_ci95_Pa_s": "Pa s", "shear_stress_Pa": "Pa"}
 
 
-def write_csv(red, path) -> Path:
-    """The table of ``red`` as CSV (header = ``red.columns``)."""
+def write_table(rows, columns, path) -> Path:
+    """Rows (dicts) as CSV with the header ``columns``, cells by :func:`.tables.csv_value`."""
     path = Path(path)
     with open(path, "w", newline="") as fh:
         out = csv.writer(fh)
-        out.writerow(red.columns)
-        for row in red.rows():
-            out.writerow([csv_value(row[c]) for c in red.columns])
+        out.writerow(columns)
+        for row in rows:
+            out.writerow([csv_value(row[c]) for c in columns])
     return path
+
+
+def write_csv(red, path) -> Path:
+    """The table of ``red`` as CSV (header = ``red.columns``)."""
+    return write_table(red.rows(), red.columns, path)
 
 
 def write_h5(red, path) -> Path:
@@ -154,9 +159,10 @@ def plus_minus(mean, err) -> str:
 
 
 def format_table(red) -> str:
-    """The table as aligned text, values as mean +- one standard error."""
+    """The table as aligned text, values as mean +- one standard error (moduli columns
+    for every kind but "steady")."""
     pm = plus_minus
-    if red.kind == "oscillatory":
+    if red.kind != "steady":
         head = ["phi", "omega", "component", "n", "G'", "G''", "eta'", "eta''"]
         pairs = [("G_prime", "G_prime_err"), ("G_dprime", "G_dprime_err"),
                  ("eta_prime", "eta_prime_err"), ("eta_dprime", "eta_dprime_err")]
@@ -175,7 +181,7 @@ def format_table(red) -> str:
     widths = [max(len(x) for x in col) for col in zip(head, *lines)]
     text = ["  ".join(x.ljust(w) for x, w in zip(row, widths)).rstrip()
             for row in [head] + lines]
-    bars = "one standard error" if red.kind == "oscillatory" else "95% confidence interval"
+    bars = "one standard error" if red.kind != "steady" else "95% confidence interval"
     flag = ([f"* fewer than {SMALL_ENSEMBLE} realisations: error bars rest on few runs"]
             if any(small(r) for r in red.rows()) else [])
     return "\n".join(text + [f"({units}; ± {bars})"] + flag)
@@ -245,13 +251,7 @@ def units_of(red) -> dict:
 
 def write_errors_csv(red, path) -> Path:
     """errors.csv (:func:`error_rows`)."""
-    columns = error_columns(red)
-    with open(path, "w", newline="") as fh:
-        out = csv.writer(fh)
-        out.writerow(columns)
-        for row in error_rows(red):
-            out.writerow([csv_value(row[c]) for c in columns])
-    return Path(path)
+    return write_table(error_rows(red), error_columns(red), path)
 
 
 def write_units(red, path) -> Path:
@@ -283,16 +283,11 @@ def write_all(red, outdir, *, plots=True, task_id=None):
     place, so a failure (ReduceError, e.g. a bad ``task_id``, or a full disk) leaves
     ``outdir`` as it was and removes a directory it created. Returns (paths written,
     notes); OSError is raised as ReduceError."""
-    outdir = Path(outdir)
-    check_output_dir(outdir)
     if task_id is not None:  # checked with or without the plots that use it
         task_of(red, task_id)
-    created = [p for p in (outdir, *outdir.parents) if not p.exists()]
     stem = "moduli" if red.kind == "oscillatory" else "viscosity"
-    staging = None
-    try:
-        outdir.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=".reduce-", suffix=".tmp", dir=outdir))
+
+    def produce(staging):
         from .trust import plot_trust, trust_rows, warnings_of, write_trust_csv
         trust = trust_rows(red)
         paths = [write_csv(red, staging / f"{stem}.csv"), write_h5(red, staging / f"{stem}.h5"),
@@ -309,6 +304,24 @@ def write_all(red, outdir, *, plots=True, task_id=None):
         elif plots:
             from .plots import plot_running_all
             paths += plot_running_all(red, staging)
+        return paths, notes
+    return staged(outdir, produce)
+
+
+def staged(outdir, produce):
+    """Run ``produce(staging)`` -> (paths written into staging, notes) with ``staging`` a
+    temporary directory inside ``outdir`` (created), then rename every path into
+    ``outdir``: a file there is either the old one or the complete new one. A failure
+    (ReduceError, a full disk) leaves ``outdir`` as it was and removes the directories
+    made for it; OSError is raised as ReduceError. Returns (final paths, notes)."""
+    outdir = Path(outdir)
+    check_output_dir(outdir)
+    created = [p for p in (outdir, *outdir.parents) if not p.exists()]
+    staging = None
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".reduce-", suffix=".tmp", dir=outdir))
+        paths, notes = produce(staging)
         final = []
         for path in paths:
             os.replace(path, outdir / path.name)
