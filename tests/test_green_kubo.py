@@ -3,12 +3,18 @@ toys with an exact G(t), and `sdmpi reduce` of runs at rest."""
 
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from scipy.signal import lfilter
 
 from sdmpi.analysis import green_kubo as gk
+from sdmpi.analysis.at_rest import RELAXATION_COLUMNS, reduce_at_rest
+from sdmpi.analysis.reduce import COMPONENTS, MODULI_COLUMNS
+from sdmpi.cli import main
+from .runs import ROOT, child_env
 
 KT = 6 * math.pi
 
@@ -193,15 +199,6 @@ def test_exact_dilute_relaxation_transforms_to_the_exact_dilute_moduli(rule):
 
 # --------------------------------------------------------------------------- sdmpi reduce
 
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-from sdmpi.analysis.at_rest import RELAXATION_COLUMNS, reduce_at_rest  # noqa: E402
-from sdmpi.analysis.reduce import COMPONENTS, MODULI_COLUMNS  # noqa: E402
-from sdmpi.cli import main  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
 OUTPUTS = {"relaxation.csv", "moduli_gk.csv", "green_kubo.json"}
 
 TINY = """
@@ -231,11 +228,10 @@ checkpoint_every = 400
 
 
 def sdmpi_run(job, path, *sets):
-    from test_ensemble import _env
     cmd = [sys.executable, "-m", "sdmpi.cli", "run", str(job), "-o", str(path)]
     for item in sets:
         cmd += ["--set", item]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(), timeout=900)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=900)
     assert res.returncode == 0, res.stderr
     return path
 
