@@ -128,6 +128,9 @@ class Registry(Generic[E]):
         except KeyError:
             raise ValueError(f"{self.key} must be one of {list(self._entries)}, got {name!r}") from None
 
+    def __contains__(self, name: object) -> bool:
+        return name in self._entries
+
     def __iter__(self) -> Iterator[E]:
         return iter(tuple(self._entries.values()))
 

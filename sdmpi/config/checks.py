@@ -314,7 +314,7 @@ def scheme_problems(job, backend: str) -> list[Problem]:
     "auto" is judged once resolved; `sdmpi run` and `sdmpi validate` pass what it stands
     for, `sdmpi.registry.backend_for`)."""
     if job.brownian.scheme != "rfd" or not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves or \
-            backend in SOLVER_BACKENDS.rules or not SOLVER_BACKENDS[backend].matrix_free:
+            backend not in SOLVER_BACKENDS or not SOLVER_BACKENDS[backend].matrix_free:
         return []
     named = job.solver.backend
     where = "" if named == backend else f' (what "{named}" stands for with {job.system.n_particles} particles)'

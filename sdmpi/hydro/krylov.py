@@ -421,8 +421,6 @@ class KrylovSolver(SolverBackend):
     preconditioner of a solver at a nearby configuration (`take_preconditioner`), and
     counts its iterations (`stats`)."""
 
-    name = "petsc-krylov"
-
     @classmethod
     def build(cls, resistance, comm, tolerance, lanczos_tolerance):
         return cls(resistance, comm, tolerance, lanczos_tolerance)

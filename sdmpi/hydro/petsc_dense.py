@@ -164,8 +164,6 @@ class PetscDenseSolver(SolverBackend):
     """ScaLAPACK Cholesky of R_FU over `comm` (an mpi4py communicator; None: COMM_SELF), a
     `backend.SolverBackend`. Collective over comm; see the module docstring."""
 
-    name = "petsc-dense"
-
     def __init__(self, resistance, comm=None):
         PETSc = load_petsc()
         if not PETSc.Sys.hasExternalPackage("scalapack"):

@@ -25,8 +25,6 @@ class DenseSolver(SolverBackend):
     resistance's freshly formed R_FU, finite by construction); R_FE, R_SU, R_SE act through the
     resistance's block form (`resistance.GrandResistance`)."""
 
-    name = "dense"
-
     def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
         self.resistance = resistance
         self.n = resistance.n_particles
