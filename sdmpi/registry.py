@@ -147,12 +147,6 @@ class Registry(Generic[E]):
         return "; ".join([f"{e.name} = {e.summary}" for e in self] + [f"{r} = {s}" for r, s in self.rules.items()])
 
 
-def quoted(names, last: str = "or") -> str:
-    """'"a", "b" or "c"' of the names (for messages)."""
-    names = [f'"{n}"' for n in names]
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} {last} {names[-1]}"
-
-
 # --------------------------------------------------------------------------- solver backends
 
 AUTO = "auto"

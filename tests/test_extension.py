@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import sdmpi
+from sdmpi.cli import main
 from sdmpi.config import JobError, parse_job, resources
 from sdmpi.registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, BackendSpec, ModelSpec
 
@@ -88,8 +89,11 @@ def registered():
     HYDRODYNAMIC_MODELS.unregister(model.name)
 
 
-def test_loader_follows_the_registries(registered):
-    """Registered names become choices; the checks and the memory estimate read the specs."""
+def test_loader_follows_the_registries(registered, capsys):
+    """Registered names become choices; the checks, the memory estimate and `sdmpi validate`
+    read the specs (which never import the implementation: it is nowhere)."""
+    assert main(["validate", str(DEMO), "--set", 'solver.backend="test-gpu"']) == 0
+    assert "backend test-gpu, dense far field, 1 rank(s) per task" in capsys.readouterr().out  # matrix-free
     job = parse_job('[solver]\nbackend = "test-gpu"\n[hydrodynamics]\nmodel = "test-model"\n',
                     ["ensemble.ranks_per_task=2"])
     assert resources.dense_bytes(job, "test-gpu") == 0.0  # no dense matrices

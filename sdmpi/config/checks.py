@@ -13,9 +13,9 @@ import dataclasses
 import math
 from collections.abc import Callable
 
-from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, quoted, several_rank_choices
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, several_rank_choices
 from .problems import Problem
-from .schema import START_PHI_LIMIT, TWO_PI, Job
+from .schema import START_PHI_LIMIT, TWO_PI, Job, quoted
 
 
 def _discard_periods(job):

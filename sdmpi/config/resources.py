@@ -25,9 +25,9 @@ import math
 import os
 import shutil
 
-from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, quoted
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS
 from .problems import Problem
-from .schema import START_PHI_LIMIT
+from .schema import START_PHI_LIMIT, quoted
 from .tasks import enumerate_tasks
 
 BASE_BYTES = 300 * 2 ** 20  # interpreter, libraries, compiled kernels

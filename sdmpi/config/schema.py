@@ -23,7 +23,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, Registry, quoted, several_rank_choices
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, Registry, several_rank_choices
 
 TWO_PI = 2.0 * math.pi
 #: volume fractions of the initial configurations: below the lattice limit a lattice
@@ -98,6 +98,12 @@ class Range:
 
 def _num(x) -> str:
     return str(x) if isinstance(x, int) else f"{x:g}"
+
+
+def quoted(names) -> str:
+    """'"a", "b" or "c"' of the names (messages, docs)."""
+    names = [f'"{n}"' for n in names]
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
 
 
 @dataclass(frozen=True)
