@@ -143,7 +143,7 @@ class Registry(Generic[E]):
         return (*self._entries, *self.rules)
 
     def summaries(self) -> str:
-        """"name = summary; ..." of every choice (the key's documentation)."""
+        """The key's documentation: "name = summary" of every choice, joined by "; "."""
         return "; ".join([f"{e.name} = {e.summary}" for e in self] + [f"{r} = {s}" for r, s in self.rules.items()])
 
 
