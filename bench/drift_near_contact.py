@@ -41,7 +41,6 @@ from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.dynamics.realisation import KT_REDUCED, Realisation
 from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
-from sdmpi.hydro.solvers import noise_shape
 
 #: step of the centred differences (the gaps are >= 1e-4)
 FD_STEP = 1e-7
@@ -64,7 +63,7 @@ def exact_drift(evaluation, kT, ewald_tol, min_gap, cutoff=2.0):
 def rfd_drift_samples(evaluation, kT, dt, samples, rng):
     """(samples, N, 6) rfd drift samples, each the mean of the Brownian velocities of z and
     -z (no near-contact correction)."""
-    shape = noise_shape(evaluation.solver)
+    shape = evaluation.solver.noise_shape
     out = []
     for _ in range(samples):
         z = rng.standard_normal(shape)

@@ -16,7 +16,6 @@ import numpy as np
 from sdmpi.dynamics.collisions import separate
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.hydro.geometry import Lattice
-from sdmpi.hydro.solvers import noise_shape
 
 
 def main():
@@ -45,7 +44,7 @@ def main():
         if corrected_step:
             brownian = at.brownian(rng, kt, dt)
         else:
-            brownian = at.brownian_terms(rng.standard_normal(noise_shape(at.solver)), kt, dt)
+            brownian = at.brownian_terms(rng.standard_normal(at.solver.noise_shape), kt, dt)
         pos = at.positions + dt * brownian.velocities[:, :3]
     free = side ** 3 - 4 * math.pi * 8 / 3
     print(f"{scheme} {'corrected' if corrected_step else 'uncorrected'} dt={dt} box={side} steps={n} seed={seed} "

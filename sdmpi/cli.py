@@ -231,19 +231,22 @@ def summary(job) -> str:
 
 
 def _backend(job) -> str:
-    """The solver backend as `run` uses it ("auto" resolved), and whether PETSc, which
-    the other backends need, can be imported here (`run` refuses the job otherwise)."""
+    """The solver backend as `run` uses it ("auto" resolved), its far field if it is
+    matrix-free, and whether PETSc, where the backend needs it, can be imported here
+    (`run` refuses the job otherwise)."""
     from .dynamics.models import job_backend
     from .hydro.krylov import far_field_kind
     from .hydro.petsc_dense import PetscUnavailable, import_petsc4py
+    from .registry import SOLVER_BACKENDS
 
     name = job.solver.backend
     used = job_backend(job)
+    spec = SOLVER_BACKENDS[used]
     text = name if used == name else f"{name} (here {used})"
-    if used == "dense":
-        return text
-    if used == "petsc-krylov":
+    if spec.matrix_free:
         text += f", {far_field_kind(job.solver.far_field, job.system.n_particles)} far field"
+    if not spec.needs_petsc:
+        return text
     try:
         import_petsc4py()
     except PetscUnavailable as err:

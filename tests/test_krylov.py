@@ -26,7 +26,7 @@ from sdmpi.dynamics.models import ResistanceModel  # noqa: E402
 from sdmpi.hydro.krylov import lanczos_inverse_sqrt  # noqa: E402
 from sdmpi.hydro.lubrication import close_pairs, lubrication_matrix, lubrication_sparse  # noqa: E402
 from sdmpi.hydro.resistance import grand_resistance, split_resistance  # noqa: E402
-from sdmpi.hydro.solvers import make_solver, resolve_backend, take_preconditioner  # noqa: E402
+from sdmpi.hydro.solvers import make_solver, resolve_backend  # noqa: E402
 
 # Agreement with dense: the solves stop at a relative preconditioned residual TOL = 1e-8,
 # which bounds the relative error of the solution up to the preconditioner's quality
@@ -176,10 +176,9 @@ def test_midpoint_difference_is_accurate():
     first = make_solver("petsc-krylov", start, tolerance=1e-5)
     u_first, s_first = solved(first)
     follow = make_solver("petsc-krylov", mid, tolerance=1e-5)
-    take_preconditioner(follow, first)
+    follow.take_preconditioner(first)
     assert follow.inner is not None and first.inner is None  # taken over
-    take_preconditioner(make_solver("dense", grand_resistance(start.positions, np.ones(n), box, STRAIN)),
-                        first)  # no-op
+    make_solver("dense", grand_resistance(start.positions, np.ones(n), box, STRAIN)).take_preconditioner(first)  # no-op
     u_follow, s_follow = solved(follow)
     assert np.abs(u_first - u0).max() > 1e-6 * np.abs(u0).max()  # each solve is only ~1e-5 accurate
     for got, exact, whole in ((u_follow - u_first, u1 - u0, u0), (s_follow - s_first, s1 - s0, s0)):
@@ -260,7 +259,7 @@ def test_midpoint_drift_and_brownian_stress_agree_with_dense():
         model = ResistanceModel(np.ones(n), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=1e-4,
                                 backend=name, tolerance=1e-10, scheme="midpoint")
         at = model.at(CONFIG, 0.1)
-        shape = getattr(at.solver, "noise_shape", (n, 6))
+        shape = at.solver.noise_shape
         m = int(np.prod(shape))
         drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
         for k in range(m):

@@ -13,7 +13,6 @@ from sdmpi.dynamics.realisation import KT_REDUCED
 from sdmpi.hydro.geometry import Lattice
 from sdmpi.hydro.lubrication import close_pairs
 from sdmpi.hydro.resistance import grand_resistance
-from sdmpi.hydro.solvers import mobility_forms
 
 BOX = np.full(3, 10.0)
 MIN_GAP = 1e-4  # the default floor: gaps below 1e-4 a are clamped in the lubrication
@@ -155,11 +154,11 @@ def test_squeeze_fraction_is_the_slope_of_the_relative_mobility(h0, h_cross):
     model = ResistanceModel(np.ones(4), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP)
     at = model.at(_square(h0, h_cross), 0.0)
     forces = unit_pair_forces(np.array([0]), np.array([1]), np.array([[1.0, 0, 0]]), 4)
-    g = mobility_forms(at.solver, forces)[0]
+    g = at.solver.mobility_forms(forces)[0]
     v = at.velocities(forces[0], np.zeros((4, 5)))
     delta = 1e-3 * h0 / g
-    moved = [mobility_forms(model.displaced(at, at.positions + sign * delta * v[:, :3], separate=False)[0],
-                            forces)[0] for sign in (1.0, -1.0)]
+    moved = [model.displaced(at, at.positions + sign * delta * v[:, :3], separate=False)[0].mobility_forms(forces)[0]
+             for sign in (1.0, -1.0)]
     slope = (moved[0] - moved[1]) / (2 * delta) * h0 / g ** 2
     kappa = squeeze_fraction(g, h0, 1.0, 1.0)
     pair_model = ResistanceModel(np.ones(2), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP)

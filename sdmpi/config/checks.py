@@ -13,8 +13,9 @@ import dataclasses
 import math
 from collections.abc import Callable
 
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, several_rank_choices
 from .problems import Problem
-from .schema import START_PHI_LIMIT, TWO_PI, Job
+from .schema import START_PHI_LIMIT, TWO_PI, Job, quoted
 
 
 def _discard_periods(job):
@@ -85,10 +86,12 @@ def _gaps(job):
 
 
 def _ranks(job):
-    if job.ensemble.ranks_per_task > 1 and job.solver.backend == "dense":
-        return [Problem("ensemble.ranks_per_task", 'the "dense" backend runs a task on '
+    """A task on several ranks needs a backend that solves on several (`sdmpi.registry`)."""
+    backend = job.solver.backend
+    if job.ensemble.ranks_per_task > 1 and backend not in several_rank_choices():
+        return [Problem("ensemble.ranks_per_task", f'the "{backend}" backend runs a task on '
                         "one rank", job.ensemble.ranks_per_task,
-                        allowed='1, or solver.backend = "petsc-dense", "petsc-krylov" or "auto"')]
+                        allowed=f"1, or solver.backend = {quoted(several_rank_choices())}")]
     return []
 
 
@@ -278,47 +281,46 @@ def _frictional(job):
 
 
 def _model(job):
-    """What the hydrodynamic models support (sdmpi.dynamics.models): lubrication is the
-    Stokesian model's; monolayers and frictional contacts are built on lubrication; the
-    rfd drift needs a direct solver (`scheme_problems`)."""
+    """What the hydrodynamic models support (`sdmpi.registry.ModelSpec`): lubrication is
+    the models' that have it; monolayers and frictional contacts are built on lubrication;
+    a model that solves nothing has nothing to share over several ranks; the rfd drift
+    needs a direct solver (`scheme_problems`)."""
     hyd, problems = job.hydrodynamics, []
-    if hyd.model != "stokesian" and not hyd.lubrication:
-        problems.append(Problem("hydrodynamics.lubrication", "applies to the stokesian model "
-                                "only (lubrication = false there is the far-field model)", False,
+    model = HYDRODYNAMIC_MODELS[hyd.model]
+    with_lubrication = HYDRODYNAMIC_MODELS.names(lambda m: m.lubrication)
+    if not model.lubrication and not hyd.lubrication:
+        problems.append(Problem("hydrodynamics.lubrication", f"applies to the {' and '.join(with_lubrication)} "
+                                "model only (lubrication = false there is the far-field model)", False,
                                 allowed=f'true (the default) with hydrodynamics.model = "{hyd.model}"'))
     for needed, why in ((job.system.geometry == "monolayer", "monolayers are simulated with full "
                          "Stokesian dynamics only"),
                         (job.interparticle.kind == "frictional", "frictional contacts need the "
                          "lubrication of the stokesian model")):
-        if needed and hyd.model != "stokesian":
-            problems.append(Problem("hydrodynamics.model", why, hyd.model, allowed='"stokesian"'))
+        if needed and not model.lubrication:
+            problems.append(Problem("hydrodynamics.model", why, hyd.model, allowed=quoted(with_lubrication)))
         elif needed and not hyd.lubrication:  # the stokesian model without it is the far field
             problems.append(Problem("hydrodynamics.lubrication", why, False, allowed="true (the default)"))
-    if hyd.model == "free-draining" and job.ensemble.ranks_per_task > 1:
-        problems.append(Problem("ensemble.ranks_per_task", "a free-draining realisation has "
+    if not model.solves and job.ensemble.ranks_per_task > 1:
+        problems.append(Problem("ensemble.ranks_per_task", f"a {hyd.model} realisation has "
                                 "nothing to solve on several ranks", job.ensemble.ranks_per_task,
-                                allowed='1 with hydrodynamics.model = "free-draining"'))
+                                allowed=f'1 with hydrodynamics.model = "{hyd.model}"'))
     return problems + scheme_problems(job, job.solver.backend)
 
 
 def scheme_problems(job, backend: str) -> list[Problem]:
-    """brownian.scheme = "rfd" on the iterative backend: the random finite difference takes a
-    difference over ~1e-6 a, which an iterative solver's tolerance would swamp. backend: the
-    one the job runs on (the loader passes solver.backend; `sdmpi run` and `sdmpi validate`
-    pass what "auto" stands for, `hydro.solvers.backend_for`, which this package does not
-    import)."""
-    if job.brownian.scheme != "rfd" or job.hydrodynamics.model == "free-draining" or \
-            backend != "petsc-krylov":
+    """brownian.scheme = "rfd" on a matrix-free (iterative) backend: the random finite
+    difference takes a difference over ~1e-6 a, which an iterative solver's tolerance would
+    swamp. backend: the one the job runs on (the loader passes solver.backend, whose rule
+    "auto" is judged once resolved; `sdmpi run` and `sdmpi validate` pass what it stands
+    for, `sdmpi.registry.backend_for`)."""
+    if job.brownian.scheme != "rfd" or not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves or \
+            backend not in SOLVER_BACKENDS or not SOLVER_BACKENDS[backend].matrix_free:
         return []
     named = job.solver.backend
     where = "" if named == backend else f' (what "{named}" stands for with {job.system.n_particles} particles)'
     return [Problem("brownian.scheme", "the random finite difference takes a difference over "
                     "~1e-6 a, which an iterative solver's tolerance would swamp", "rfd",
-                    allowed=f'"midpoint" (or absent) with solver.backend = "petsc-krylov"{where}')]
-
-
-#: backends implemented in this version (the others are named by the job schema)
-IMPLEMENTED_BACKENDS = ("dense", "petsc-dense", "petsc-krylov", "auto")
+                    allowed=f'"midpoint" (or absent) with solver.backend = "{backend}"{where}')]
 
 
 def _maxwell_forces(job):
@@ -328,13 +330,6 @@ def _maxwell_forces(job):
         return [Problem("interparticle.kind", "interparticle forces in a Maxwell medium are not "
                         "modelled (their stresslets would need the medium's memory too)",
                         job.interparticle.kind, allowed='"none" with medium.kind = "maxwell"')]
-    return []
-
-
-def _backend(job):
-    if job.solver.backend not in IMPLEMENTED_BACKENDS:
-        return [Problem("solver.backend", "is not implemented yet in this version",
-                        job.solver.backend, allowed=", ".join(f'"{b}"' for b in IMPLEMENTED_BACKENDS))]
     return []
 
 
@@ -369,6 +364,5 @@ CROSS_CHECKS: tuple[CrossCheck, ...] = (
       "ensemble.ranks_per_task", "brownian.scheme", "solver.backend"), _model),
     (("interparticle.kind", "interparticle.repulsion_length", "brownian.enabled",
       "hydrodynamics.lubrication_cutoff"), _frictional),
-    (("solver.backend",), _backend),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
 )

@@ -4,11 +4,12 @@ refuses with exit 2).
 
 Memory per rank, in bytes (estimates, documented in docs/cli.md):
 
-* the dense solvers hold about ``DENSE_MATRICES`` matrices of the 11N x 11N FTS grand
+* the solver backend's dense matrices (`sdmpi.registry.BackendSpec.dense_matrices`): the
+  direct backends hold about `sdmpi.registry.DENSE_MATRICES` matrices of the 11N x 11N FTS grand
   mobility / resistance problem (6 force/torque and 5 stresslet unknowns per sphere),
-  8 bytes per entry; ``petsc-dense`` distributes them over the task's ranks; the
-  matrix-free ``petsc-krylov`` backend needs O(N) and is not estimated, nor is the
-  ``free-draining`` model (no hydrodynamic matrices);
+  8 bytes per entry, spread over the task's ranks by those that solve on several; a
+  matrix-free backend needs O(N) and is not estimated, nor is a model that solves nothing
+  (free draining: no hydrodynamic matrices);
 * the hard-sphere start's cell list: one 8-byte head per cell of side >= the contact
   distance 2 a_max, (L / 2 a_max)^3 cells for a cubic box of side L; a very dilute job
   (phi -> 0) makes L, and this list, explode: more than ``MAX_CELL_BYTES`` is refused on
@@ -24,15 +25,11 @@ import math
 import os
 import shutil
 
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS
 from .problems import Problem
-from .schema import START_PHI_LIMIT
+from .schema import START_PHI_LIMIT, quoted
 from .tasks import enumerate_tasks
 
-# 11N x 11N matrices alive at once, rounded up (a dense evaluation holds 218 N^2 doubles:
-# S^-1, X, U_b, the lubrication's dense partitions and R_FU's factor; assembling one
-# peaks at 242 N^2; the midpoint scheme holds one evaluation while it assembles another:
-# 460 N^2 = 3.8 (11N)^2)
-DENSE_MATRICES = 4
 BASE_BYTES = 300 * 2 ** 20  # interpreter, libraries, compiled kernels
 MEMORY_SHARE = 0.9          # of the available memory that a run may plan to use
 MAX_CELL_BYTES = 2 ** 30    # largest start cell list accepted on any machine
@@ -47,12 +44,11 @@ def gib(n_bytes: float) -> str:
 
 
 def dense_bytes(job, backend: str) -> float:
-    """Bytes per rank of the dense solver matrices (0 for the matrix-free petsc-krylov and
-    for free draining, which solves nothing)."""
-    if backend == "petsc-krylov" or job.hydrodynamics.model == "free-draining":
+    """Bytes per rank of the resolved ``backend``'s dense matrices (0 for a matrix-free
+    backend and for a model that solves nothing)."""
+    if not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves:
         return 0.0
-    size = DENSE_MATRICES * (11 * job.system.n_particles) ** 2 * 8.0
-    return size / job.ensemble.ranks_per_task if backend == "petsc-dense" else size
+    return SOLVER_BACKENDS[backend].memory_per_rank(job.system.n_particles, job.ensemble.ranks_per_task)
 
 
 def start_cells_bytes(job) -> float:
@@ -124,13 +120,14 @@ def memory_problems(job, backend: str, ranks: int, available: float | None) -> l
     need, allowed = memory_per_rank(job, backend), MEMORY_SHARE * available / ranks
     if need <= allowed:
         return []
+    matrices, lean = SOLVER_BACKENDS[backend].dense_matrices, SOLVER_BACKENDS.names(lambda b: not b.dense_matrices)
     return [Problem("system.n_particles", f"the job needs about {gib(need)} per rank "
-                    f"({backend} solver: {DENSE_MATRICES} matrices of (11 N)^2 doubles; "
+                    f"({backend} solver: {matrices} matrices of (11 N)^2 doubles; "
                     f"start cell list {gib(start_cells_bytes(job))}), more than the "
                     f"{gib(allowed)} available to each of {ranks} rank(s) here",
                     job.system.n_particles,
                     allowed="fewer particles, fewer ranks per machine, or "
-                            "solver.backend = \"petsc-krylov\" (O(N) memory)")]
+                            f"solver.backend = {quoted(lean)} (O(N) memory)")]
 
 
 def min_phi(job, cell_bytes: float) -> float:

@@ -23,6 +23,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, Registry, several_rank_choices
+
 TWO_PI = 2.0 * math.pi
 #: volume fractions of the initial configurations: below the lattice limit a lattice
 #: start, above it a compressed one (sdmpi.dynamics.initial), up to this
@@ -98,11 +100,24 @@ def _num(x) -> str:
     return str(x) if isinstance(x, int) else f"{x:g}"
 
 
+def quoted(names) -> str:
+    """'"a", "b" or "c"' of the names (messages, docs)."""
+    names = [f'"{n}"' for n in names]
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+
+
 @dataclass(frozen=True)
 class Choice:
-    """One of a fixed set of strings."""
+    """One of a fixed set of strings, or of the choices of a registry (`sdmpi.registry`,
+    read at every check, so that implementations registered after this module is imported
+    count)."""
 
-    values: tuple[str, ...]
+    options: tuple[str, ...] | Registry
+
+    @property
+    def values(self) -> tuple[str, ...]:
+        options = self.options
+        return options.choices() if isinstance(options, Registry) else options
 
     def contains(self, x) -> bool:
         return x in self.values
@@ -369,7 +384,8 @@ class Brownian:
                              "stresslets are estimated: rfd = random finite difference at every "
                              "step (exact in the mean at every gap), midpoint = Fixman's midpoint "
                              "(too small a drift at gaps below ~4 dt); absent: rfd on the direct "
-                             "backends, midpoint on petsc-krylov (see docs/physics.md)",
+                             "backends, midpoint on the matrix-free ones ("
+                             + ", ".join(SOLVER_BACKENDS.names(lambda b: b.matrix_free)) + ") (see docs/physics.md)",
                              allowed=Choice(("rfd", "midpoint")), optional=True)
 
 
@@ -500,7 +516,8 @@ class Ensemble:
 
     realisations: int = key(7, "int", "independent realisations per (phi, omega) "
                             "(Schaink et al. 2000: at least 7)", allowed=Range(1, MAX_REALISATIONS))
-    ranks_per_task: int = key(1, "int", "MPI ranks per task (> 1 needs a petsc backend)",
+    ranks_per_task: int = key(1, "int", "MPI ranks per task (> 1 needs solver.backend = "
+                              f"{quoted(several_rank_choices())})",
                               allowed=Range(1, None))
 
 
@@ -508,11 +525,7 @@ class Ensemble:
 class Solver:
     """[solver]: the linear-algebra backend for the resistance problem."""
 
-    backend: str = key("dense", "str", "dense = LAPACK Cholesky on one rank; petsc-dense = "
-                       "ScaLAPACK Cholesky over the task's ranks; petsc-krylov = matrix-free "
-                       "mixed-form GMRES and Lanczos Brownian forces (large N); auto = dense "
-                       "(petsc-dense on several ranks) below 300 particles, else petsc-krylov",
-                       allowed=Choice(("dense", "petsc-dense", "petsc-krylov", "auto")))
+    backend: str = key("dense", "str", SOLVER_BACKENDS.summaries(), allowed=Choice(SOLVER_BACKENDS))
     tolerance: float = key(1e-8, "float", "relative residual of iterative solves "
                            "(petsc-krylov; direct backends ignore it); for dynamics 1e-4 to "
                            "1e-6 with lanczos_tolerance = 1e-4 and hydrodynamics."
@@ -537,10 +550,8 @@ class Hydrodynamics:
     """[hydrodynamics]: accuracy knobs of the hydrodynamic interactions. Gaps are
     surface-to-surface distances in units of the pair's mean radius."""
 
-    model: str = key("stokesian", "str", "hydrodynamic interactions: stokesian = far field + "
-                     "lubrication (Stokesian dynamics), far-field = the periodic far-field "
-                     "(Rotne-Prager-level FTS) mobility alone, free-draining = none (Stokes drag "
-                     "of isolated spheres)", allowed=Choice(("stokesian", "far-field", "free-draining")))
+    model: str = key("stokesian", "str", "hydrodynamic interactions: " + HYDRODYNAMIC_MODELS.summaries(),
+                     allowed=Choice(HYDRODYNAMIC_MODELS))
     ewald_tolerance: float | None = key(None, "float", "relative accuracy of the Ewald sums; "
                                         f"absent: {_num(BROWNIAN_EWALD_TOLERANCE)} for Brownian "
                                         "jobs of equal spheres in a box of side >= "
@@ -560,8 +571,9 @@ class Hydrodynamics:
                                  "reflect = the Brownian part of the step reflected at the gap "
                                  "min_gap (the deterministic part separated), both by contact "
                                  "impulses acting through the mobility; absent: separate "
-                                 "for the stokesian model, reflect for far-field and "
-                                 "free-draining (see docs/physics.md)",
+                                 "for the models with lubrication ("
+                                 + ", ".join(HYDRODYNAMIC_MODELS.names(lambda m: m.lubrication))
+                                 + "), reflect for the others (see docs/physics.md)",
                                  allowed=Choice(("separate", "reflect")), optional=True)
 
 

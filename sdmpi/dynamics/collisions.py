@@ -88,6 +88,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..hydro.lubrication import close_pairs
+from ..registry import HYDRODYNAMIC_MODELS
 
 #: separated pairs are left at this many times hydrodynamics.min_gap
 SEPARATION = 2.0
@@ -96,9 +97,10 @@ RULES = ("separate", "reflect")
 
 
 def default_rule(model):
-    """The collision rule of a hydrodynamic model when hydrodynamics.collisions is absent
-    (module docstring): separate with lubrication, reflect without."""
-    return "separate" if model == "stokesian" else "reflect"
+    """The collision rule of the hydrodynamic model named ``model`` when
+    hydrodynamics.collisions is absent (module docstring): separate for a model with
+    lubrication (`sdmpi.registry.ModelSpec`), reflect without."""
+    return "separate" if HYDRODYNAMIC_MODELS[model].lubrication else "reflect"
 
 
 @dataclass

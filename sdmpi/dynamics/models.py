@@ -1,8 +1,9 @@
 """Hydrodynamic models: what the integrator asks of the hydrodynamics at one configuration.
 
-A model (`hydrodynamic_model(job, ...)`) is evaluated at a configuration,
-``model.at(positions, strain)``, which assembles and factorises whatever the model needs and
-returns an *evaluation* with
+A model (`HydrodynamicModel`, built by `hydrodynamic_model(job, ...)` from the entry of
+hydrodynamics.model in `sdmpi.registry.HYDRODYNAMIC_MODELS`) is evaluated at a
+configuration, ``model.at(positions, strain)``, which assembles and factorises whatever the
+model needs and returns an *evaluation* (`HydrodynamicEvaluation`) with
 
 * ``velocities(forces, einf)``: rigid-body velocities relative to the imposed flow, (N, 6)
   U', Omega' = R_FU^-1 (F + R_FE e_inf) for forces/torques (N, 6) and E_inf (N, 5);
@@ -15,10 +16,10 @@ returns an *evaluation* with
   along its line of centres (for the collision forces of `collisions`), ``stats()``: solver
   statistics of the evaluation.
 
-Models (``hydrodynamics.model``):
+Models (``hydrodynamics.model``, registered in `sdmpi.registry.HYDRODYNAMIC_MODELS`):
 
 * ``stokesian``: full Stokesian dynamics, R = M_inf^-1 + lubrication (Durlofsky, Brady &
-  Bossis 1987; Brady et al. 1988), on any `hydro.solvers` backend;
+  Bossis 1987; Brady et al. 1988), on any solver backend (`sdmpi.registry.SOLVER_BACKENDS`);
 * ``far-field``: the periodic far-field (Rotne-Prager-level, FTS) mobility alone, R = M_inf^-1,
   no lubrication: Brownian dynamics with hydrodynamic interactions;
 * ``free-draining``: no hydrodynamic interactions, R_FU = diag(6 pi a, 8 pi a^3),
@@ -129,21 +130,23 @@ the whole of m, is large against the small radial parts m_h of close pairs, and 
 G_p h_p it would dominate the correction (petsc-krylov keeps the scheme's own step).
 """
 
+from __future__ import annotations
+
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
 from ..hydro.farfield import NDOF
 from ..hydro.geometry import Lattice
-from ..hydro.lubrication import close_pairs
+from ..hydro.lubrication import PairList, close_pairs
 from ..hydro.resistance import resistance_change
-from ..hydro.solvers import (MATRIX_FREE, assemble, backend_for, brownian_velocities, make_solver, mobility_forms,
-                             noise_shape, resolve_backend, solver_stats, take_preconditioner)
+from ..hydro.solvers import assemble, make_solver, resolve_backend
 from ..hydro.two_sphere import squeeze_slope
+from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, backend_for
 
-#: hydrodynamics.model choices
-MODELS = ("stokesian", "far-field", "free-draining")
 #: brownian.scheme choices (resistance models)
 SCHEMES = ("rfd", "midpoint")
 #: the random finite difference's length in units of hydrodynamics.min_gap (mean radii)
@@ -164,10 +167,63 @@ class BrownianTerms:
     midpoint_overlaps: int = 0
 
 
+class HydrodynamicEvaluation(Protocol):
+    """A hydrodynamic model at one configuration of N spheres (module docstring), all in
+    the reduced units of the job (radius a, viscosity eta_m).
+
+    Attributes:
+        positions: (N, 3) the configuration, wrapped into the box.
+        n_particles: N.
+        pairs: the pairs within the interparticle-force cut-off, with true gaps.
+    """
+
+    positions: np.ndarray
+    n_particles: int
+    pairs: PairList
+
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """U', Omega' (N, 6) relative to the imposed flow = R_FU^-1 (F + R_FE e_inf), for
+        forces/torques (N, 6) and E_inf (N, 5)."""
+        raise NotImplementedError
+
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """S (N, 5) = R_SE e_inf - R_SU U' for rigid-body velocities (N, 6) and E_inf (N, 5)."""
+        raise NotImplementedError
+
+    def relative_mobility(self, i: np.ndarray, j: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """(P,) mobility of relative motion e.(M_jj + M_ii - M_ij - M_ji).e of the pairs
+        (i, j) along their unit lines of centres e (P, 3), M = R_FU^-1."""
+        raise NotImplementedError
+
+    def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
+        """The step's Brownian velocities (drift included) and stresslets, drawn from rng."""
+        raise NotImplementedError
+
+    def stats(self) -> dict[str, float]:
+        """Solver statistics of the evaluation: solver_iterations, solver_residual,
+        lanczos_iterations (zero for the direct backends)."""
+        raise NotImplementedError
+
+
+class HydrodynamicModel(Protocol):
+    """A hydrodynamic model of spheres of given radii in a box, registered in
+    `sdmpi.registry.HYDRODYNAMIC_MODELS` (docs/extending.md)."""
+
+    @classmethod
+    def from_job(cls, job: Any, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+                 separate: Callable | None = None, on_error: Callable | None = None) -> HydrodynamicModel:
+        """The model of ``job`` (`hydrodynamic_model`)."""
+        raise NotImplementedError
+
+    def at(self, positions: np.ndarray, strain: float) -> HydrodynamicEvaluation:
+        """The model evaluated at ``positions`` (N, 3) with the box at Lees-Edwards ``strain``."""
+        raise NotImplementedError
+
+
 def default_scheme(backend):
     """The drift scheme a backend gets when brownian.scheme is absent: rfd on the direct
-    backends, midpoint on the iterative one (module docstring)."""
-    return "midpoint" if backend in MATRIX_FREE else "rfd"
+    backends, midpoint on the matrix-free (iterative) ones (module docstring)."""
+    return "midpoint" if SOLVER_BACKENDS[backend].matrix_free else "rfd"
 
 
 def squeeze_fraction(mobility, gap, radius_i, radius_j):
@@ -190,7 +246,7 @@ def unit_pair_forces(i, j, e, n):
     return forces
 
 
-class ResistanceEvaluation:
+class ResistanceEvaluation(HydrodynamicEvaluation):
     """A resistance model (stokesian, far-field) at one configuration: its resistance
     (`hydro.resistance`), the backend's solver of it, and the force pair list."""
 
@@ -210,17 +266,17 @@ class ResistanceEvaluation:
     def relative_mobility(self, i, j, e):
         """e.(M_jj + M_ii - M_ij - M_ji).e of the pairs (i, j) with unit lines of centres
         e (M = R_FU^-1): f.M.f for unit and opposite forces f on j and i (`unit_pair_forces`)."""
-        return mobility_forms(self.solver, unit_pair_forces(i, j, e, self.n_particles))
+        return self.solver.mobility_forms(unit_pair_forces(i, j, e, self.n_particles))
 
     def brownian(self, rng, kT, dt):
-        shape = noise_shape(self.solver)
+        shape = self.solver.noise_shape
         z = rng.standard_normal(shape)
         z_near = rng.standard_normal(shape) if self.model.near_contact else None
         # the iterative backend's Brownian forces (Lanczos) need a positive definite M_inf
         return self.model._guarded(self.brownian_terms, z, kT, dt, z_near)
 
     def brownian_terms(self, z, kT, dt, z_near=None):
-        """The step's `BrownianTerms` for the standard normal noise z (`solvers.noise_shape`):
+        """The step's `BrownianTerms` for the standard normal noise z (the solver's noise_shape):
         F_B = sqrt(2 kT/dt) C z (C C^T = R_FU, or any F_B of that covariance), the
         displacement direction m = R_FU^-1 C z (module docstring); z_near: the independent
         noise z' of the near-contact correction (None: no correction)."""
@@ -229,14 +285,14 @@ class ResistanceEvaluation:
             unit_force = self.solver.brownian_forces(z)
             m = self.solver.velocities(unit_force, zero)
         else:
-            m = brownian_velocities(self.solver, z)
+            m = self.solver.brownian_velocities(z)
         noise = math.sqrt(2 * kT / dt) * m
         near = 0.0 if z_near is None else self._near_contact(m, z_near, kT, dt)
         if self.model.scheme == "midpoint":
             step = 0.5 * dt * math.sqrt(2 * kT / dt)
             mid, found = self.model.displaced(self, self.positions + step * m[:, :3], separate=True)
             self._solvers.append(mid)
-            take_preconditioner(mid, self.solver)  # petsc-krylov: refactorise the start's factor
+            mid.take_preconditioner(self.solver)  # petsc-krylov: refactorise the start's factor
             u_mid = mid.velocities(math.sqrt(2 * kT / dt) * unit_force, zero)
             return BrownianTerms(u_mid + near, mid.stresslets(u_mid, zero) - self.solver.stresslets(noise, zero),
                                  found)
@@ -262,26 +318,26 @@ class ResistanceEvaluation:
         i, j = pairs.i[close], pairs.j[close]
         dx = pairs.dx[close]
         e = dx / np.sqrt(np.einsum("pc,pc->p", dx, dx))[:, None]
-        m_indep = brownian_velocities(self.solver, z_near)
+        m_indep = self.solver.brownian_velocities(z_near)
         m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
         gap = np.maximum(pairs.gap[close], self.model.min_gap * mean_radius[close])  # the lubrication's floor
         forces = unit_pair_forces(i, j, e, n)
-        mobility = mobility_forms(self.solver, forces)
+        mobility = self.solver.mobility_forms(forces)
         kappa = squeeze_fraction(mobility, gap, self.model.radii[i], self.model.radii[j])
         weight = np.maximum(2.0 * kappa - 1.0, 0.0) * 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility * gap)
         return self.solver.velocities(np.einsum("p,pkc->kc", weight, forces), zero)
 
     def stats(self):
         """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""
-        stats = [solver_stats(s) for s in self._solvers]
+        stats = [s.stats for s in self._solvers]
         return {"solver_iterations": sum(s["iterations"] for s in stats),
                 "solver_residual": max(s["residual"] for s in stats),
                 "lanczos_iterations": sum(s["lanczos"] for s in stats)}
 
 
-class ResistanceModel:
+class ResistanceModel(HydrodynamicModel):
     """Stokesian dynamics (lubrication on) or its far field alone (lubrication off) on a
-    `hydro.solvers` backend; `at` evaluates it at a configuration."""
+    solver backend (`sdmpi.registry.SOLVER_BACKENDS`); `at` evaluates it at a configuration."""
 
     def __init__(self, radii, box, *, lubrication, ewald_tol, cutoff, min_gap, backend="dense",
                  far_field=None, comm=None, tolerance=None, lanczos_tolerance=None, scheme=None,
@@ -293,14 +349,26 @@ class ResistanceModel:
         self.rfd_step = RFD_STEP * min_gap
         # the near-contact correction (module docstring): with lubrication, on the direct
         # backends (an iterative solve's error is amplified in the small radial parts m_h)
-        self.near_contact = lubrication and self.backend not in MATRIX_FREE
+        matrix_free = SOLVER_BACKENDS[self.backend].matrix_free
+        self.near_contact = lubrication and not matrix_free
         self._hydro = dict(lubrication=lubrication, ewald_tol=ewald_tol, cutoff=cutoff, min_gap=min_gap)
-        if self.backend in MATRIX_FREE:
+        if matrix_free:
             self._hydro["far_field"] = far_field
         self._solver_args = {} if tolerance is None else dict(tolerance=tolerance,
                                                                lanczos_tolerance=lanczos_tolerance)
         self._separate = separate  # positions, strain -> (positions, overlaps found)
         self._on_error = on_error  # LinAlgError -> exception to raise
+
+    @classmethod
+    def from_job(cls, job, radii, box, comm=None, separate=None, on_error=None):
+        """The model of job.hydrodynamics.model, with lubrication when the model has it
+        (`sdmpi.registry.ModelSpec`) and hydrodynamics.lubrication is on."""
+        hyd = job.hydrodynamics
+        return cls(radii, box, lubrication=HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication,
+                   ewald_tol=job.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
+                   backend=job.solver.backend, far_field=job.solver.far_field, comm=comm,
+                   tolerance=job.solver.tolerance, lanczos_tolerance=job.solver.lanczos_tolerance,
+                   scheme=job.brownian.scheme, separate=separate, on_error=on_error)
 
     def _guarded(self, build, *args, **kwargs):
         """build(*args, **kwargs), its LinAlgError (a matrix not positive definite) turned
@@ -342,7 +410,7 @@ class ResistanceModel:
         return self._solver(res), found
 
 
-class FreeDrainingEvaluation:
+class FreeDrainingEvaluation(HydrodynamicEvaluation):
     """No hydrodynamic interactions at one configuration (module docstring)."""
 
     def __init__(self, radii, positions, pairs):
@@ -372,14 +440,18 @@ class FreeDrainingEvaluation:
         return {"solver_iterations": 0, "solver_residual": 0.0, "lanczos_iterations": 0}
 
 
-class FreeDrainingModel:
+class FreeDrainingModel(HydrodynamicModel):
     """Isolated-sphere mobilities (Stokes' laws) for every sphere; the force pairs within
     the cut-off are searched here."""
 
-    scheme = None
-
     def __init__(self, radii, box, *, cutoff, min_gap):
         self.radii, self.box, self.cutoff, self.min_gap = radii, box, cutoff, min_gap
+
+    @classmethod
+    def from_job(cls, job, radii, box, comm=None, separate=None, on_error=None):
+        """The model for the job's cut-off and minimum gap (it solves nothing: comm,
+        separate and on_error do not apply)."""
+        return cls(radii, box, cutoff=job.hydrodynamics.lubrication_cutoff, min_gap=job.hydrodynamics.min_gap)
 
     def at(self, positions, strain):
         lattice = Lattice(self.box, strain)
@@ -390,21 +462,15 @@ class FreeDrainingModel:
 
 def job_backend(job):
     """The backend a job's tasks solve on: job.solver.backend, or what "auto" stands for at
-    its N on ensemble.ranks_per_task ranks (`hydro.solvers.backend_for`)."""
+    its N on ensemble.ranks_per_task ranks (`sdmpi.registry.backend_for`)."""
     return backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
 
 
-def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None):
-    """The model of job.hydrodynamics.model for spheres of these radii in this box
-    (comm: the ranks that solve together; separate(positions, strain) -> (positions,
-    overlaps): the overlap correction the midpoint scheme applies at its half step;
-    on_error(LinAlgError) -> the exception raised when M_inf or R_FU is not positive
-    definite)."""
-    hyd = job.hydrodynamics
-    if hyd.model == "free-draining":
-        return FreeDrainingModel(radii, box, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap)
-    return ResistanceModel(radii, box, lubrication=hyd.model == "stokesian" and hyd.lubrication,
-                           ewald_tol=job.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
-                           backend=job.solver.backend, far_field=job.solver.far_field, comm=comm,
-                           tolerance=job.solver.tolerance, lanczos_tolerance=job.solver.lanczos_tolerance,
-                           scheme=job.brownian.scheme, separate=separate, on_error=on_error)
+def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None) -> HydrodynamicModel:
+    """The model of job.hydrodynamics.model (its `sdmpi.registry.HYDRODYNAMIC_MODELS` entry)
+    for spheres of these radii in this box (comm: the ranks that solve together;
+    separate(positions, strain) -> (positions, overlaps): the overlap correction the
+    midpoint scheme applies at its half step; on_error(LinAlgError) -> the exception raised
+    when M_inf or R_FU is not positive definite)."""
+    model = HYDRODYNAMIC_MODELS[job.hydrodynamics.model].load()
+    return model.from_job(job, radii, box, comm=comm, separate=separate, on_error=on_error)

@@ -70,6 +70,7 @@ import weakref
 import numpy as np
 import scipy.sparse
 
+from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
 
 #: default relative residual of the saddle-point solves and the Lanczos square roots
@@ -412,14 +413,17 @@ class _SelfPreconditioner(_Context):
         z.getArray()[:] = np.einsum("pij,pj->pi", s.d_inv, r.getArray(readonly=True).reshape(-1, NDOF)).ravel()
 
 
-class KrylovSolver:
-    """The `petsc-krylov` backend for a `resistance.SplitResistance` on the MPI
-    communicator comm (None: this rank alone); tol: relative residual of every solve,
-    lanczos_tol: relative accuracy of the Lanczos square roots (None: tol). Interface
-    as `solvers.DenseSolver`, plus noise_shape, take_preconditioner and stats (iterations,
-    largest relative residual, Lanczos iterations)."""
+class KrylovSolver(SolverBackend):
+    """The `petsc-krylov` backend (`backend.SolverBackend`) for a
+    `resistance.SplitResistance` on the MPI communicator comm (None: this rank alone); tol:
+    relative residual of every solve, lanczos_tol: relative accuracy of the Lanczos square
+    roots (None: tol). Its noise is longer than N x 6 (`noise_shape`), it takes over the
+    preconditioner of a solver at a nearby configuration (`take_preconditioner`), and
+    counts its iterations (`stats`)."""
 
-    name = "petsc-krylov"
+    @classmethod
+    def build(cls, resistance, comm, tolerance, lanczos_tolerance):
+        return cls(resistance, comm, tolerance, lanczos_tolerance)
 
     def __init__(self, resistance, comm=None, tol=DEFAULT_TOL, lanczos_tol=None):
         from .petsc_dense import _keepalive, _mpi_comm, load_petsc

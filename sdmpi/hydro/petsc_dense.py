@@ -1,6 +1,6 @@
 """`petsc-dense`: R_FU distributed over an MPI communicator, ScaLAPACK Cholesky through PETSc.
 
-Same interface and equations as `solvers.DenseSolver` (see `sdmpi.hydro.solvers`):
+Same interface (`backend.SolverBackend`) and equations as `solvers.DenseSolver`:
 
     U' = R_FU^-1 (F + R_FE e_inf),   S = R_SE e_inf - R_SU U',   F_B = C z with R_FU = C C^T.
 
@@ -43,6 +43,8 @@ import os
 import sys
 
 import numpy as np
+
+from .backend import SolverBackend
 
 
 #: options PETSc is initialised with (when sdmpi is the first to import it)
@@ -158,11 +160,9 @@ def _set_factor_type():
     return _SET_FACTOR_TYPE[0]
 
 
-class PetscDenseSolver:
-    """ScaLAPACK Cholesky of R_FU over `comm` (an mpi4py communicator; None: COMM_SELF).
-    Collective over comm; see the module docstring."""
-
-    name = "petsc-dense"
+class PetscDenseSolver(SolverBackend):
+    """ScaLAPACK Cholesky of R_FU over `comm` (an mpi4py communicator; None: COMM_SELF), a
+    `backend.SolverBackend`. Collective over comm; see the module docstring."""
 
     def __init__(self, resistance, comm=None):
         PETSc = load_petsc()
@@ -175,6 +175,7 @@ class PetscDenseSolver:
         self.comm = _mpi_comm(comm)
         _keepalive(PETSc, self.comm)
         self.n = n = resistance.n_particles
+        self.noise_shape = (n, 6)
         m = 6 * n
         self.resistance = resistance  # R_FE, R_SU, R_SE act through its block form
         dense = PETSc.Mat().createDense([m, m], comm=self.comm)

@@ -78,8 +78,8 @@ def solve_mobility(positions: ArrayLike, box: ArrayLike | None, *, radii: ArrayL
             E_xy = E_yx = gamma_dot/2.
         lubrication: add the pairwise lubrication (near-field) resistance; False gives
             the far-field (Rotne-Prager level, FTS) mobility alone.
-        solver: a backend of `sdmpi.hydro.solvers.CHOICES`: "dense" (LAPACK),
-            "petsc-dense", "petsc-krylov" or "auto".
+        solver: a solver backend of `sdmpi.registry.SOLVER_BACKENDS` ("dense": LAPACK,
+            "petsc-dense", "petsc-krylov", ...) or "auto".
         ewald_tol: relative accuracy of the Ewald sums.
         comm: the MPI communicator a PETSc backend solves on, collective over it
             (default: this process alone).

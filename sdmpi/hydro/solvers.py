@@ -1,49 +1,34 @@
-"""Solvers for the resistance problem F = R U, behind one interface.
+"""The solver backends of the resistance problem F = R U, chosen by name.
 
-A backend is built from a `GrandResistance` and answers, for imposed forces/torques
-and strain rates, the rigid-body velocities and the stresslets:
-
-    U' = R_FU^-1 (F + R_FE e_inf),      S = R_SE e_inf - R_SU U'
-
-(from (F, L, -S) = R (U', -e_inf), U' = velocities relative to the imposed flow,
-e_inf the 5-vector of E_inf at every particle), plus the Brownian factor:
-R_FU = C C^T, so C z (z standard normal) has covariance R_FU, and the velocities it
-drives, R_FU^-1 C z = C^-T z, have covariance R_FU^-1 (fluctuation-dissipation).
-
-`dense` factorises R_FU by LAPACK Cholesky on one rank. `petsc-dense`
+The interface is `backend.SolverBackend`; the backends are registered, with what the job
+checks know of them, in `sdmpi.registry.SOLVER_BACKENDS`. `dense` (`DenseSolver`, here)
+factorises R_FU by LAPACK Cholesky on one rank. `petsc-dense`
 (`petsc_dense.PetscDenseSolver`) distributes R_FU over an MPI communicator and factorises
-it by ScaLAPACK through PETSc; it is imported only when asked for. Every backend is
-built as backend(resistance, comm): the communicator of the ranks that solve together
-(None: one rank; `dense` ignores it). `petsc-krylov` (`krylov.KrylovSolver`) solves
-iteratively without forming R: it is built from a `resistance.SplitResistance`
-(`assemble` picks the form a backend needs) with a tolerance, draws other noise than
-z (N, 6) (`noise_shape`) and counts its iterations (`solver_stats`). `auto` is not a
-backend but a rule (`resolve_backend`): dense below AUTO_KRYLOV_MIN_N particles
-(petsc-dense on several ranks), petsc-krylov from there on.
+it by ScaLAPACK through PETSc. `petsc-krylov` (`krylov.KrylovSolver`) solves iteratively
+without forming R: it is built from a `resistance.SplitResistance` (`assemble` picks the
+form a backend needs) with a tolerance, draws other noise than z (N, 6) and counts its
+iterations. A backend is imported only when asked for. `auto` is not a backend but a rule
+(`resolve_backend`).
 """
 
 import numpy as np
 from scipy.linalg import lapack
 
+from ..registry import SOLVER_BACKENDS, backend_for
+from .backend import SolverBackend
 from .krylov import DEFAULT_TOL
 from .resistance import grand_resistance, split_resistance
 
-#: `auto` picks petsc-krylov from this many particles on, for its memory (it forms no
-#: dense 11N x 11N matrix); on one rank at the default tolerances dense stays the faster up to
-#: N ~ 1000 (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
-AUTO_KRYLOV_MIN_N = 300
 
-
-class DenseSolver:
+class DenseSolver(SolverBackend):
     """Cholesky factorisation of R_FU (LAPACK potrf/potrs via scipy, in the memory of the
     resistance's freshly formed R_FU, finite by construction); R_FE, R_SU, R_SE act through the
     resistance's block form (`resistance.GrandResistance`)."""
 
-    name = "dense"
-
     def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
         self.resistance = resistance
         self.n = resistance.n_particles
+        self.noise_shape = (self.n, 6)
         # R_FU is symmetric: the transpose of the (fresh, C-ordered) r_fu is it in Fortran
         # order; its upper factor U (R_FU = U^T U) overwrites it, and U.T is the lower factor C
         upper, info = lapack.dpotrf(resistance.r_fu.T, lower=False, clean=True, overwrite_a=True)
@@ -85,102 +70,25 @@ class DenseSolver:
         return np.einsum("kp,kp->p", y, y)
 
 
-def _petsc_dense(resistance, comm=None):
-    from .petsc_dense import PetscDenseSolver
-
-    return PetscDenseSolver(resistance, comm)
-
-
-def _petsc_krylov(resistance, comm=None, tolerance=DEFAULT_TOL, lanczos_tolerance=None):
-    from .krylov import KrylovSolver
-
-    return KrylovSolver(resistance, comm, tolerance, lanczos_tolerance)
-
-
-BACKENDS = {"dense": DenseSolver, "petsc-dense": _petsc_dense, "petsc-krylov": _petsc_krylov}
-#: backends built from a SplitResistance (the others from a GrandResistance)
-MATRIX_FREE = ("petsc-krylov",)
-#: what a `solver` argument may name
-CHOICES = (*BACKENDS, "auto")
-
-
 def resolve_backend(name, n_particles, comm=None):
-    """The backend `name` stands for on the communicator comm (None: one rank): see
-    `backend_for`."""
+    """The backend `name` (a choice of solver.backend) stands for on the communicator comm
+    (None: one rank): itself, or what "auto" picks (`sdmpi.registry.backend_for`)."""
+    if name not in SOLVER_BACKENDS.choices():
+        raise ValueError(f"solver must be one of {list(SOLVER_BACKENDS.choices())}, got {name!r}")
     return backend_for(name, n_particles, 1 if comm is None else comm.size)
-
-
-def backend_for(name, n_particles, ranks):
-    """The backend `name` stands for with `ranks` ranks per task: itself, or for "auto"
-    dense (one rank) or petsc-dense (several) below AUTO_KRYLOV_MIN_N particles, else
-    petsc-krylov."""
-    if name not in CHOICES:
-        raise ValueError(f"solver must be one of {list(CHOICES)}, got {name!r}")
-    if name != "auto":
-        return name
-    if n_particles >= AUTO_KRYLOV_MIN_N:
-        return "petsc-krylov"
-    return "dense" if ranks == 1 else "petsc-dense"
 
 
 def assemble(name, *args, comm=None, **kwargs):
     """The resistance backend `name` needs: `grand_resistance(*args, **kwargs)`, or for
     the matrix-free backends `split_resistance(*args, comm=comm, **kwargs)`."""
-    if name in MATRIX_FREE:
+    if SOLVER_BACKENDS[name].matrix_free:
         return split_resistance(*args, comm=comm, **kwargs)
     return grand_resistance(*args, **kwargs)
 
 
-def make_solver(name, resistance, comm=None, tolerance=DEFAULT_TOL, lanczos_tolerance=None):
+def make_solver(name, resistance, comm=None, tolerance=DEFAULT_TOL, lanczos_tolerance=None) -> SolverBackend:
     """The backend `name` for a resistance from `assemble(name, ...)`, solving on the MPI
     communicator `comm` (None: this rank alone; collective over comm for the PETSc
     backends); tolerance: relative residual of the iterative backends, lanczos_tolerance:
     accuracy of their Brownian square roots (None: tolerance)."""
-    try:
-        backend = BACKENDS[name]
-    except KeyError:
-        raise ValueError(f"solver must be one of {sorted(BACKENDS)}, got {name!r}") from None
-    if name in MATRIX_FREE:
-        return backend(resistance, comm, tolerance, lanczos_tolerance)
-    return backend(resistance, comm)
-
-
-def noise_shape(solver):
-    """Shape of the standard normal noise `solver.brownian_forces` takes: (N, 6) unless
-    the backend declares its own (noise_shape)."""
-    return getattr(solver, "noise_shape", (solver.n, 6))
-
-
-def mobility_forms(solver, forces):
-    """f.R_FU^-1.f (P,) for the force sets forces (P, N, 6): the backend's own batched form
-    where it has one (dense), else one solve per set."""
-    forms = getattr(solver, "mobility_forms", None)
-    if forms is not None:
-        return forms(forces)
-    zero = np.zeros((solver.n, 5))
-    return np.array([np.vdot(f, solver.velocities(f, zero)) for f in forces])
-
-
-def brownian_velocities(solver, noise):
-    """R_FU^-1 C z for the noise z (`noise_shape`): the velocities of the Brownian force
-    C z (C C^T = R_FU), by the backend's own short cut where it has one (dense: one
-    triangular solve), else `velocities(brownian_forces(z))`."""
-    direct = getattr(solver, "brownian_velocities", None)
-    if direct is not None:
-        return direct(noise)
-    return solver.velocities(solver.brownian_forces(noise), np.zeros((solver.n, 5)))
-
-
-def take_preconditioner(solver, previous):
-    """Let solver take over the preconditioner factor of previous (a solver of the same
-    backend at a nearby configuration, the Brownian step's start for its midpoint), where
-    the backend has one (petsc-krylov); the direct backends ignore it."""
-    take = getattr(solver, "take_preconditioner", None)
-    if take is not None:
-        take(previous)
-
-
-def solver_stats(solver):
-    """Iterations (Krylov, Lanczos) and the largest relative residual of the solves so
-    far: zero for the direct backends."""
-    return getattr(solver, "stats", {"iterations": 0, "residual": 0.0, "lanczos": 0})
+    return SOLVER_BACKENDS[name].load().build(resistance, comm, tolerance, lanczos_tolerance)

@@ -1,0 +1,80 @@
+"""The interface of a solver backend: what the hydrodynamics asks of a solver of F = R U.
+
+A backend is built at one configuration from its resistance (`resistance.GrandResistance`,
+or `resistance.SplitResistance` for a matrix-free backend: `sdmpi.registry.BackendSpec`)
+and answers, for imposed forces/torques and strain rates, the rigid-body velocities and
+the stresslets,
+
+    U' = R_FU^-1 (F + R_FE e_inf),      S = R_SE e_inf - R_SU U'
+
+(from (F, L, -S) = R (U', -e_inf), U' = velocities relative to the imposed flow, e_inf
+the 5-vector of E_inf at every particle), and a Brownian factor: forces C z of covariance
+R_FU = C C^T for standard normal z, whose velocities R_FU^-1 C z have covariance R_FU^-1
+(fluctuation-dissipation).
+
+A backend class subclasses `SolverBackend` and implements its abstract members; the other
+members have generic forms a backend may replace by faster ones of its own (the dense
+backend's triangular solves). It is registered in `sdmpi.registry.SOLVER_BACKENDS`
+(docs/extending.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, Protocol
+
+import numpy as np
+
+
+class SolverBackend(Protocol):
+    """A solver of the resistance problem at one configuration of N spheres.
+
+    Attributes:
+        n: the number of spheres N.
+        noise_shape: the shape of the standard normal noise z that `brownian_forces` takes
+            ((N, 6) for a factor C of R_FU itself; a matrix-free backend may draw more).
+        stats: iterations (Krylov "iterations", "lanczos") and the largest relative
+            "residual" of the solves so far (zero for a direct backend).
+    """
+
+    n: int
+    noise_shape: tuple[int, ...]
+    stats: Mapping[str, float] = MappingProxyType({"iterations": 0, "residual": 0.0, "lanczos": 0})
+
+    @classmethod
+    def build(cls, resistance: Any, comm: Any, tolerance: float, lanczos_tolerance: float | None) -> SolverBackend:
+        """The backend of ``resistance`` solving on the MPI communicator ``comm`` (None: this
+        rank alone; collective over comm otherwise); ``tolerance``: relative residual of
+        iterative solves, ``lanczos_tolerance``: accuracy of their Brownian square roots
+        (None: tolerance). Generic form: ``cls(resistance, comm)``, for the direct backends,
+        which have no tolerance."""
+        return cls(resistance, comm)
+
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """U' (N, 6) = R_FU^-1 (F + R_FE e_inf) for forces/torques (N, 6) and e_inf (N, 5)."""
+        raise NotImplementedError
+
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """S (N, 5) = R_SE e_inf - R_SU U' for rigid-body velocities U' (N, 6) and e_inf (N, 5)."""
+        raise NotImplementedError
+
+    def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
+        """C z (N, 6), of covariance R_FU, for the standard normal noise z (`noise_shape`)."""
+        raise NotImplementedError
+
+    def brownian_velocities(self, noise: np.ndarray) -> np.ndarray:
+        """R_FU^-1 C z (N, 6) for the noise z (`noise_shape`): the velocities of the
+        Brownian force C z. Generic form: ``velocities(brownian_forces(z), 0)``."""
+        return self.velocities(self.brownian_forces(noise), np.zeros((self.n, 5)))
+
+    def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
+        """f.R_FU^-1.f (P,) for each of the force sets ``forces`` (P, N, 6). Generic form:
+        one solve per set."""
+        zero = np.zeros((self.n, 5))
+        return np.array([np.vdot(f, self.velocities(f, zero)) for f in forces])
+
+    def take_preconditioner(self, previous: SolverBackend) -> None:
+        """Take over what can be reused of ``previous``, a solver of the same backend at a
+        nearby configuration (the Brownian step's start for its midpoint). Generic form:
+        nothing (a direct backend factorises afresh)."""

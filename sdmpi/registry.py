@@ -1,0 +1,204 @@
+"""The registries of sdmpi's extension points: solver backends and hydrodynamic models.
+
+A registry maps a name, as a job file spells it (``solver.backend``,
+``hydrodynamics.model``), to an entry: a frozen spec that declares what the job loader,
+the checks, the resource estimates, the command line and the key reference need to know
+of an implementation, and where the implementation is (the class itself, or
+``"module:Class"``, imported on first use). Every list of choices users see is read from
+here. This module uses only the standard library, so that `sdmpi.config` derives its
+choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`
+and `sdmpi.dynamics.models` build the implementations it names.
+
+Adding an implementation: docs/extending.md. In short, one module with the class
+(`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`) and one
+``register``: an entry below for those shipped with sdmpi, or a call of
+``SOLVER_BACKENDS.register(BackendSpec(...))`` in the user's own module before the job is
+loaded.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+#: bytes of one entry of a dense matrix (double precision)
+DOUBLE = 8.0
+
+
+def _load(implementation: Any) -> Any:
+    """The object ``implementation`` stands for: itself, or the attribute named by a
+    ``"module:attribute"`` string, imported now."""
+    if not isinstance(implementation, str):
+        return implementation
+    module, _, attribute = implementation.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
+@dataclass(frozen=True)
+class BackendSpec:
+    """A solver backend of the resistance problem, as sdmpi's job checks know it.
+
+    Attributes:
+        name: its solver.backend value.
+        summary: what it is, one phrase (the key reference, ``sdmpi validate``).
+        implementation: a `sdmpi.hydro.backend.SolverBackend` class, or "module:Class".
+        matrix_free: solves without forming R, iteratively, from a
+            `sdmpi.hydro.resistance.SplitResistance` (solver.far_field applies); such a
+            backend gets the midpoint drift scheme, refuses rfd (its tolerance would swamp
+            the random finite difference) and no near-contact correction.
+        several_ranks: a task may solve on several ranks (ensemble.ranks_per_task > 1).
+        needs_petsc: needs petsc4py (``sdmpi run`` refuses the job where it is missing).
+        dense_matrices: how many (11 N)^2 matrices of doubles a task holds at once (the
+            memory estimate), spread over the task's ranks; 0: O(N) memory, not estimated.
+    """
+
+    name: str
+    summary: str
+    implementation: Any
+    matrix_free: bool = False
+    several_ranks: bool = False
+    needs_petsc: bool = False
+    dense_matrices: int = 0
+
+    def load(self) -> Any:
+        """The implementation class (imported on first use)."""
+        return _load(self.implementation)
+
+    def memory_per_rank(self, n_particles: int, ranks: int) -> float:
+        """Bytes per rank of the dense matrices of N spheres solved on ``ranks`` ranks."""
+        return self.dense_matrices * (11 * n_particles) ** 2 * DOUBLE / ranks
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A hydrodynamic model, as sdmpi's job checks know it.
+
+    Attributes:
+        name: its hydrodynamics.model value.
+        summary: what it is, one phrase (the key reference).
+        implementation: a `sdmpi.dynamics.models.HydrodynamicModel` class, or
+            "module:Class".
+        lubrication: it has the pairwise lubrication (hydrodynamics.lubrication applies;
+            monolayers and frictional contacts need it; pairs in contact are separated by
+            default, hydrodynamics.collisions).
+        solves: it solves a resistance problem on solver.backend (False: nothing to solve,
+            no solver memory, one rank per task, no drift scheme).
+    """
+
+    name: str
+    summary: str
+    implementation: Any
+    lubrication: bool = False
+    solves: bool = True
+
+    def load(self) -> Any:
+        """The implementation class (imported on first use)."""
+        return _load(self.implementation)
+
+
+E = TypeVar("E", BackendSpec, ModelSpec)
+
+
+class Registry(Generic[E]):
+    """Entries by name in registration order, for the job key ``key``; ``rules`` are
+    further choices of that key that stand for an entry (solver.backend = "auto"), with
+    their summaries."""
+
+    def __init__(self, key: str, rules: dict[str, str] | None = None):
+        self.key = key
+        self.rules = dict(rules or {})
+        self._entries: dict[str, E] = {}
+
+    def register(self, entry: E) -> E:
+        """Add ``entry`` under ``entry.name`` (ValueError if the name is taken)."""
+        if entry.name in self._entries or entry.name in self.rules:
+            raise ValueError(f"{self.key}: {entry.name!r} is registered already")
+        self._entries[entry.name] = entry
+        return entry
+
+    def unregister(self, name: str) -> None:
+        """Remove the entry ``name``."""
+        del self._entries[name]
+
+    def __getitem__(self, name: str) -> E:
+        try:
+            return self._entries[name]
+        except KeyError:
+            raise ValueError(f"{self.key} must be one of {list(self._entries)}, got {name!r}") from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._entries
+
+    def __iter__(self) -> Iterator[E]:
+        return iter(tuple(self._entries.values()))
+
+    def names(self, where: Callable[[E], bool] = lambda entry: True) -> tuple[str, ...]:
+        """The names of the entries (those for which ``where(entry)`` holds)."""
+        return tuple(entry.name for entry in self if where(entry))
+
+    def choices(self) -> tuple[str, ...]:
+        """Every value the job key may take: the names, then the rules."""
+        return (*self._entries, *self.rules)
+
+    def summaries(self) -> str:
+        """The key's documentation: "name = summary" of every choice, joined by "; "."""
+        return "; ".join([f"{e.name} = {e.summary}" for e in self] + [f"{r} = {s}" for r, s in self.rules.items()])
+
+
+# --------------------------------------------------------------------------- solver backends
+
+AUTO = "auto"
+#: `auto` picks petsc-krylov from this many particles on, for its memory (it forms no
+#: dense 11N x 11N matrix); on one rank at the default tolerances dense stays the faster up to
+#: N ~ 1000 (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
+AUTO_KRYLOV_MIN_N = 300
+#: 11N x 11N matrices alive at once in a dense evaluation, rounded up (it holds 218 N^2
+#: doubles: S^-1, X, U_b, the lubrication's dense partitions and R_FU's factor; assembling
+#: one peaks at 242 N^2; the midpoint scheme holds one evaluation while it assembles
+#: another: 460 N^2 = 3.8 (11N)^2)
+DENSE_MATRICES = 4
+
+SOLVER_BACKENDS: Registry[BackendSpec] = Registry("solver.backend", {
+    AUTO: f"dense (petsc-dense on several ranks) below {AUTO_KRYLOV_MIN_N} particles, else petsc-krylov"})
+SOLVER_BACKENDS.register(BackendSpec(
+    "dense", "LAPACK Cholesky on one rank", "sdmpi.hydro.solvers:DenseSolver",
+    dense_matrices=DENSE_MATRICES))
+SOLVER_BACKENDS.register(BackendSpec(
+    "petsc-dense", "ScaLAPACK Cholesky over the task's ranks", "sdmpi.hydro.petsc_dense:PetscDenseSolver",
+    several_ranks=True, needs_petsc=True, dense_matrices=DENSE_MATRICES))
+SOLVER_BACKENDS.register(BackendSpec(
+    "petsc-krylov", "matrix-free mixed-form GMRES and Lanczos Brownian forces (large N)",
+    "sdmpi.hydro.krylov:KrylovSolver", matrix_free=True, several_ranks=True, needs_petsc=True))
+
+
+def backend_for(name: str, n_particles: int, ranks: int) -> str:
+    """The backend solver.backend = ``name`` stands for with ``ranks`` ranks per task:
+    itself, or for "auto" dense (one rank) or petsc-dense (several) below
+    AUTO_KRYLOV_MIN_N particles, else petsc-krylov. ValueError for an unknown name."""
+    if name != AUTO:
+        return SOLVER_BACKENDS[name].name
+    if n_particles >= AUTO_KRYLOV_MIN_N:
+        return "petsc-krylov"
+    return "dense" if ranks == 1 else "petsc-dense"
+
+
+def several_rank_choices() -> tuple[str, ...]:
+    """The solver.backend choices that may run a task on several ranks: the backends that
+    can, and "auto" (which picks one of them there)."""
+    return (*SOLVER_BACKENDS.names(lambda backend: backend.several_ranks), AUTO)
+
+
+# --------------------------------------------------------------------------- hydrodynamic models
+
+HYDRODYNAMIC_MODELS: Registry[ModelSpec] = Registry("hydrodynamics.model")
+HYDRODYNAMIC_MODELS.register(ModelSpec(
+    "stokesian", "far field + lubrication (Stokesian dynamics)", "sdmpi.dynamics.models:ResistanceModel",
+    lubrication=True))
+HYDRODYNAMIC_MODELS.register(ModelSpec(
+    "far-field", "the periodic far-field (Rotne-Prager-level FTS) mobility alone",
+    "sdmpi.dynamics.models:ResistanceModel"))
+HYDRODYNAMIC_MODELS.register(ModelSpec(
+    "free-draining", "none (Stokes drag of isolated spheres)", "sdmpi.dynamics.models:FreeDrainingModel",
+    solves=False))

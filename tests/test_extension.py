@@ -1,0 +1,114 @@
+"""Extension is local: a solver backend and a hydrodynamic model defined outside the package
+(tests/extension_plugin.py, one module that registers both) run jobs through `sdmpi run`,
+and the job loader's choices, checks and estimates follow the registries
+(`sdmpi.registry`, docs/extending.md)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import sdmpi
+from sdmpi.cli import main
+from sdmpi.config import JobError, parse_job, resources
+from sdmpi.registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, BackendSpec, ModelSpec
+
+from .runs import child_env, fresh_lubrication_tables
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT / "jobs" / "demo.toml"
+PLUGIN = Path(__file__).with_name("extension_plugin.py")
+#: one task of 20 steps
+ONE_TASK = ["ensemble.realisations=1", "shear.omega=[25.132741228718345]", "integration.periods=1",
+            "integration.discard_periods=0", "integration.steps_per_period=20"]
+
+
+def _run_with_plugin(tmp_path, sets):
+    """The samples of the one task of demo.toml with ``sets``, run by `sdmpi run` with the
+    plugin's registrations."""
+    out = tmp_path / "run.h5"
+    cmd = [sys.executable, str(PLUGIN), "run", str(DEMO), "-o", str(out)]
+    for item in sets:
+        cmd += ["--set", item]
+    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=600)
+    assert res.returncode == 0, res.stderr
+    with h5py.File(out, "r") as f:
+        return {name: data[()] for name, data in f["tasks/000000/samples"].items()}
+
+
+def _api_samples(sets):
+    """The same task's samples with sdmpi's own implementations (the Python API)."""
+    job = sdmpi.load_job(DEMO, sets)
+    fresh_lubrication_tables()
+    real = sdmpi.Realisation(job, sdmpi.tasks(job)[0])
+    return real.advance(real.n_steps)
+
+
+def test_registered_backend_runs_a_job(tmp_path):
+    """A Brownian Stokesian job (rfd drift; the near-contact correction, with the generic
+    mobility_forms, acts: gaps down to 7e-3) on the plugin's numpy Cholesky backend gives
+    the dense backend's samples: the same factor of R_FU, so the same numbers up to
+    rounding, which the random finite difference amplifies (it divides a difference of
+    solves by a length ~1e-6, `dynamics.models`) and 20 steps carry into the positions:
+    agreement to 1e-8 of each sample's largest value (measured: 2e-10)."""
+    ours = _run_with_plugin(tmp_path, [*ONE_TASK, 'solver.backend="numpy-cholesky"'])
+    dense = _api_samples(ONE_TASK)
+    assert set(ours) == set(dense)
+    for name in ("stress_hydrodynamic", "stress_brownian", "strain", "min_gap"):
+        scale = np.abs(dense[name]).max()
+        assert np.abs(ours[name] - dense[name]).max() <= 1e-8 * scale, name
+    assert np.abs(dense["stress_brownian"]).max() > 0  # the Brownian terms were exercised
+
+
+def test_registered_model_runs_a_job(tmp_path):
+    """A model that doubles the medium's viscosity (the plugin's): a non-Brownian free-draining
+    job moves the same (no forces, dilute: no collisions) and has twice the hydrodynamic
+    stress, exactly (a factor 2 is exact in floating point)."""
+    sets = [*ONE_TASK, "brownian.enabled=false", "system.phi=[0.05]"]
+    ours = _run_with_plugin(tmp_path, [*sets, 'hydrodynamics.model="viscous-free-draining"'])
+    plain = _api_samples([*sets, 'hydrodynamics.model="free-draining"'])
+    assert not plain["n_overlaps"].any() and np.abs(plain["stress_hydrodynamic"]).max() > 0
+    assert np.array_equal(ours["stress_hydrodynamic"], 2.0 * plain["stress_hydrodynamic"])
+    for name in ("strain", "min_gap", "stress_collision", "n_overlaps"):
+        assert np.array_equal(ours[name], plain[name]), name
+
+
+@pytest.fixture
+def registered():
+    """A backend that solves on several ranks without dense matrices, and a model with
+    lubrication, registered for one test."""
+    backend = SOLVER_BACKENDS.register(BackendSpec("test-gpu", "a test backend", "nowhere:Solver",
+                                                   several_ranks=True, matrix_free=True))
+    model = HYDRODYNAMIC_MODELS.register(ModelSpec("test-model", "a test model", "nowhere:Model",
+                                                   lubrication=True))
+    yield backend, model
+    SOLVER_BACKENDS.unregister(backend.name)
+    HYDRODYNAMIC_MODELS.unregister(model.name)
+
+
+def test_loader_follows_the_registries(registered, capsys):
+    """Registered names become choices; the checks, the memory estimate and `sdmpi validate`
+    read the specs (which never import the implementation: it is nowhere)."""
+    assert main(["validate", str(DEMO), "--set", 'solver.backend="test-gpu"']) == 0
+    assert "backend test-gpu, dense far field, 1 rank(s) per task" in capsys.readouterr().out  # matrix-free
+    job = parse_job('[solver]\nbackend = "test-gpu"\n[hydrodynamics]\nmodel = "test-model"\n',
+                    ["ensemble.ranks_per_task=2"])
+    assert resources.dense_bytes(job, "test-gpu") == 0.0  # no dense matrices
+    with pytest.raises(JobError, match='"midpoint" .or absent. with solver.backend = "test-gpu"'):
+        parse_job('[solver]\nbackend = "test-gpu"\n[brownian]\nscheme = "rfd"\n')  # matrix-free
+    with pytest.raises(JobError, match='allowed: 1, or solver.backend = "petsc-dense", "petsc-krylov", '
+                                       '"test-gpu" or "auto"'):
+        parse_job("", ["ensemble.ranks_per_task=2"])
+    with pytest.raises(JobError, match='applies to the stokesian and test-model model only'):
+        parse_job('[hydrodynamics]\nmodel = "far-field"\nlubrication = false\n')
+
+
+def test_unregistered_names_are_refused():
+    with pytest.raises(JobError, match='solver.backend = "test-gpu": not a valid choice.*'
+                                       'one of "dense", "petsc-dense", "petsc-krylov", "auto"'):
+        parse_job('[solver]\nbackend = "test-gpu"\n')
+    with pytest.raises(ValueError, match="registered already"):
+        SOLVER_BACKENDS.register(BackendSpec("dense", "again", "nowhere:Solver"))
