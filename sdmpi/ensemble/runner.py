@@ -51,6 +51,7 @@ from ..config.checks import scheme_problems
 from ..dynamics.checks import load_job
 from ..dynamics.models import job_backend
 from ..dynamics.realisation import RealisationFailed
+from ..registry import SOLVER_BACKENDS
 from . import extension, start_file, store, trajectory
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
@@ -278,7 +279,7 @@ def _check_backend(job, job_path) -> None:
     problems = scheme_problems(job, used)
     if problems:
         raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
-    if used == "dense":
+    if not SOLVER_BACKENDS[used].needs_petsc:
         return
     try:
         import_petsc4py()  # not load_petsc: PETSc initialisation is collective
