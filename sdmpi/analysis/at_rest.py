@@ -42,9 +42,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.stresses import CONTRIBUTIONS
+from ..ensemble.h5 import open_read
 from . import green_kubo as gk
 from .reduce import (COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
-                     medium_moduli, open_runs, read_stress, _open_h5)
+                     medium_moduli, open_runs, read_stress)
 
 #: the configurational contributions correlated at rest (the rows of relaxation.csv
 #: before their sum, "total")
@@ -203,7 +204,7 @@ def quiescent(path) -> bool:
     for anything unreadable (the reducer then says why)."""
     import tomllib
     try:
-        with _open_h5(path) as f:
+        with open_read(path) as f:
             text = f.attrs["job_text"]
         text = text.decode() if isinstance(text, bytes) else str(text)
         return tomllib.loads(text)["shear"]["protocol"] == "none"
@@ -278,7 +279,7 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
                              f"after the start-up; Green-Kubo needs {need} (twice the window "
                              f"of {max_lag} lags plus {gk.BASE_BLOCKS}): contributes nothing")
                 continue
-            with _open_h5(paths[i]) as f:
+            with open_read(paths[i]) as f:
                 from ..ensemble.store import task_key
                 volume = float(np.prod(f[f"tasks/{task_key(t.task_id)}"].attrs["box"]))
                 stress = read_stress(f, job, t, done, viewed, slice(None))[1:]
