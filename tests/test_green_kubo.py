@@ -305,8 +305,8 @@ def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
     """A run at rest with hydrodynamic interactions (synthetic samples) reduces with the
     warning that it is not validated, in the output and on the terminal; unfinished
     tasks are reduced as far as committed and named."""
-    from synthetic_run import write_run
-    from test_reduce import job_text
+    from .synthetic_run import write_run
+    from .test_reduce import job_text
     text = job_text(realisations=4, phi="[0.3]", protocol="none",
                     extra='[hydrodynamics]\nmodel = "stokesian"\n').replace(
                         "n_steps = 400", "n_steps = 2000")
