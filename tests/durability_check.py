@@ -32,7 +32,7 @@ import h5py
 
 ROOT = Path(__file__).resolve().parents[1]
 JOB = ROOT / "jobs" / "demo.toml"
-SETS = ["--set", "integration.periods=16", "--set", "output.checkpoint_every=40"]
+SETS = ["--set", "integration.periods=40", "--set", "output.checkpoint_every=40"]
 SDMPI = [sys.executable, "-m", "sdmpi"]
 
 
@@ -82,11 +82,12 @@ def killed_run(ranks: int, out: Path, kills: int, rng: random.Random) -> bool:
         deadline = time.monotonic() + 300
         while not out.exists() and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.1)
-        time.sleep(rng.uniform(1.0, 4.0))
+        time.sleep(rng.uniform(1.0, 3.0))
         seen = committed(out)
         if proc.poll() is not None:
-            print(f"  kill {k + 1}: the run ended before the kill (exit {proc.returncode})")
-            continue
+            print(f"  kill {k + 1}: the run ended before the kill (exit {proc.returncode}); "
+                  "no more kills")
+            break
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         after = committed(out)
