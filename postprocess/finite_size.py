@@ -187,9 +187,11 @@ def main(argv=None):
     eta_inf = {int(r["n_particles"]): (r["eta_inf"] - 1.0, r["err"])
                for r in json.loads(Path(args.eta_inf).read_text())["rows"]
                if math.isclose(r["phi"], PHI)}
-    values = {n: {q: fn(rows) for q, (_, fn) in QUANTITIES.items()} for n, rows in tables.items()}
+    none = (math.nan, math.nan)
+    values = {n: {q: fn(tables[n]) if n in tables else none for q, (_, fn) in QUANTITIES.items()}
+              for n in sorted(set(tables) | set(eta_inf))}
     for n in values:
-        values[n]["eta_inf_minus_1"] = eta_inf.get(n, (math.nan, math.nan))
+        values[n]["eta_inf_minus_1"] = eta_inf.get(n, none)
     fits = {q: extrapolate(values, q) for q in [*QUANTITIES, "eta_inf_minus_1"]}
     write_quantities(values, out / "quantities.csv")
     write_extrapolation(fits, out / "extrapolation.csv")
