@@ -138,3 +138,47 @@ def test_live_file_is_read_while_it_is_written(job_file, tmp_path, path_kind):
         proc.send_signal(signal.SIGTERM)  # a clean stop: checkpoint, exit 3
         stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 3, stderr
+
+
+#: in a child process: a serial run file of the ensemble job, three commits of task 0
+#: (steps 10, 20, 30; slots 0, 1, 0) made and applied as one batch, as the writer rank of
+#: a serial h5py applies what it has received (SDMPI_TEST_KILL kills it on the way)
+BATCH = """
+import sys
+from mpi4py import MPI
+from sdmpi.config import canonical_text, enumerate_tasks, load_job
+from sdmpi.ensemble.store import RunFile, TaskLayout, create
+from tests.ensemble_double import DoubleRealisation
+
+job = load_job(sys.argv[1])
+tasks = enumerate_tasks(job)
+layouts = {t.task_id: TaskLayout.of(DoubleRealisation(job, t)) for t in tasks}
+create(sys.argv[2], job, canonical_text(job), layouts, MPI.COMM_SELF, "{}", "now")
+collected = []
+handle = RunFile(sys.argv[2], MPI.COMM_SELF)
+handle._submit = collected.append
+real = DoubleRealisation(job, tasks[0])
+handle.begin(0, -1)
+for k, stop in enumerate((10, 20, 30)):
+    samples = real.advance(10)
+    handle.commit(0, handle.samples(0), stop - 10, stop, samples, real.get_state(), k % 2)
+handle._apply(collected)
+handle.close()
+"""
+
+
+@pytest.mark.parametrize("kill", ["commit:1", "commit:2", "commit:3", "state:3", None])
+def test_a_batch_of_one_tasks_commits_keeps_the_file_consistent(job_file, tmp_path, kill):
+    """The writer rank may receive several commits of one task at once; a kill anywhere
+    in applying them leaves /progress at a step some intact slot holds."""
+    from sdmpi.ensemble.store import inspect
+
+    out = tmp_path / "batch.h5"
+    res = subprocess.run([sys.executable, "-c", BATCH, str(job_file), str(out)],
+                         capture_output=True, text=True, cwd=str(DRIVER.parents[1]),
+                         env=child_env({"SDMPI_TEST_KILL": kill} if kill else {}), timeout=120)
+    assert (res.returncode != 0) == (kill is not None), res.stderr
+    summary = inspect(out)
+    assert summary.damage == ()
+    committed = {None: 30, "commit:1": 0, "commit:2": 10, "commit:3": 20, "state:3": 20}[kill]
+    assert int(summary.progress[0]) == committed

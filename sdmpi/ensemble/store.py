@@ -374,14 +374,16 @@ class RunFile:
         n, ops = stop - start, self._pending
         self._pending = []
         for i, (name, ds) in enumerate(datasets.items()):
-            ops.append(("write", ds.name, slice(start, stop), buffers[name][:n]))
+            ops.append(("write", ds.name, slice(start, stop), buffers[name][:n].copy()))
             if i == 0:
                 ops.append(("fault", "samples"))
         key = f"checkpoints/{task_key(task_id)}"
+        # the operations own copies of the buffers and the running checksums, which change
+        # after the call (a commit may be applied later, by another rank)
         ops.append(("write", f"{key}/slot_step", slot, -1))  # invalid while rewritten
         group = self.file[f"{key}/slot{slot}"]
         for name, value in state.items():
-            ops.append(("write", f"{key}/slot{slot}/{name}", (), value))
+            ops.append(("write", f"{key}/slot{slot}/{name}", (), np.array(value)))
         if task_id in self._checksums:
             t0 = time.perf_counter()
             table, block = self._checksums[task_id]
@@ -390,7 +392,7 @@ class RunFile:
                                   datasets[name].dtype)
             crcs = [crc32(state[k], group[k].dtype) for k in sorted(state)] + [crc32(table)]
             self.t_checksum += time.perf_counter() - t0
-            ops += [("write", f"{key}/sample_crc", slot, table),
+            ops += [("write", f"{key}/sample_crc", slot, table.copy()),
                     ("write", f"{key}/state_crc", slot, crcs)]
         ops += [("fault", "state"), ("write", f"{key}/slot_step", slot, stop),
                 SYNC,                                   # all of the above on disk first
@@ -401,18 +403,30 @@ class RunFile:
         self._apply([ops])
 
     def _apply(self, commits: list) -> None:
-        """Apply commits (operation lists, :meth:`commit`): what each does before its
-        ``sync`` for all of them, one flush and fsync, then what each does after it."""
-        after = []
+        """Apply commits (operation lists, :meth:`commit`, in the order each task made
+        them) in rounds that hold at most one commit per task: per round, what each does
+        before its ``sync``, one flush and fsync, then what each does after it (its
+        ``/progress``). Two commits of one task never share a round: the second rewrites
+        the slot that ``/progress`` points to until the first one's ``/progress`` is
+        written."""
+        rounds, seen = [], {}
         for ops in commits:
-            cut = ops.index(SYNC)
-            self._run(ops[:cut])
-            after.append(ops[cut + 1:])
-        self._flush()
-        os.fsync(self._fd)  # everything before the syncs is on disk first
-        for ops in after:
-            self._run(ops)
-        self._flush()       # readers of a live file see the new /progress
+            task_id = ops[-1][2]  # the last operation moves /progress[task_id]
+            k = seen[task_id] = seen.get(task_id, -1) + 1
+            if k == len(rounds):
+                rounds.append([])
+            rounds[k].append(ops)
+        for round_ in rounds:
+            after = []
+            for ops in round_:
+                cut = ops.index(SYNC)
+                self._run(ops[:cut])
+                after.append(ops[cut + 1:])
+            self._flush()
+            os.fsync(self._fd)  # everything before the syncs is on disk first
+            for ops in after:
+                self._run(ops)
+            self._flush()       # readers of a live file see the new /progress
 
     def _run(self, ops: list) -> None:
         for op in ops:
