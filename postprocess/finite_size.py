@@ -13,7 +13,9 @@ it, from `make schaink2000`; dt = 5e-4 ... 5e-5 t_D, 500 steps per period), the 
 reference, and the N = 27 point of the fits when no run file has N = 27; ``--control``:
 the time-step control (jobs/finite_size_dt_control.toml: N = 27 at 80 pi with dt = 5e-4,
 as long as the reference); ``--eta-inf``: the equilibrium high-frequency viscosity
-eta'_inf(N) (bench/eta_inf.json), the anchor for eta'_H = eta'_inf - 1.
+eta'_inf(N) (bench/eta_inf.json), the anchor for eta'_H = eta'_inf - 1. Sizes whose run
+files are gone enter by their reduced tables (``--tables N=MODULI.csv``, e.g. the
+committed ``N64/moduli.csv``), and the control by its table likewise.
 
 Outputs in OUTDIR:
 
@@ -151,7 +153,11 @@ def parse_args(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[1])
     p.add_argument("--runs", nargs="+", default=[], metavar="RUN.h5",
                    help="run files, one N each (jobs/finite_size_n*.toml)")
-    p.add_argument("--control", metavar="RUN.h5", help="the time-step control's run file")
+    p.add_argument("--control", metavar="RUN.h5|MODULI.csv",
+                   help="the time-step control's run file, or its reduced table")
+    p.add_argument("--tables", nargs="+", default=[], metavar="N=MODULI.csv",
+                   help="sizes whose run files are gone, by their reduced tables (e.g. "
+                        "64=docs/validation/finite_size/N64/moduli.csv)")
     p.add_argument("--reference", default="docs/validation/schaink2000/newtonian/moduli.csv",
                    metavar="MODULI.csv", help="the N = 27 study's table")
     p.add_argument("--eta-inf", default="bench/eta_inf.json", metavar="JSON",
@@ -163,6 +169,7 @@ def parse_args(argv):
 def main(argv=None):
     args = parse_args(argv)
     out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
     tables, runs, notes = {27: rows_of(args.reference)}, set(), []
     try:
         for path in args.runs:
@@ -176,8 +183,15 @@ def main(argv=None):
             runs.add(n)
             notes.append(f"N = {n}: {path}, " + ("complete" if red.complete else
                                                  "PARTIAL (committed samples only)"))
+        for item in args.tables:
+            n, _, path = item.partition("=")
+            tables[int(n)] = rows_of(path)
+            runs.add(int(n))
+            notes.append(f"N = {n}: the table {path}")
         control = None
-        if args.control:
+        if args.control and args.control.endswith(".csv"):
+            control = rows_of(args.control)
+        elif args.control:
             red = reduce([args.control])
             write_all(red, out / "dt_control")
             control = rows_of(out / "dt_control" / "moduli.csv")

@@ -81,3 +81,18 @@ def test_tables_are_byte_identical_when_regenerated(runs, tmp_path):
     for name in ("quantities.csv", "extrapolation.csv", "summary.md", "N16/moduli.csv",
                  "dt_control/moduli.csv"):
         assert (first / name).read_bytes() == (second / name).read_bytes(), name
+
+
+def test_sizes_from_their_committed_tables_give_the_same_numbers(runs, tmp_path):
+    """Run files are not kept: a later session adds a size to the committed tables
+    (--tables N=MODULI.csv, --control MODULI.csv) and gets the same quantities and fits."""
+    first = tmp_path / "runs"
+    assert regenerate(runs, first) == 0
+    again = tmp_path / "tables"
+    assert postprocess_script("finite_size").main(
+        ["--tables", f"8={first / 'N8' / 'moduli.csv'}", f"16={first / 'N16' / 'moduli.csv'}",
+         "--control", str(first / "dt_control" / "moduli.csv"), "-o", str(again)]) == 0
+    for name in ("quantities.csv", "extrapolation.csv"):
+        assert (again / name).read_bytes() == (first / name).read_bytes(), name
+    assert (again / "summary.md").read_text().split("\n| quantity")[1] == \
+        (first / "summary.md").read_text().split("\n| quantity")[1]
