@@ -1,5 +1,5 @@
 """Dilute hard spheres without hydrodynamic interactions: the collision moduli of sdmpi
-against the exact O(phi^2) result (sdmpi.analysis.models.dilute_hard_sphere_moduli;
+against the exact O(phi^2) result (sdmpi.analysis.analytic.dilute_hard_sphere_moduli;
 Cichocki & Felderhof 1991, Brady 1993). Runs jobs/dilute_free_draining.toml (N = 1000,
 phi = 0.05, free draining) once per frequency with `sdmpi run` (the frequencies side by side), reduces it, and writes
 bench/dilute_hard_spheres.json: per frequency, G'/phi^2 and G''/phi^2 of the `collision`
@@ -27,7 +27,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from sdmpi.analysis.models import dilute_hard_sphere_moduli
+from sdmpi.analysis.analytic import dilute_hard_sphere_moduli
 from sdmpi.analysis.reduce import PartialRunWarning, reduce_runs
 from sdmpi.dynamics.realisation import KT_REDUCED
 

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from schaink_common import (describe, figure, parser, phis, pm, print_table,  # noqa: E402
                             reduce_systems, save, series)
 
-from sdmpi.analysis.models import batchelor_green, schaink_eta_h  # noqa: E402
+from sdmpi.analysis.analytic import batchelor_green, schaink_eta_h  # noqa: E402
 
 
 def main(argv=None):

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from schaink_common import (describe, figure, parser, phis, pm, print_table,  # noqa: E402
                             reduce_systems, save, series)
 
-from sdmpi.analysis.models import maxwell_eta_h, maxwell_viscosity, schaink_eta_h  # noqa: E402
+from sdmpi.analysis.analytic import maxwell_eta_h, maxwell_viscosity, schaink_eta_h  # noqa: E402
 
 
 def newtonian_eta_h(reductions, phi):

@@ -19,7 +19,7 @@ only error). Then
 
 * phi scan: for every (mu, k_n, k_t, f_r0) with at least two phi, a weighted
   least-squares fit of log eta_r to log of Krieger-Dougherty, (1 - phi/phi_max)^(-2.5
-  phi_max) (sdmpi.analysis.models; the MigFlow thesis's model), and of Maron-Pierce, (1 -
+  phi_max) (sdmpi.analysis.analytic; the MigFlow thesis's model), and of Maron-Pierce, (1 -
   phi/phi_max)^(-2) (the divergence Mari et al. 2014 fit for phi_J), one parameter
   phi_max, weights 1/(eta_err/eta)^2. Its standard error phi_max_err is curve_fit's for
   these absolute weights, multiplied by sqrt(chi^2/dof) when that exceeds 1 (scatter
@@ -62,8 +62,8 @@ import h5py
 import numpy as np
 from scipy.optimize import curve_fit
 
-from sdmpi.analysis.models import krieger_dougherty, maron_pierce
-from sdmpi.analysis.reduce import (COMPONENTS, PartialRunWarning, ReduceError,
+from sdmpi.analysis.analytic import krieger_dougherty, maron_pierce
+from sdmpi.analysis.reduce import (TABLE_COMPONENTS, PartialRunWarning, ReduceError,
                                    confidence_half_width, open_run, reduce_runs)
 
 MODELS = {"krieger-dougherty": krieger_dougherty, "maron-pierce": maron_pierce}
@@ -74,7 +74,7 @@ FIT_COLUMNS = ("mu", "k_n", "k_t", "f_r0", "model", "phi_max", "phi_max_err", "d
                "ci95_hi", "chi2_dof", "n_phi")
 DIFF_COLUMNS = ("model", "mu_a", "mu_b", "diff", "diff_err", "diff_ci95_lo", "diff_ci95_hi",
                 "disjoint")
-TOTAL = COMPONENTS.index("total")
+TOTAL = TABLE_COMPONENTS.index("total")
 
 
 def contact_means(path, task_ids, discard):

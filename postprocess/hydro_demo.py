@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from sdmpi.analysis.models import schaink_eta_h
+from sdmpi.analysis.analytic import schaink_eta_h
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.hydro import solve_mobility
 from sdmpi.hydro.bulk import hydrodynamic_viscosity

@@ -27,7 +27,7 @@ import warnings
 import h5py
 import numpy as np
 
-from sdmpi.analysis.reduce import (COMPONENTS, PartialRunWarning, ReduceError, open_run,
+from sdmpi.analysis.reduce import (TABLE_COMPONENTS, PartialRunWarning, ReduceError, open_run,
                                    reduce_runs)
 from sdmpi.analysis.report import plus_minus
 from sdmpi.ensemble.store import task_key
@@ -96,7 +96,7 @@ def eta_of(red, phi, component):
     of the spread between realisations and the blocking error within them: with R = 2
     realisations the spread (1 degree of freedom) alone can be far too small by chance."""
     g = int(np.flatnonzero(np.isclose(red.phi, phi, rtol=1e-9))[0])
-    c = COMPONENTS.index(component)
+    c = TABLE_COMPONENTS.index(component)
     e = red.ensemble
     return float(e.mean[g, c, 0]), float(e.err[g, c, 0])
 

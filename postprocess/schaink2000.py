@@ -57,7 +57,7 @@ import fig7_newtonian_viscosity  # noqa: E402
 import fig8_maxwell_viscosity  # noqa: E402
 from schaink_common import figure, pm, save, series  # noqa: E402
 
-from sdmpi.analysis.models import maxwell_eta_h, maxwell_viscosity, schaink_eta_h  # noqa: E402
+from sdmpi.analysis.analytic import maxwell_eta_h, maxwell_viscosity, schaink_eta_h  # noqa: E402
 from sdmpi.analysis.reduce import PartialRunWarning, ReduceError, reduce_runs  # noqa: E402
 from sdmpi.analysis.report import write_all  # noqa: E402
 from sdmpi.config import Medium, Mode  # noqa: E402

@@ -34,6 +34,7 @@ from . import __version__
 from .config import JobError, enumerate_tasks, job_hash
 from .config.stresses import CONTRIBUTIONS
 from .dynamics.checks import load_job
+from .registry import HYDRODYNAMIC_MODELS
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -182,6 +183,18 @@ def cost_text(job, ranks: int, k: int) -> str:
             f"{ranks} rank(s)")
 
 
+def hydrodynamics_line(job) -> str:
+    """The hydrodynamic model a job runs, as it runs it: hydrodynamics.model, and, where
+    hydrodynamics.lubrication = false turns a model with lubrication into its far field
+    alone, that too."""
+    hyd = job.hydrodynamics
+    if HYDRODYNAMIC_MODELS[hyd.model].lubrication and not hyd.lubrication:
+        return (f'{hyd.model} without lubrication (hydrodynamics.lubrication = false): the far-field '
+                'mobility alone, as hydrodynamics.model = "far-field" (whose default collision rule, '
+                'reflect, differs)')
+    return hyd.model
+
+
 def summary(job) -> str:
     """A few lines describing a resolved job: physics, task groups, tasks and cost."""
     s, unit, tasks = job.shear, job.time_unit, enumerate_tasks(job)
@@ -203,6 +216,7 @@ def summary(job) -> str:
         + ", ".join(f"{p:g}" for p in job.system.phi) + f", medium {medium}",
         f"  shear {shear}; Brownian {'on' if job.brownian.enabled else 'off'}; "
         f"time unit {unit}",
+        f"  hydrodynamics: {hydrodynamics_line(job)}",
     ]
     from .config.units import scales
 
@@ -321,10 +335,10 @@ def _add_info(subparsers) -> None:
 
 def _info(args) -> int:
     from .ensemble.progress import lock_holder
-    from .ensemble.store import StoreError, inspect
+    from .ensemble.store import StoreError, read_summary
 
     try:
-        run = inspect(args.run)
+        run = read_summary(args.run)
     except StoreError as err:
         print(err, file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 import pytest
 
-from sdmpi.ensemble.store import inspect
+from sdmpi.ensemble.store import read_summary
 
 from . import runs as ens
 
@@ -67,7 +67,7 @@ def test_random_bit_flips_are_all_detected(ensemble_reference, tmp_path):
         shutil.copy(ensemble_reference, damaged)
         flip(damaged, offset + at, int(rng.integers(8)))
         injected += 1
-        found = inspect(damaged).damage
+        found = read_summary(damaged).damage
         assert all(d.task_id == tid for d in found), (name, [str(d) for d in found])
         if kind == "samples":
             step = at // row
@@ -116,11 +116,11 @@ def test_damaged_state_of_a_stopped_run_falls_back(ensemble_reference, ensemble_
     out = tmp_path / "run.h5"
     res = ens.sdmpi("run", ensemble_job, "-o", out, env={"SDMPI_TEST_KILL": "step:25"})
     assert res.returncode != 0
-    summary = inspect(out)
+    summary = read_summary(out)
     tid = next(t for t, p in enumerate(summary.progress) if 0 < p < ens.N_STEPS)
     region = next(r for r in committed_regions(out) if r[0] == tid and r[2] == "rng")
     flip(out, region[3] + 5, 0)
-    summary = inspect(out)
+    summary = read_summary(out)
     assert [d.what for d in summary.damage] == ["state", "samples"]
     done = int(summary.progress[tid])
     assert summary.resume[tid][0] == done - 10  # the other slot, one checkpoint earlier
@@ -135,7 +135,7 @@ def test_files_without_checksums_are_read_unverified(ensemble_reference, tmp_pat
     with h5py.File(out, "r+") as f:
         for key in f["checkpoints"]:
             del f[f"checkpoints/{key}/sample_crc"], f[f"checkpoints/{key}/state_crc"]
-    summary = inspect(out)
+    summary = read_summary(out)
     assert not summary.checksummed and summary.damage == ()
     info = ens.sdmpi("info", out)
     assert info.returncode == 0 and "checksums: none" in info.stdout
@@ -151,10 +151,10 @@ def test_damaged_unused_slot_of_a_complete_run_is_discarded(ensemble_reference, 
         older = int(np.argmin(ckpt["slot_step"][()]))
         offset = ckpt[f"slot{older}/positions"].id.get_offset()
     flip(out, offset + 7, 6)
-    assert [str(d) for d in inspect(out).damage] == [
+    assert [str(d) for d in read_summary(out).damage] == [
         f"task 3: checkpoint slot {older} (state at step 40) fails its checksum"]
     res = ens.sdmpi("run", ensemble_job, "-o", out)
     assert res.returncode == 0 and "already complete" in res.stdout, res.stderr
     assert "WARNING: damaged: task 3: checkpoint slot" in res.stdout
-    assert inspect(out).damage == ()
+    assert read_summary(out).damage == ()
     assert ens.task_data(out) == ens.task_data(ensemble_reference)

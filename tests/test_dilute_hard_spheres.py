@@ -1,5 +1,5 @@
 """Brownian hard spheres without hydrodynamic interactions, dilute: the moduli of the
-collision stress against the exact O(phi^2) result (sdmpi.analysis.models.
+collision stress against the exact O(phi^2) result (sdmpi.analysis.analytic.
 dilute_hard_sphere_moduli), through `sdmpi run` and the reducer, as a user runs it."""
 
 import importlib.util

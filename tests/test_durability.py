@@ -69,13 +69,13 @@ def reference(job_file, tmp_path_factory):
 @pytest.mark.parametrize("kill", ["step:25", "commit:7", "step:203", "commit:33"])
 def test_kill_keeps_every_completed_checkpoint(reference, job_file, tmp_path, path_kind,
                                                kill):
-    from sdmpi.ensemble.store import inspect
+    from sdmpi.ensemble.store import read_summary
 
     out = tmp_path / "killed.h5"
     res = run(path_kind, "run", job_file, "-o", out, env={"SDMPI_TEST_KILL": kill})
     assert res.returncode != 0, f"not killed:\n{res.stdout}"
     point, k = kill.split(":")
-    summary = inspect(out)  # as the kill left it on disk
+    summary = read_summary(out)  # as the kill left it on disk
     assert summary.damage == ()
     assert committed_checkpoints(summary.progress) == commits_before(point, int(k))
     with h5py.File(out, "r") as f, h5py.File(reference, "r") as ref:
@@ -171,14 +171,14 @@ handle.close()
 def test_a_batch_of_one_tasks_commits_keeps_the_file_consistent(job_file, tmp_path, kill):
     """The writer rank may receive several commits of one task at once; a kill anywhere
     in applying them leaves /progress at a step some intact slot holds."""
-    from sdmpi.ensemble.store import inspect
+    from sdmpi.ensemble.store import read_summary
 
     out = tmp_path / "batch.h5"
     res = subprocess.run([sys.executable, "-c", BATCH, str(job_file), str(out)],
                          capture_output=True, text=True, cwd=str(DRIVER.parents[1]),
                          env=child_env({"SDMPI_TEST_KILL": kill} if kill else {}), timeout=120)
     assert (res.returncode != 0) == (kill is not None), res.stderr
-    summary = inspect(out)
+    summary = read_summary(out)
     assert summary.damage == ()
     committed = {None: 30, "commit:1": 0, "commit:2": 10, "commit:3": 20, "state:3": 20}[kill]
     assert int(summary.progress[0]) == committed

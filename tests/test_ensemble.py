@@ -86,9 +86,9 @@ def test_sigkill_then_resume_bit_identical(ensemble_reference, ensemble_job, tmp
 def current_checksums(path):
     """Per task, the sample and state checksums of the current checkpoint slot; asserts
     that the file verifies."""
-    from sdmpi.ensemble.store import inspect
+    from sdmpi.ensemble.store import read_summary
 
-    summary = inspect(path)
+    summary = read_summary(path)
     assert summary.checksummed and summary.damage == ()
     with h5py.File(path, "r") as f:
         return {t.task_id: (f[f"checkpoints/{t.task_id:06d}/sample_crc"][s].tobytes(),

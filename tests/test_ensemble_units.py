@@ -135,3 +135,16 @@ def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):
     out = capsys.readouterr().out
     # a = 55 nm (the job's radius); Pe = 6 pi eta a^3 gamma_dot / kT = the reduced rate in t_D units
     assert "physical units: a = 5.5e-08 m" in out and "Pe = 8.36" in out
+
+
+def test_validate_summary_names_the_hydrodynamics_run_uses(capsys):
+    """hydrodynamics.lubrication = false turns the stokesian model into its far field
+    alone: `sdmpi validate` says so rather than printing the model's name only."""
+    from sdmpi.cli import main
+
+    demo = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
+    assert main(["validate", demo]) == 0
+    assert "  hydrodynamics: stokesian\n" in capsys.readouterr().out
+    assert main(["validate", demo, "--set", "hydrodynamics.lubrication=false"]) == 0
+    out = capsys.readouterr().out
+    assert "stokesian without lubrication" in out and 'as hydrodynamics.model = "far-field"' in out

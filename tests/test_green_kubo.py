@@ -12,7 +12,7 @@ from scipy.signal import lfilter
 
 from sdmpi.analysis import green_kubo as gk
 from sdmpi.analysis.at_rest import RELAXATION_COLUMNS, reduce_at_rest
-from sdmpi.analysis.reduce import COMPONENTS, MODULI_COLUMNS
+from sdmpi.analysis.reduce import TABLE_COMPONENTS, MODULI_COLUMNS
 from sdmpi.cli import main
 from .runs import ROOT, child_env
 
@@ -184,7 +184,7 @@ def test_exact_dilute_relaxation_transforms_to_the_exact_dilute_moduli(rule):
     (the truncation and (w dt)^2/12), and the "contact" rule, which rebuilds lags 0-4
     from lags 5-20, to 1% (its fit of c t^-1/2 + b to a G that curves away from that
     form)."""
-    from sdmpi.analysis.models import (dilute_hard_sphere_moduli,
+    from sdmpi.analysis.analytic import (dilute_hard_sphere_moduli,
                                        dilute_hard_sphere_relaxation)
     dt, m = 2e-3, 3000
     lags = np.arange(m + 1)
@@ -271,7 +271,7 @@ def test_rest_run_reduces_to_tables_that_are_byte_identical_on_re_reduction(tiny
     for w in g.omega[:3]:   # free draining: 5/2 phi medium, exact; no Brownian stress
         assert red.value(0.2, w, "hydrodynamic", "eta_prime") == pytest.approx(0.5, rel=1e-12)
         assert red.value(0.2, w, "brownian", "G_dprime") == 0.0
-        total = sum(red.value(0.2, w, c, "G_dprime") for c in COMPONENTS[:-1])
+        total = sum(red.value(0.2, w, c, "G_dprime") for c in TABLE_COMPONENTS[:-1])
         assert red.value(0.2, w, "total", "G_dprime") == pytest.approx(total, rel=1e-12)
 
 
@@ -346,7 +346,7 @@ def test_dilute_free_draining_at_rest_gives_the_exact_dilute_relaxation_and_modu
     the exact G(t) put through the same window, quadrature and contact rule (errors
     15-35%). Fails for a wrong V/kT (a factor 2 or 6 pi), a missing or doubled
     five-component average, G' and G'' exchanged, or a wrong sign."""
-    from sdmpi.analysis.models import dilute_hard_sphere_relaxation
+    from sdmpi.analysis.analytic import dilute_hard_sphere_relaxation
     run = sdmpi_run(DILUTE, tmp_path / "dilute.h5", *DILUTE_SETS)
     red = reduce_at_rest([run], window=1.0)
     g = red.groups[0]

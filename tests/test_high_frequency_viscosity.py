@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from sdmpi.analysis.models import schaink_eta_h
+from sdmpi.analysis.analytic import schaink_eta_h
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
 

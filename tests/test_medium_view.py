@@ -10,7 +10,7 @@ import pytest
 
 from sdmpi.analysis.medium_view import (MediumError, filtered_stress, label, parse_medium,
                                         view_job)
-from sdmpi.analysis.reduce import COMPONENTS, ReduceError, reduce_runs
+from sdmpi.analysis.reduce import TABLE_COMPONENTS, ReduceError, reduce_runs
 from sdmpi.cli import main
 from sdmpi.config import Medium, Mode
 from .synthetic_run import write_run
@@ -39,7 +39,7 @@ def test_maxwell_view_of_a_newtonian_run_equals_the_direct_maxwell_run(runs, tmp
     name = "maxwell_eta0.6_lambda0.5_eta0.4_lambda0.05"
     head_v, view = table(out / name / "moduli.csv")
     head_d, direct = table(tmp_path / "direct" / "moduli.csv")
-    assert head_v == head_d and len(view) == len(direct) == 2 * len(COMPONENTS)
+    assert head_v == head_d and len(view) == len(direct) == 2 * len(TABLE_COMPONENTS)
     compared = 0
     for rv, rd in zip(view, direct):
         assert rv[:4] == rd[:4]
@@ -48,7 +48,7 @@ def test_maxwell_view_of_a_newtonian_run_equals_the_direct_maxwell_run(runs, tmp
             # equal to rounding (a few ulp of the largest stress, relative 1e-12)
             assert math.isclose(float(a), float(b), rel_tol=1e-12, abs_tol=1e-12), (rv, rd)
             compared += 1
-    assert compared == 2 * len(COMPONENTS) * 8
+    assert compared == 2 * len(TABLE_COMPONENTS) * 8
     # the Newtonian tables beside it are the plain Newtonian reduction
     assert (out / "moduli.csv").read_bytes() != (out / name / "moduli.csv").read_bytes()
     red = reduce_runs([newt])

@@ -1,4 +1,4 @@
-"""Viscosity laws of sdmpi.analysis.models: dilute limits, O(phi^2) coefficients, the
+"""Viscosity laws of sdmpi.analysis.analytic: dilute limits, O(phi^2) coefficients, the
 divergence at phi_max, relations between the laws."""
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from sdmpi.analysis.models import (batchelor_green, eilers, einstein, krieger_dougherty,
+from sdmpi.analysis.analytic import (batchelor_green, eilers, einstein, krieger_dougherty,
                                    maron_pierce)
 
 SMALL = np.array([1e-6, 1e-5, 1e-4])
@@ -98,7 +98,7 @@ def test_dilute_hard_sphere_viscosity_limits():
     """Zero frequency: 12/5 phi^2 (Brady 1993, Bergenholtz et al. 2002); low frequency
     G' ~ (8/15) w^2; high frequency eta' ~ (18/5) w^-1/2, eta'' ~ (18/5)(w^-1/2 - w^-1), the
     next terms being O(w^-3/2); eta' decreases monotonically."""
-    from sdmpi.analysis.models import dilute_hard_sphere_moduli, dilute_hard_sphere_viscosity
+    from sdmpi.analysis.analytic import dilute_hard_sphere_moduli, dilute_hard_sphere_viscosity
     c1, c2 = dilute_hard_sphere_viscosity(np.array([0.0, 1e-8]))
     assert c1 == pytest.approx([2.4, 2.4], rel=1e-6) and c2[0] == 0
     w = 1e-5
@@ -118,7 +118,7 @@ def test_dilute_hard_sphere_viscosity_solves_the_pair_smoluchowski_equation(omeg
     """The closed form against a numerical solution of its boundary-value problem and a
     numerical angular integral of the contact stress (all prefactors included): to 1e-5
     (the boundary-value solver's tolerance)."""
-    from sdmpi.analysis.models import dilute_hard_sphere_viscosity
+    from sdmpi.analysis.analytic import dilute_hard_sphere_viscosity
     c1, c2 = dilute_hard_sphere_viscosity(omega)
     numeric = _contact_coefficient(omega)
     assert numeric.real == pytest.approx(c1, rel=1e-5)
@@ -129,7 +129,7 @@ def test_dilute_hard_sphere_viscosity_obeys_kramers_kronig():
     """Causality: eta'(0) - eta'(inf) = (2/pi) int_0^inf eta''(x)/x dx, with eta'(inf) = 0
     (no instantaneous interparticle stress without hydrodynamic interactions)."""
     from scipy import integrate
-    from sdmpi.analysis.models import dilute_hard_sphere_viscosity
+    from sdmpi.analysis.analytic import dilute_hard_sphere_viscosity
     total = 0.0
     for lo, hi in ((0, 1), (1, 100), (100, np.inf)):
         total += integrate.quad(lambda x: dilute_hard_sphere_viscosity(x)[1] / x, lo, hi, epsabs=1e-12,

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 import pytest
 
-from sdmpi.analysis.reduce import COMPONENTS
+from sdmpi.analysis.reduce import TABLE_COMPONENTS
 from sdmpi.config import JobError, canonical_text, enumerate_tasks, load_job, parse_job
 from sdmpi.config.schema import START_PHI_LIMIT
 from sdmpi.dynamics import Realisation
@@ -215,7 +215,7 @@ def test_bidisperse_job_two_ranks_run_and_reduce(tmp_path):
                          capture_output=True, text=True, env=child_env(), timeout=300)
     assert res.returncode == 0, res.stderr
     lines = (out / "moduli.csv").read_text().splitlines()
-    assert lines[0].startswith("phi,omega,component") and len(lines) == 1 + len(COMPONENTS)
+    assert lines[0].startswith("phi,omega,component") and len(lines) == 1 + len(TABLE_COMPONENTS)
 
 
 def test_validate_summary_lists_size_classes():

@@ -13,7 +13,7 @@ from scipy.signal import lfilter
 from scipy.stats import t as student_t
 
 from sdmpi.analysis.errors import Blocking, blocking, combine, ensemble_average
-from sdmpi.analysis.models import (einstein, krieger_dougherty, maxwell_eta_h,
+from sdmpi.analysis.analytic import (einstein, krieger_dougherty, maxwell_eta_h,
                                    maxwell_moduli, maxwell_viscosity)
 from sdmpi.analysis.projection import project_periods, viscosities
 

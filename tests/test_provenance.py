@@ -12,13 +12,13 @@ def other_stack(*args, env=None):
 
 def test_resume_under_another_stack_warns_and_is_recorded(tmp_path):
     from sdmpi.ensemble.runner import versions
-    from sdmpi.ensemble.store import inspect
+    from sdmpi.ensemble.store import read_summary
 
     job = tmp_path / "job.toml"
     job.write_text(JOB)
     out = tmp_path / "run.h5"
     assert sdmpi("run", job, "-o", out, env={"SDMPI_TEST_KILL": "step:100"}).returncode != 0
-    first = inspect(out).sessions
+    first = read_summary(out).sessions
     assert [s["mode"] for s in first] == ["new"] and first[0]["versions"] == versions()
     for key in ("python", "numpy", "scipy", "numba", "h5py", "hdf5", "mpi4py", "MPI",
                 "petsc4py", "sdmpi source"):
@@ -32,7 +32,7 @@ def test_resume_under_another_stack_warns_and_is_recorded(tmp_path):
 
     res = sdmpi("run", job, "-o", out)  # back on this stack: warned again, then complete
     assert res.returncode == 0 and f"numpy 0.0-other -> {versions()['numpy']}" in res.stdout
-    sessions = inspect(out).sessions
+    sessions = read_summary(out).sessions
     assert [s["mode"] for s in sessions] == ["new", "resume", "resume"]
     assert sessions[1]["versions"]["numpy"] == "0.0-other"
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
-from sdmpi.analysis.models import maxwell_moduli, maxwell_viscosity
-from sdmpi.analysis.reduce import (COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
+from sdmpi.analysis.analytic import maxwell_moduli, maxwell_viscosity
+from sdmpi.analysis.reduce import (TABLE_COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
                                    reduce_runs)
 from sdmpi.analysis.report import write_all
 from sdmpi.cli import main
@@ -90,9 +90,9 @@ def test_moduli_csv_columns_rows_and_known_moduli(tmp_path):
     paths, _ = write_all(red, tmp_path / "out", plots=False)
     header, rows = rows_of(tmp_path / "out" / "moduli.csv")
     assert tuple(header) == MODULI_COLUMNS
-    assert len(rows) == 2 * 2 * len(COMPONENTS)
+    assert len(rows) == 2 * 2 * len(TABLE_COMPONENTS)
     keys = [(float(r[0]), float(r[1]), r[2]) for r in rows]
-    assert keys == [(p, w, c) for p in (0.3, 0.45) for w in (W1, W2) for c in COMPONENTS]
+    assert keys == [(p, w, c) for p in (0.3, 0.45) for w in (W1, W2) for c in TABLE_COMPONENTS]
     job = parse_job(red.job_text)
     for task in enumerate_tasks(job)[::16]:                 # one task per (phi, omega)
         exact = truth(task)
@@ -135,7 +135,7 @@ def test_maxwell_medium_row_is_seed_eq36_and_hydrodynamic_is_the_filtered_stress
         assert red.value(0.45, w, "hydrodynamic", "G_prime") == pytest.approx(0.4, abs=0.02)
         assert red.value(0.45, w, "hydrodynamic", "G_dprime") == pytest.approx(1.1, abs=0.02)
         total = red.value(0.45, w, "total", "G_dprime")
-        parts = sum(red.value(0.45, w, c, "G_dprime") for c in COMPONENTS[:-1])
+        parts = sum(red.value(0.45, w, c, "G_dprime") for c in TABLE_COMPONENTS[:-1])
         assert total == pytest.approx(parts, rel=1e-13)
 
 
@@ -282,10 +282,10 @@ def test_cli_writes_table_archive_and_figures(tmp_path, capsys):
         assert parse_job(f.attrs["job_text"]) == parse_job(job_text(realisations=2,
                                                                     medium=MAXWELL))
         assert str(run) in f.attrs["input_files"]
-        assert f["realisations/mean"].shape == (4, len(COMPONENTS), 2, 2)
-        assert f["realisations/block_size"].shape == (4, len(COMPONENTS), 2, 2)
-        assert f["ensemble/dof"].shape == (4, len(COMPONENTS), 2)
-        assert list(f["table/component"].asstr()[:len(COMPONENTS)]) == list(COMPONENTS)
+        assert f["realisations/mean"].shape == (4, len(TABLE_COMPONENTS), 2, 2)
+        assert f["realisations/block_size"].shape == (4, len(TABLE_COMPONENTS), 2, 2)
+        assert f["ensemble/dof"].shape == (4, len(TABLE_COMPONENTS), 2)
+        assert list(f["table/component"].asstr()[:len(TABLE_COMPONENTS)]) == list(TABLE_COMPONENTS)
         np.testing.assert_array_equal(f["table/G_prime"][:], [r["G_prime"] for r in
                                                               reduce_runs([run]).rows()])
     assert main(["reduce", str(run), "-o", str(out), "--task", "999"]) == 2

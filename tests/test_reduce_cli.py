@@ -7,7 +7,7 @@ import stat
 
 import pytest
 
-from sdmpi.analysis.reduce import COMPONENTS
+from sdmpi.analysis.reduce import TABLE_COMPONENTS
 from sdmpi.cli import main
 from .synthetic_run import write_run
 from .test_reduce import MODULI, job_text
@@ -31,7 +31,7 @@ def test_nothing_analysed_exits_0_with_a_table_of_nan_rows_and_a_note(tmp_path, 
     assert FILES <= set(names) and not any(n.endswith(".png") for n in names)
     assert not any(".tmp" in n for n in names)
     lines = (out / "moduli.csv").read_text().splitlines()
-    assert len(lines) == 1 + 2 * len(COMPONENTS) and "nan" in lines[2]
+    assert len(lines) == 1 + 2 * len(TABLE_COMPONENTS) and "nan" in lines[2]
 
 
 def test_default_lissajous_task_comes_from_the_first_group_with_data(tmp_path, capsys):

@@ -17,7 +17,7 @@ import pytest
 from scipy.stats import t as student_t
 
 from sdmpi.analysis.errors import SOURCES
-from sdmpi.analysis.reduce import (COMPONENTS, STEADY_QUANTITIES, VISCOSITY_COLUMNS,
+from sdmpi.analysis.reduce import (TABLE_COMPONENTS, STEADY_QUANTITIES, VISCOSITY_COLUMNS,
                                    confidence_half_width, reduce_runs, steady_quantities)
 from sdmpi.analysis.report import format_table, write_all
 from sdmpi.config import enumerate_tasks, load_job, parse_job
@@ -107,7 +107,7 @@ def test_viscosity_csv_split_normal_stresses_pressure_and_ci(tmp_path):
     e = red.ensemble
     for comp, want in [(c, expected(v)) for c, v in STRESS.items()] + [("total", total)]:
         r = by[comp]
-        c = COMPONENTS.index(comp)
+        c = TABLE_COMPONENTS.index(comp)
         assert int(r["n_realisations"]) == 5
         assert int(r["dof"]) == (4 if e.source[0, c, 0] == SOURCES.index("between")
                                  else e.dof_within[0, c, 0])
@@ -121,11 +121,11 @@ def test_viscosity_csv_split_normal_stresses_pressure_and_ci(tmp_path):
             assert abs(m - w) < bound * err, (comp, q, m, w, err)
     # the total is the sum of the parts, value by value
     for q in STEADY_QUANTITIES:
-        parts = sum(float(by[c][q]) for c in COMPONENTS[:-1])
+        parts = sum(float(by[c][q]) for c in TABLE_COMPONENTS[:-1])
         assert float(by["total"][q]) == pytest.approx(parts, abs=1e-12)
     # running averages end at the mean over all samples (start-up included)
     run_vals = red.running["values"]
-    assert run_vals.shape[:4] == (1, len(COMPONENTS), 4, 5)
+    assert run_vals.shape[:4] == (1, len(TABLE_COMPONENTS), 4, 5)
     assert np.all(np.isfinite(run_vals))
     assert "95% confidence interval" in format_table(red)
     png = tmp_path / "out" / "running_phi0.3.png"

@@ -44,7 +44,7 @@ import numpy as np
 from ..config.stresses import CONTRIBUTIONS
 from ..ensemble.h5 import open_read
 from . import green_kubo as gk
-from .reduce import (COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
+from .reduce import (TABLE_COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
                      medium_moduli, open_runs, read_stress)
 
 #: the configurational contributions correlated at rest (the rows of relaxation.csv
@@ -131,7 +131,7 @@ class RestReduction:
                 for c, name in enumerate(STREAMS):
                     values[name] = (e.mean[c, :, k], e.err[c, :, k])
                 values["total"] = (med + hyd + e.mean[-1, :, k], e.err[-1, :, k])
-                for name in COMPONENTS:
+                for name in TABLE_COMPONENTS:
                     (g1, g2), (s1, s2) = values[name]
                     out.append({"phi": g.phi, "omega": float(w), "component": name,
                                 "n_realisations": n, "G_prime": float(g1),

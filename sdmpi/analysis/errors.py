@@ -66,12 +66,12 @@ class Blocking(NamedTuple):
     n_blocks: np.ndarray
 
 
-#: ``Ensemble.source`` codes: no data, the medium's exact value, the within-realisation
+#: ``EnsembleEstimate.source`` codes: no data, the medium's exact value, the within-realisation
 #: blocking error, the between-realisation spread
 SOURCES = ("none", "exact", "within", "between")
 
 
-class Ensemble(NamedTuple):
+class EnsembleEstimate(NamedTuple):
     """Ensemble mean, one standard error and its degrees of freedom, counts, the within
     and between estimates with their degrees of freedom, and which of them is ``err``
     (index into :data:`SOURCES`; see module docstring)."""
@@ -131,7 +131,7 @@ def blocking(x):
 
 def combine(b):
     """Combine per-realisation Blocking results (fields (..., R); realisations with
-    n == 0 are absent) into one Ensemble per leading index (module docstring)."""
+    n == 0 are absent) into one EnsembleEstimate per leading index (module docstring)."""
     n = np.asarray(b.n)
     present = n > 0
     w = np.where(present, n, 0).astype(float)
@@ -152,13 +152,13 @@ def combine(b):
     dof = np.where(between, dof_between, np.where(r >= 1, dof_within, 0))
     source = np.where(r == 0, SOURCES.index("none"),
                       np.where(between, SOURCES.index("between"), SOURCES.index("within")))
-    return Ensemble(mu, err, dof, r, n.sum(axis=-1), err_within, err_between, dof_within,
+    return EnsembleEstimate(mu, err, dof, r, n.sum(axis=-1), err_within, err_between, dof_within,
                     dof_between, source.astype(np.int8))
 
 def ensemble_average(values):
-    """Ensemble of per-period values: a list of 1-D arrays, one per realisation
+    """Ensemble estimate of per-period values: a list of 1-D arrays, one per realisation
     (lengths may differ, e.g. for a partial run; empty ones count as absent), or an
-    array (..., R, n_periods). Returns combine(blocking(...)) as an Ensemble."""
+    array (..., R, n_periods). Returns combine(blocking(...)) as an EnsembleEstimate."""
     if isinstance(values, np.ndarray):
         return combine(blocking(values))
     if len(values) == 0:

@@ -237,7 +237,7 @@ def realisation_values(series, dt, volume, kT, max_lag, omega, lags, lag0="keep"
 
 def ensemble(values):
     """Combine :class:`Realisation` values (a list, None for a realisation without data)
-    into (relaxation, moduli) :class:`.errors.Ensemble` over the realisations, each
+    into (relaxation, moduli) :class:`.errors.EnsembleEstimate` over the realisations, each
     weighted by its number of time origins (:func:`.errors.combine`)."""
     present = [v for v in values if v is not None]
     out = []

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .models import maxwell_eta_h, schaink_eta_h
-from .reduce import COMPONENTS, lissajous_data, medium_moduli
+from .analytic import maxwell_eta_h, schaink_eta_h
+from .reduce import TABLE_COMPONENTS, lissajous_data, medium_moduli
 
 STYLE = {  # component -> (colour, marker)
     "medium": ("0.35", None),
@@ -65,7 +65,7 @@ def _title(red, phi):
 def _active(red, sel):
     """Components worth drawing: the medium, the total, and parts not identically zero."""
     keep = []
-    for c, name in enumerate(COMPONENTS):
+    for c, name in enumerate(TABLE_COMPONENTS):
         m = red.ensemble.mean[sel, c]
         if name in ("medium", "total") or np.any(np.abs(m[np.isfinite(m)]) > 0):
             keep.append((c, name))
@@ -229,7 +229,7 @@ def plot_lissajous(red, path, task_id=None, file_index=0) -> Path:
     ax.plot(x, close(d["stress"][-1]), "-", color="0.6", lw=0.6,
             label=f"total, averaged over {d['n_periods']} period(s)")
     phase = np.linspace(0.0, 2.0 * np.pi, 361)
-    for c, comp in enumerate(COMPONENTS):
+    for c, comp in enumerate(TABLE_COMPONENTS):
         if comp not in ("medium", "total") and not np.any(d["stress"][c]):
             continue
         colour, _ = STYLE[comp]
@@ -371,7 +371,7 @@ def plot_green_kubo(red, group, path, task_id=None) -> Path:
     legend_below(ax_t)
     rows = [r for r in red.rows() if r["phi"] == group.phi]
     values = []
-    for k, name in enumerate(COMPONENTS):
+    for k, name in enumerate(TABLE_COMPONENTS):
         sel = [r for r in rows if r["component"] == name]
         w = np.array([r["omega"] for r in sel])
         g1 = np.array([r["G_prime"] for r in sel])

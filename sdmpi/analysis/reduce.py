@@ -2,7 +2,7 @@
 
 Pipeline (Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
 
-1. Open each run file read-only and validate it (:func:`sdmpi.ensemble.store.inspect`:
+1. Open each run file read-only and validate it (:func:`sdmpi.ensemble.store.read_summary`:
    format, version, stored job, progress, checkpoints). Several files are reduced
    together only if they hold the same system: their jobs may differ in the seed, the
    number of realisations, the job name and keys that never change results (run layout,
@@ -99,12 +99,12 @@ from ..config import Job, units
 from ..config.schema import toml_name
 from ..config.stresses import CONTRIBUTIONS, contribution_datasets, sample_offset, unrecorded_offset
 from ..ensemble.h5 import open_read
-from .errors import SOURCES, Blocking, Ensemble, blocking, combine
-from .models import maxwell_moduli
+from .analytic import maxwell_moduli
+from .errors import SOURCES, Blocking, EnsembleEstimate, blocking, combine
 from .projection import project_periods, viscosities
 
 #: rows of moduli.csv per (phi, omega), in this order
-COMPONENTS = ("medium", *(c.component for c in CONTRIBUTIONS), "total")
+TABLE_COMPONENTS = ("medium", *(c.component for c in CONTRIBUTIONS), "total")
 #: moduli.csv columns (DESIGN.md contract 4)
 MODULI_COLUMNS = ("phi", "omega", "component", "n_realisations", "G_prime", "G_prime_err",
                   "G_dprime", "G_dprime_err", "eta_prime", "eta_prime_err", "eta_dprime",
@@ -160,7 +160,7 @@ class Reduction:
     files         input paths; seeds (per file)
     phi, control  (G,) per task group: volume fraction and omega (1/t_D) or shear rate
     quantities    names of the last axis Q: ("G_prime", "G_dprime") or STEADY_QUANTITIES
-    ensemble      :class:`.errors.Ensemble`, fields (G, C, Q), C = len(COMPONENTS)
+    ensemble      :class:`.errors.EnsembleEstimate`, fields (G, C, Q), C = len(TABLE_COMPONENTS)
     per_realisation :class:`.errors.Blocking`, fields (G, C, Q, R), realisations R of all
                   files (n == 0: nothing committed after the start-up, absent)
     file_index, realisation  (R,): which file and which realisation of that file
@@ -184,7 +184,7 @@ class Reduction:
     phi: np.ndarray
     control: np.ndarray
     quantities: tuple
-    ensemble: Ensemble
+    ensemble: EnsembleEstimate
     per_realisation: Blocking
     file_index: np.ndarray
     realisation: np.ndarray
@@ -217,7 +217,7 @@ class Reduction:
         e = self.ensemble
         out = []
         for g in range(len(self.phi)):
-            for c, name in enumerate(COMPONENTS):
+            for c, name in enumerate(TABLE_COMPONENTS):
                 row = {"phi": float(self.phi[g]), self.columns[1]: float(self.control[g]),
                        "component": name, "n_realisations": int(e.n_realisations[g, c, 0])}
                 if self.kind == "oscillatory":
@@ -294,7 +294,7 @@ def confidence_half_width(err, dof, level=CONFIDENCE):
     return np.where(err == 0, 0.0, np.where(dof >= 1, q * err, np.nan))
 
 
-def ensemble_half_width(e: Ensemble, index=(), level=CONFIDENCE):
+def ensemble_half_width(e: EnsembleEstimate, index=(), level=CONFIDENCE):
     """Half-width of the confidence interval of the ensemble means ``e`` (at ``index``):
     the wider of the between interval t_{R-1} err_between and the within interval
     t_{dof_within} err_within (:func:`confidence_half_width`), so that, as ``err``, it
@@ -348,11 +348,11 @@ def read_stress(f, job: Job, task, committed, viewed=False, columns=XY):
 def open_run(path):
     """Validate one run file and return its :class:`sdmpi.ensemble.store.RunSummary`
     (job, tasks, progress); :class:`ReduceError` if it is not an intact run file."""
-    from ..ensemble.store import StoreError, inspect
+    from ..ensemble.store import StoreError, read_summary
     if not Path(path).is_file():
         raise ReduceError(f"{path}: no such file")
     try:
-        summary = inspect(path)
+        summary = read_summary(path)
     except StoreError as err:
         raise ReduceError(str(err)) from None
     damaged = [str(d) for d in summary.damage if d.what == "samples"]
@@ -429,7 +429,7 @@ def task_series(job: Job, task, stress, offsets=0.0):
     samples (`read_stress`), (C, committed) xy for oscillatory jobs and (C, committed, 6)
     6-vectors for steady ones; ``offsets``: (C,) or one number, sample k of contribution c
     represents t_k + offsets[c] dt (`sample_offsets`; the projection's sample times).
-    Rows follow COMPONENTS; the medium row is its exact value repeated and the total row
+    Rows follow TABLE_COMPONENTS; the medium row is its exact value repeated and the total row
     is medium + the contributions, value by value."""
     if job.shear.protocol == "oscillatory":
         n = job.steps_per_period(task.omega)
@@ -512,7 +512,7 @@ def reduce_runs(paths, medium=None) -> Reduction:
         n_planned = summaries[0].tasks[0].n_steps
         _, keep = running_average(np.zeros(n_planned))
         running = {"time": keep * summaries[0].tasks[0].dt,
-                   "values": np.full((n_groups, len(COMPONENTS), len(STEADY_QUANTITIES),
+                   "values": np.full((n_groups, len(TABLE_COMPONENTS), len(STEADY_QUANTITIES),
                                       n_real, keep.size), np.nan),
                    "discard_time": job.integration.discard_steps * job.integration.dt}
     committed = np.zeros((n_groups, n_real), dtype=np.int64)
@@ -632,7 +632,7 @@ def _stack_blocking(per_real):
                       for k in range(len(Blocking._fields))))
 
 
-def _exact_medium(ens: Ensemble, job: Job, groups, kind) -> Ensemble:
+def _exact_medium(ens: EnsembleEstimate, job: Job, groups, kind) -> EnsembleEstimate:
     """Put the medium's exact values (Schaink et al. eq. 36; steady shear: eta_0m and no normal
     stresses) into row 0 with zero errors, instead
     of the average of identical numbers (equal to round-off) or NaN when no data."""
@@ -681,7 +681,7 @@ def lissajous_data(red: Reduction, task_id=None, file_index=0) -> dict:
 
     task_id: a task of file ``file_index``; default, in the first group that has analysed
     periods, the task with the most of them. Returns dict with ``task_id, file, phi, omega,
-    gamma0, n_periods``, ``strain`` (n,) = gamma(t_j), ``stress`` (C, n) per COMPONENTS
+    gamma0, n_periods``, ``strain`` (n,) = gamma(t_j), ``stress`` (C, n) per TABLE_COMPONENTS
     in eta_m/t_D (medium analytic: gamma0 (G'_m sin + G''_m cos)), ``sample_offset`` (C,)
     the time stress[c, j] represents, (j + sample_offset[c]) dt (`sample_offsets`; 0 for
     the medium and the total), and ``last`` (n,) the total stress of the last analysed

@@ -39,14 +39,14 @@ what the error columns mean, and the SI value of each reduced unit when the job 
 | `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML; with ``--medium``, the job with that medium), `medium_applied` (1 when the medium was applied after the fact, :mod:`.medium_view`), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
 | `/table/<column>` | the CSV table, one dataset per column (component as UTF-8 strings) |
 | `/groups/phi`, `/groups/omega` or `/groups/rate` | (G,) the task groups |
-| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between`, `dof_within`, `dof_between`, `source` (int8 index into the attr `sources`) (:class:`.errors.Ensemble`) |
+| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between`, `dof_within`, `dof_between`, `source` (int8 index into the attr `sources`) (:class:`.errors.EnsembleEstimate`) |
 | `/realisations/<field>` | (G, C, Q, R): per-realisation `mean`, `err`, `n` (periods or samples used), `block_size`, `n_blocks` (:class:`.errors.Blocking`) |
 | `/realisations/file_index`, `realisation` | (R,): input file (index into `input_files`) and realisation number in it |
 | `/realisations/task_id`, `committed`, `n_steps` | (G, R): task of each realisation, samples committed and planned |
 | `/running/time`, `/running/values` | steady shear only: (T,) times and (G, C, Q, R, T) running averages from t = 0 (`Reduction.running`); attr `discard_time` |
 
 Axes: G task groups (phi-major, then omega), C = components in the order of
-:data:`.reduce.COMPONENTS`, Q = quantities (G', G''; or eta, N1, N2, Pi), R = realisations.
+:data:`.reduce.TABLE_COMPONENTS`, Q = quantities (G', G''; or eta, N1, N2, Pi), R = realisations.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ from .. import __version__
 from .errors import SOURCES
 from .tables import csv_value
 from .trust import TRUST_UNITS
-from .reduce import COMPONENTS, SMALL_ENSEMBLE, ReduceError, task_of
+from .reduce import TABLE_COMPONENTS, SMALL_ENSEMBLE, ReduceError, task_of
 
 #: errors.csv columns after phi and omega (or rate): see the module docstring
 ERROR_COLUMNS = ("component", "quantity", "n_realisations", "err", "err_within",
@@ -109,7 +109,7 @@ def write_h5(red, path) -> Path:
         f.attrs.update({
             "format": "sdmpi-moduli", "format_version": 1, "kind": red.kind,
             "job_text": red.job_text, "input_files": json.dumps(list(red.files)),
-            "seeds": json.dumps(list(red.seeds)), "components": " ".join(COMPONENTS),
+            "seeds": json.dumps(list(red.seeds)), "components": " ".join(TABLE_COMPONENTS),
             "quantities": " ".join(red.quantities),
             "units": json.dumps({c: u for c, u in UNITS.items() if c in red.columns
                                  or c in red.quantities}),
@@ -193,7 +193,7 @@ def error_rows(red) -> list[dict]:
     e, out = red.ensemble, []
     control = red.columns[1]
     for g in range(len(red.phi)):
-        for c, name in enumerate(COMPONENTS):
+        for c, name in enumerate(TABLE_COMPONENTS):
             for q, quantity in enumerate(red.quantities):
                 r = int(e.n_realisations[g, c, q])
                 out.append({

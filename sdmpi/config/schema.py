@@ -560,7 +560,8 @@ class Hydrodynamics:
                                         f"{_num(BROWNIAN_EWALD_TOLERANCE_TIGHT)} for other "
                                         f"Brownian jobs, else {_num(EWALD_TOLERANCE)}",
                                         allowed=Range(0.0, 1e-2, lo_open=True), optional=True)
-    lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms")
+    lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms; false leaves "
+                            "the far-field mobility alone (prefer model = \"far-field\")")
     lubrication_cutoff: float = key(2.0, "float", "gap below which lubrication is added",
                                     unit="mean radii", allowed=Range(0.0, 10.0, lo_open=True))
     min_gap: float = key(1e-4, "float", "gaps are clamped to at least this in lubrication; "

@@ -3,7 +3,7 @@
 Modules (import the ones you need; only ``runner`` initialises MPI):
 
 ``farm``      LPT assignment of tasks to rank groups; communicator split;
-``store``     the run file (layout: docs/store.md): create, write, inspect;
+``store``     the run file (layout: docs/store.md): create, write, read_summary;
 ``h5``        HDF5 primitives: early-allocated datasets, lock-free reads;
 ``runner``    ``run(...)``, the MPI driver behind ``sdmpi run``;
 ``progress``  aggregate progress on rank 0, per-rank logs;

@@ -48,7 +48,7 @@ def problems(summary: store.RunSummary, job) -> list[str]:
 def extend(path: Path, job, job_text: str, versions: str) -> store.RunSummary:
     """Replace the run file ``path`` by the same run lengthened to ``job`` (one process;
     see the module docstring). Returns the summary of the extended file."""
-    summary = store.inspect(path)
+    summary = store.read_summary(path)
     part = path.with_name(path.name + ".part")
     with h5py.File(path, "r") as old:
         layouts = {t.task_id: _layout(old, t.task_id) for t in summary.tasks}
@@ -75,7 +75,7 @@ def extend(path: Path, job, job_text: str, versions: str) -> store.RunSummary:
         os.fsync(directory)
     finally:
         os.close(directory)
-    return store.inspect(path)
+    return store.read_summary(path)
 
 
 def _now() -> str:

@@ -212,7 +212,7 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
         raise BadInput(f"{out}: does not exist; --extend lengthens an existing run file")
     if out.exists() and not new:
         try:
-            summary = store.inspect(out)
+            summary = store.read_summary(out)
         except store.StoreError as err:
             advice = ("Use --new to replace it, or choose another output file (-o)."
                       if store.is_run_file(out) else "Choose another output file (-o).")

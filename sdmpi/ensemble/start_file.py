@@ -124,7 +124,7 @@ def _read_hdf5(path) -> dict:
 
 def _read_run(path) -> dict:
     try:
-        summary = store.inspect(path)
+        summary = store.read_summary(path)
     except store.StoreError as err:
         _fail(path, f"an unusable run file: {err}")
     sets = {}

@@ -7,7 +7,7 @@ Three ways in:
 * :class:`RunFile` (collective open, ``mpio``): while stepping, each task's owner writes
   raw data only (:meth:`RunFile.commit`), never metadata, so a process killed at any
   instant leaves the HDF5 structure as it was when the file was created;
-* :func:`inspect` (one process, read-only): validate a file and summarise it, or raise
+* :func:`read_summary` (one process, read-only): validate a file and summarise it, or raise
   :class:`StoreError` saying what is wrong. Used before resuming and by ``sdmpi info``.
 
 A checkpoint commits ``[samples -> state slot and checksums -> slot step -> fsync ->
@@ -17,7 +17,7 @@ points at data that are completely on disk.
 Checksums: CRC-32 (``zlib.crc32``, ISO 3309) of every sample dataset over fixed blocks of
 rows (``checksum_block`` rows, fixed when the file is created) and of every state dataset
 of a slot. Each slot holds the sample checksums of all rows before its step, so a slot is
-a self-contained, verifiable picture of the task up to its step. :func:`inspect` verifies
+a self-contained, verifiable picture of the task up to its step. :func:`read_summary` verifies
 them and says, per task, from where a resume may safely continue.
 """
 
@@ -500,7 +500,7 @@ def _extend_checksums(column, block: int, start: int, rows, dtype) -> None:
 def fall_back(path, progress: dict, damaged: list) -> None:
     """Undo what failed its checksums (one process, under the run's lock, before the
     run opens the file): move ``/progress`` back (task id -> step, the resume point
-    :func:`inspect` found), sync, then mark every damaged ``(task id, slot)`` as never
+    :func:`read_summary` found), sync, then mark every damaged ``(task id, slot)`` as never
     written (``slot_step`` -1), sync. Each stage leaves a consistent file."""
     with h5py.File(path, "r+") as f:
         for tid, step in progress.items():
@@ -521,7 +521,7 @@ def _fsync(path) -> None:
         os.close(fd)
 
 
-# --------------------------------------------------------------------------- inspect
+# --------------------------------------------------------------------------- read_summary
 
 
 @dataclass(frozen=True)
@@ -589,7 +589,7 @@ def is_run_file(path) -> bool:
 LIVE_READS, LIVE_PAUSE = 5, 0.5
 
 
-def inspect(path) -> RunSummary:
+def read_summary(path) -> RunSummary:
     """Open ``path`` read-only, check that it is an intact sdmpi run file, summarise it.
 
     Raises :class:`StoreError` for a file that is not HDF5, truncated, not a run file, of
@@ -624,14 +624,14 @@ def _inspect_once(path: str, live: bool) -> RunSummary:
         raise StoreError(f"{path}: not a readable HDF5 file, or truncated/corrupted ({err})")
     with f:
         try:
-            return _inspect(f, path, live)
+            return _read_summary(f, path, live)
         except StoreError:
             raise
         except Exception as err:  # h5py raises OSError, KeyError, ValueError, ... on damage
             raise StoreError(f"{path}: damaged run file ({type(err).__name__}: {err})") from None
 
 
-def _inspect(f, path, live: bool) -> RunSummary:
+def _read_summary(f, path, live: bool) -> RunSummary:
     attrs = {k: f.attrs[k] for k in f.attrs}
     if attrs.get("format") != FORMAT:
         raise StoreError(f"{path}: an HDF5 file, but not an sdmpi run file "

@@ -7,8 +7,8 @@
 (the run files of the job files here; README.md gives the commands). Dilute: G(t) at
 each short lag, sampled as it is, against the exact O(phi^2) G(t) of hard spheres
 without hydrodynamic interactions averaged over a step
-(sdmpi.analysis.models.dilute_hard_sphere_relaxation), and G', G'' with each short-time
-rule and window against the exact moduli (sdmpi.analysis.models.dilute_hard_sphere_moduli).
+(sdmpi.analysis.analytic.dilute_hard_sphere_relaxation), and G', G'' with each short-time
+rule and window against the exact moduli (sdmpi.analysis.analytic.dilute_hard_sphere_moduli).
 phi = 0.3: the Brownian and collision rows of Green-Kubo and of oscillatory runs of the
 same model (free draining; far field).
 """
@@ -22,7 +22,7 @@ from scipy.integrate import quad
 
 from sdmpi.analysis import green_kubo as gk
 from sdmpi.analysis.at_rest import STREAMS, reduce_at_rest
-from sdmpi.analysis.models import dilute_hard_sphere_moduli, dilute_hard_sphere_relaxation
+from sdmpi.analysis.analytic import dilute_hard_sphere_moduli, dilute_hard_sphere_relaxation
 from sdmpi.analysis.reduce import PartialRunWarning, reduce_runs
 
 COLLISION = STREAMS.index("collision")
