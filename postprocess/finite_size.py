@@ -130,17 +130,15 @@ def _eta_b(rows):
     return at(rows, "brownian", "eta_prime", EIGHT_PI)
 
 
-@quantity("eta_dprime_half", "B of eta'' (total) = B omega^-1/2, 8 pi ... 80 pi "
+@quantity("eta_dprime_half", "B of eta'' (total) = A + B omega^-1/2, weighted fit over 8 pi ... "
+                             "80 pi with a free intercept A, the form of Schaink et al.'s Fig. 5 "
                              "[eta_m t_D^-1/2]")
 def _half(rows):
     omega, v, e = column(rows, "total", "eta_dprime", low=EIGHT_PI)
-    if len(omega) < 2:
+    if len(omega) < 3:
         return math.nan, math.nan
-    x = omega ** -0.5
-    ok = np.isfinite(v) & (e > 0)
-    w = 1 / e[ok] ** 2  # through the origin: B = sum w x y / sum w x^2
-    return float(np.sum(w * x[ok] * v[ok]) / np.sum(w * x[ok] ** 2)), \
-        float(np.sum(w * x[ok] ** 2) ** -0.5)
+    fit = weighted_line(omega ** -0.5, v, e)
+    return fit.b, fit.b_err
 
 
 def reduce(paths, medium=None):
@@ -211,7 +209,7 @@ def main(argv=None):
     write_extrapolation(fits, out / "extrapolation.csv")
     draw_spectra({n: rows for n, rows in tables.items() if n in runs}, rows_of(args.reference), out)
     draw_size(values, fits, out / "size.png")
-    (out / "summary.md").write_text(summary(values, fits, notes) + time_steps(
+    (out / "summary.md").write_text(summary(values, fits, notes, rows_of(args.reference)) + time_steps(
         rows_of(args.reference), tables[27] if 27 in runs else None, control))
     print(f"wrote {out / 'summary.md'}")
     return 0
@@ -294,7 +292,10 @@ def draw_size(values, fits, path):
     save(fig, path)
 
 
-def summary(values, fits, notes) -> str:
+def summary(values, fits, notes, reference) -> str:
+    """summary.md's numbers: the quantities per N with their fits in 1/L, the same
+    quantities of the reference study (N = 27 at its own time steps), and eta'_H against
+    the equilibrium eta'_inf - 1."""
     sizes = sorted(values)
     lines = ["# Finite-size study: the numbers", "",
              "Written by postprocess/finite_size.py. phi = 0.45, gamma0 = 0.02; one standard "
@@ -310,7 +311,10 @@ def summary(values, fits, notes) -> str:
                      f" (sizes {', '.join(map(str, fit['sizes']))}, chi2 {fit['chi2']:.3g}, "
                      f"dof {fit['dof']}) | {n_within} |")
     lines += ["", "Quantities: " + "; ".join(f"{q}: {d}" for q, (d, _) in QUANTITIES.items())
-              + "; eta_inf_minus_1: the equilibrium eta'_inf - 1 (bench/eta_inf.json).", ""]
+              + "; eta_inf_minus_1: the equilibrium eta'_inf - 1 (bench/eta_inf.json).", "",
+              "The same quantities of the reference study (N = 27, 500 steps per period, "
+              "dt = 5e-4 ... 5e-5): " + "; ".join(f"{q} {pm(*fn(reference))}"
+                                                  for q, (_, fn) in QUANTITIES.items()) + ".", ""]
     lines += ["## eta'_H against the equilibrium eta'_inf - 1 (linear response)", ""]
     for n in sizes:
         (a, ea), (b, eb) = values[n]["eta_H"], values[n]["eta_inf_minus_1"]
