@@ -432,6 +432,34 @@ def _apply_physical(raw: dict, st: _Pass) -> None:
     if not isinstance(brownian, bool) or protocol not in ("oscillatory", "steady", "none"):
         _unconverted(st, targets)  # reported by their own checks
         return
+    problems = _physical_requirements(phys, brownian, protocol)
+    if problems:
+        st.problems.extend(problems)
+        st.invalid.update(p.path for p in problems)
+        _unconverted(st, targets)
+        return
+    physical = Physical(**phys)
+    try:
+        reduced = units.reduced_values(physical, units.make_scales(physical, brownian, protocol))
+    except (OverflowError, ZeroDivisionError) as err:  # e.g. radius = 1e-300 nm
+        what = "a value overflows" if isinstance(err, OverflowError) else "a scale underflows to zero"
+        st.problems.append(Problem("physical", "these values cannot be converted to reduced units "
+                                   f"in floating point ({what}): " + ", ".join(
+                                       f"{k} = {toml_literal(phys[k])}" for k in given),
+                                   allowed="the magnitudes of colloids and their media, e.g. radius "
+                                   "= 37.5 nm, viscosity = 0.1 Pa s, temperature = 298.15 K, "
+                                   "surface_potential = 30 mV"))
+        st.invalid.add("physical")
+        _unconverted(st, targets)
+        return
+    _write_reduced(raw, st, phys, reduced)
+
+
+def _physical_requirements(phys: dict, brownian: bool, protocol: str) -> list[Problem]:
+    """The [physical] keys missing or in conflict for the keys given: radius and
+    viscosity always; temperature (t_D) or, in non-Brownian steady shear, shear_rate;
+    all or none of the optical keys of Finke et al. (2020) eq. 6 (and not hamaker
+    beside them); medium_permittivity with surface_potential."""
     problems = []
 
     def require(name, why, example):
@@ -462,25 +490,12 @@ def _apply_physical(raw: dict, st: _Pass) -> None:
     if phys["surface_potential"] is not None:
         require("medium_permittivity", "with physical.surface_potential (the double layer's "
                 "strength 4 pi eps_r eps_0 a psi0^2)", 80.0)
-    if problems:
-        st.problems.extend(problems)
-        st.invalid.update(p.path for p in problems)
-        _unconverted(st, targets)
-        return
-    physical = Physical(**phys)
-    try:
-        reduced = units.reduced_values(physical, units.make_scales(physical, brownian, protocol))
-    except (OverflowError, ZeroDivisionError) as err:  # e.g. radius = 1e-300 nm
-        what = "a value overflows" if isinstance(err, OverflowError) else "a scale underflows to zero"
-        st.problems.append(Problem("physical", "these values cannot be converted to reduced units "
-                                   f"in floating point ({what}): " + ", ".join(
-                                       f"{k} = {toml_literal(phys[k])}" for k in given),
-                                   allowed="the magnitudes of colloids and their media, e.g. radius "
-                                   "= 37.5 nm, viscosity = 0.1 Pa s, temperature = 298.15 K, "
-                                   "surface_potential = 30 mV"))
-        st.invalid.add("physical")
-        _unconverted(st, targets)
-        return
+    return problems
+
+
+def _write_reduced(raw: dict, st: _Pass, phys: dict, reduced: dict) -> None:
+    """Write the reduced values of the [physical] keys into ``raw`` (recording their
+    origin), or a problem where the reduced key is given with another value."""
     for name, (target, value) in reduced.items():
         section, key_name = target.split(".")
         table = raw.setdefault(section, {})
