@@ -495,15 +495,8 @@ def reduce_runs(paths, medium=None) -> Reduction:
     columns_read = XY if kind == "oscillatory" else slice(None)
 
     groups = list(dict.fromkeys((t.phi, t.omega) for t in summaries[0].tasks))
-    file_index, realisation, columns, notes = [], [], [], []   # columns: per realisation
-    for i, s in enumerate(summaries):
-        by_group = {}
-        for t in s.tasks:
-            by_group.setdefault((t.phi, t.omega), []).append(t)
-        for r in range(s.job.ensemble.realisations):
-            file_index.append(i)
-            realisation.append(r)
-            columns.append([by_group[key][r] for key in groups])
+    file_index, realisation, columns = _realisation_columns(summaries, groups)
+    notes = []
 
     n_groups, n_real = len(groups), len(columns)
     series = [[None] * n_real for _ in range(n_groups)]
@@ -545,21 +538,7 @@ def reduce_runs(paths, medium=None) -> Reduction:
     ens = combine(stacked)                                          # fields (G, C, Q)
     ens = _exact_medium(ens, job, groups, kind)
 
-    for g, (phi, control) in enumerate(groups):
-        r = int(ens.n_realisations[g, 0, 0])
-        where = f"phi = {phi:g}, " + (f"omega = {control:.6g}" if kind == "oscillatory"
-                                      else f"rate = {job.shear.rate:g}")
-        if r == 0:
-            notes.append(f"{where}: no realisation has data after the start-up yet; its "
-                         f"rows are NaN (the medium row is exact)")
-        elif r == 1:
-            notes.append(f"{where}: a single realisation; its error comes from blocking "
-                         f"within that run (dof {int(ens.dof[g, 1, 0])}) and may be too small")
-        elif r < SMALL_ENSEMBLE:
-            notes.append(f"{where}: only {r} realisations (fewer than {SMALL_ENSEMBLE}): "
-                         f"the spread between them is a poor error estimate, so each error "
-                         f"is the larger of it and the blocking error within the runs "
-                         f"(errors.csv says which)")
+    notes += _ensemble_notes(ens, groups, kind, job)
     if not np.all(committed == planned):
         warnings.warn(f"partial run: {int(np.sum(committed < planned))} of {committed.size} "
                       f"tasks unfinished; reducing what is committed", PartialRunWarning,
@@ -577,6 +556,43 @@ def reduce_runs(paths, medium=None) -> Reduction:
                      ("G_prime", "G_dprime") if kind == "oscillatory" else STEADY_QUANTITIES,
                      ens, stacked, np.array(file_index), np.array(realisation), task_id,
                      committed, planned, tuple(notes), running, viewed)
+
+
+def _realisation_columns(summaries, groups):
+    """Every realisation of the run files, in file order: its file index, its index
+    within the file, and its task in each group (phi, omega)."""
+    file_index, realisation, columns = [], [], []
+    for i, s in enumerate(summaries):
+        by_group = {}
+        for t in s.tasks:
+            by_group.setdefault((t.phi, t.omega), []).append(t)
+        for r in range(s.job.ensemble.realisations):
+            file_index.append(i)
+            realisation.append(r)
+            columns.append([by_group[key][r] for key in groups])
+    return file_index, realisation, columns
+
+
+def _ensemble_notes(ens: EnsembleEstimate, groups, kind: str, job: Job) -> list[str]:
+    """Notes on task groups whose error bars need a caveat: no data yet, a single
+    realisation, or fewer than SMALL_ENSEMBLE."""
+    notes = []
+    for g, (phi, control) in enumerate(groups):
+        r = int(ens.n_realisations[g, 0, 0])
+        where = f"phi = {phi:g}, " + (f"omega = {control:.6g}" if kind == "oscillatory"
+                                      else f"rate = {job.shear.rate:g}")
+        if r == 0:
+            notes.append(f"{where}: no realisation has data after the start-up yet; its "
+                         f"rows are NaN (the medium row is exact)")
+        elif r == 1:
+            notes.append(f"{where}: a single realisation; its error comes from blocking "
+                         f"within that run (dof {int(ens.dof[g, 1, 0])}) and may be too small")
+        elif r < SMALL_ENSEMBLE:
+            notes.append(f"{where}: only {r} realisations (fewer than {SMALL_ENSEMBLE}): "
+                         f"the spread between them is a poor error estimate, so each error "
+                         f"is the larger of it and the blocking error within the runs "
+                         f"(errors.csv says which)")
+    return notes
 
 
 def open_runs(paths, medium=None):
