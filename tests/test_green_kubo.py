@@ -301,6 +301,21 @@ def test_several_files_task_and_bad_input(tiny_runs, tmp_path, capsys):
     assert "needs" in err       # a window longer than the data: what it needs, said
 
 
+def test_frequencies_given_instead_of_the_grid(tiny_runs):
+    """reduce_at_rest(omega=...) reports exactly those frequencies, with the same values
+    the grid gives where they coincide; frequencies beyond MAX_OMEGA_DT/dt are refused."""
+    from sdmpi.analysis.reduce import ReduceError
+    grid = reduce_at_rest([tiny_runs[0]])
+    w = grid.groups[0].omega
+    chosen = reduce_at_rest([tiny_runs[0]], omega=[w[2], 30.0])
+    assert list(chosen.groups[0].omega) == [w[2], 30.0]
+    for col in ("G_prime", "G_dprime_err"):
+        assert chosen.value(0.2, w[2], "collision", col) == grid.value(0.2, w[2], "collision", col)
+    assert math.isfinite(chosen.value(0.2, 30.0, "collision", "G_dprime"))
+    with pytest.raises(ReduceError, match="omega"):
+        reduce_at_rest([tiny_runs[0]], omega=[0.21 / 0.002])
+
+
 def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
     """A run at rest with hydrodynamic interactions (synthetic samples) reduces with the
     warning that it is not validated, in the output and on the terminal; unfinished
@@ -320,6 +335,58 @@ def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
     assert meta["validated"] is False and "NOT validated" in meta["warnings"][0]
     rows = [r.split(",") for r in (out / "moduli_gk.csv").read_text().splitlines()[1:]]
     assert all(r[4] == "nan" for r in rows if r[2] in ("hydrodynamic", "total"))
+    assert "no trajectory frames" in meta["groups"][0]["eta_h_how"]
+    assert any("hydrodynamic and total rows NaN" in n for n in meta["notes"])
+
+
+def test_hydrodynamic_row_at_rest_is_eta_h_of_the_trajectory_frames(tmp_path, capsys):
+    """Full SD at rest (N = 8, phi = 0.3, 2 realisations of 400 steps, a frame every 50):
+    the hydrodynamic row is eta_H times the medium's moduli, eta_H the ensemble average of
+    (1/V) sum S_xy per unit shear rate over the frames from discard_steps on, recomputed
+    here from the frames with solve_mobility (to 1e-12); G'_H = 0; the total is the sum
+    of the rows; the tables are byte-identical on re-reduction. Fails for frames of the
+    start-up counted, a wrong box or rate (E_xy = 1/2 per unit rate), a medium factor
+    missing, or the row left NaN. Lubrication settings solve_mobility cannot reproduce
+    give NaN with the reason."""
+    import h5py
+    from sdmpi import load_job
+    from sdmpi.analysis.at_rest import hydrodynamic_settings
+    from sdmpi.hydro import solve_mobility
+    job = tmp_path / "sd.toml"
+    job.write_text(TINY.format(seed=41).replace('"free-draining"', '"stokesian"')
+                   .replace("phi = [0.2]", "phi = [0.3]").replace("n_steps = 1200", "n_steps = 400")
+                   .replace("checkpoint_every = 400", "checkpoint_every = 200\ntrajectory_every = 50"))
+    run = sdmpi_run(job, tmp_path / "sd.h5")
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out in (a, b):
+        assert main(["reduce", str(run), "-o", str(out), "--no-plots"]) == 0
+    assert "NOT validated" in capsys.readouterr().err
+    for name in OUTPUTS:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    per_realisation, tol = [], load_job(str(job)).ewald_tolerance
+    unit_rate = np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])
+    with h5py.File(run, "r") as f:
+        for t in (0, 1):
+            box = f[f"tasks/{t:06d}"].attrs["box"]
+            frames = f[f"particles/task_{t:06d}/position/value"][2:]       # steps 100 .. 350
+            s = [solve_mobility(x, box, rate_of_strain=unit_rate, ewald_tol=tol)[2] for x in frames]
+            per_realisation.append(np.mean([si[:, 0, 1].sum() / np.prod(box) for si in s]))
+    eta_h = np.mean(per_realisation)
+    assert 0.5 < eta_h < 2.0          # 2.5 phi = 0.75 raised by the hydrodynamic interactions
+    red = reduce_at_rest([run])
+    g = red.groups[0]
+    assert g.hydro.frames == 12 and g.hydro.eta_h == pytest.approx(eta_h, rel=1e-12)
+    meta = json.loads((a / "green_kubo.json").read_text())
+    assert meta["groups"][0]["eta_h"] == pytest.approx(eta_h, rel=1e-12)
+    for w in g.omega[:3]:
+        assert red.value(0.3, w, "hydrodynamic", "G_dprime") == pytest.approx(eta_h * w, rel=1e-12)
+        assert red.value(0.3, w, "hydrodynamic", "G_prime") == 0.0
+        assert red.value(0.3, w, "hydrodynamic", "G_dprime_err") > 0
+        total = sum(red.value(0.3, w, c, "G_dprime") for c in COMPONENTS[:-1])
+        assert red.value(0.3, w, "total", "G_dprime") == pytest.approx(total, rel=1e-12)
+    other = load_job(str(job), ["hydrodynamics.min_gap=0.001"])
+    assert "min_gap" in hydrodynamic_settings(other)
+    assert hydrodynamic_settings(load_job(str(job)))["lubrication"] is True
 
 
 #: the validation's dilute job (docs/validation/green_kubo/), shortened to 16 t_D
