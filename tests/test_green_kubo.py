@@ -127,6 +127,27 @@ def test_white_estimator_noise_biases_lag_0_only_and_the_lag1_rule_removes_it():
         assert np.all(np.abs(est.mean[-1, 1] - g2) < 4 * est.err[-1, 1])
 
 
+def test_linear_rule_for_a_g_finite_at_t_0_and_the_contact_rule_s_bias_there():
+    """A G(t) finite and smooth at t = 0 (hard spheres with lubrication): the "linear"
+    rule rebuilds lags 0-4 of a straight line exactly whatever lag 0 holds (white noise),
+    and on an exponential G = 30 exp(-t/tau), tau = 0.05 (100 steps of 5e-4: the
+    full-SD Brownian G(t) falls 17% over its first 20 lags) changes G', G'' at 2 ... 80
+    pi by at most its curvature error, (fit span/tau)^2 ~ 3% of G''; the "contact" rule
+    fits a t^-1/2 term to the same curve and more than doubles G'' at 80 pi."""
+    dt, tau = 5e-4, 0.05
+    m = np.arange(4001)
+    line = 30.0 - 500.0 * m * dt
+    noisy = line.copy()
+    noisy[0] += 90.0
+    assert gk.apply_lag0(noisy[:40], "linear") == pytest.approx(line[:40], rel=1e-12)
+    c = 30.0 * np.exp(-m * dt / tau)
+    w = np.array([2, 8, 16, 32, 80]) * math.pi
+    e1, e2 = gk.transform(c, dt, w)
+    g1, g2 = gk.transform(gk.apply_lag0(c, "linear"), dt, w)
+    assert np.all(np.abs(g1 / e1 - 1) < 1e-3) and np.all(np.abs(g2 / e2 - 1) < 0.03)
+    assert gk.transform(gk.apply_lag0(c, "contact"), dt, w)[1][-1] > 2 * e2[-1]
+
+
 def test_transform_of_the_step_average_of_a_t_to_the_minus_half_singularity():
     """G(t) = t^-1/2 (the short-time form of hard spheres), sampled as its mean over each
     step (the correlation of step averages: G smoothed by a triangle of half-width dt).

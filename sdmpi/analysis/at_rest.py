@@ -199,7 +199,11 @@ class RestReduction:
                            f"{gk.CONTACT_FIT_LAGS[-1]} (the hard-sphere short-time form); "
                            "measured on free draining against the exact dilute G(t): the "
                            "sampled lags 0-4 are 2.6, 0.62, 0.95, 1.02, 1.09 times exact, "
-                           "lags 5-32 1.13-1.20 (the O(phi^3) excess)"}[self.lag0],
+                           "lags 5-32 1.13-1.20 (the O(phi^3) excess)",
+                "linear": f"lags 0-{gk.CONTACT_REPLACED - 1} replaced by the straight line "
+                          f"a + b t fitted to lags {gk.CONTACT_FIT_LAGS[0]}-"
+                          f"{gk.CONTACT_FIT_LAGS[-1]} (a G(t) finite and smooth at t = 0, as "
+                          "with full lubrication)"}[self.lag0],
             "hydrodynamic_row": "eta_H x the medium's moduli, eta_H per group (eta_h, "
                                 "eta_h_err, eta_h_frames, eta_h_how)",
             "errors": "one standard error: per realisation, Flyvbjerg-Petersen blocking of "
