@@ -314,12 +314,21 @@ def test_several_files_task_and_bad_input(tiny_runs, tmp_path, capsys):
         if r[2] == "hydrodynamic":
             assert (float(r[4]), float(r[6])) == pytest.approx(
                 tuple(0.5 * x for x in medium[r[1]]), rel=1e-12)     # 5/2 phi, phi = 0.2
-    for args in (["--task", "7"], ["--gk-window", "-1"], ["--gk-window", "100"]):
+    for args in (["--task", "7"], ["--gk-window", "-1"], ["--gk-window", "100"],
+                 ["--gk-lag0", "lag2"]):
         bad = tmp_path / "bad"
         assert main(["reduce", str(tiny_runs[0]), "-o", str(bad), *args]) == 2
         err = capsys.readouterr().err
         assert "Traceback" not in err and not bad.exists(), args
-    assert "needs" in err       # a window longer than the data: what it needs, said
+        if args == ["--gk-window", "100"]:
+            assert "needs" in err   # a window longer than the data: what it needs, said
+        if args[0] == "--gk-lag0":
+            assert "allowed: keep, lag1, contact, linear" in err
+    linear = tmp_path / "linear"
+    assert main(["reduce", str(tiny_runs[0]), "-o", str(linear), "--no-plots",
+                 "--gk-lag0", "linear"]) == 0
+    meta = json.loads((linear / "green_kubo.json").read_text())
+    assert meta["lag0_rule"] == "linear" and meta["validated"] is False
 
 
 def test_frequencies_given_instead_of_the_grid(tiny_runs):
