@@ -367,6 +367,11 @@ def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
     assert all(r[4] == "nan" for r in rows if r[2] in ("hydrodynamic", "total"))
     assert "no trajectory frames" in meta["groups"][0]["eta_h_how"]
     assert any("hydrodynamic and total rows NaN" in n for n in meta["notes"])
+    sheared = tmp_path / "osc.h5"          # the Green-Kubo options on an oscillatory run
+    write_run(sheared, job_text(realisations=2, phi="[0.3]"), {"brownian": (1.0, 2.0)})
+    for option in (["--gk-lag0", "lag1"], ["--gk-window", "1"]):
+        assert main(["reduce", str(sheared), "-o", str(tmp_path / "o"), *option]) == 2
+        assert "apply only to runs at rest" in capsys.readouterr().err
 
 
 def test_hydrodynamic_row_at_rest_is_eta_h_of_the_trajectory_frames(tmp_path, capsys):
