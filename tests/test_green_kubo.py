@@ -132,8 +132,9 @@ def test_linear_rule_for_a_g_finite_at_t_0_and_the_contact_rule_s_bias_there():
     rule rebuilds lags 0-4 of a straight line exactly whatever lag 0 holds (white noise),
     and on an exponential G = 30 exp(-t/tau), tau = 0.05 (100 steps of 5e-4: the
     full-SD Brownian G(t) falls 17% over its first 20 lags) changes G', G'' at 2 ... 80
-    pi by at most its curvature error, (fit span/tau)^2 ~ 3% of G''; the "contact" rule
-    fits a t^-1/2 term to the same curve and more than doubles G'' at 80 pi."""
+    pi by at most its curvature error, (fit span/tau)^2 ~ 3% of G''; "lag1" by less than
+    1%; the "contact" rule fits a t^-1/2 term to the same curve and more than doubles G''
+    at 80 pi."""
     dt, tau = 5e-4, 0.05
     m = np.arange(4001)
     line = 30.0 - 500.0 * m * dt
@@ -146,6 +147,8 @@ def test_linear_rule_for_a_g_finite_at_t_0_and_the_contact_rule_s_bias_there():
     g1, g2 = gk.transform(gk.apply_lag0(c, "linear"), dt, w)
     assert np.all(np.abs(g1 / e1 - 1) < 1e-3) and np.all(np.abs(g2 / e2 - 1) < 0.03)
     assert gk.transform(gk.apply_lag0(c, "contact"), dt, w)[1][-1] > 2 * e2[-1]
+    h1, h2 = gk.transform(gk.apply_lag0(c, "lag1"), dt, w)   # G''(80 pi) loses G(0) dt/tau w dt/2
+    assert np.all(h1 == e1) and np.all(np.abs(h2 / e2 - 1) < 0.01)
 
 
 def test_transform_of_the_step_average_of_a_t_to_the_minus_half_singularity():
