@@ -4,13 +4,16 @@
         --rest fd27_rest.h5 --osc fd27_osc8pi.h5 fd27_osc32pi.h5 \\
         --rest2 ff27_rest.h5 --osc2 ff27_osc8pi.h5 > results.md
 
-(the run files of the job files here; README.md gives the commands). Dilute: G(t) at
+(the run files of the job files here; README.md gives the commands, and those of the
+full-SD comparison, --sd). Dilute: G(t) at
 each short lag, sampled as it is, against the exact O(phi^2) G(t) of hard spheres
 without hydrodynamic interactions averaged over a step
 (sdmpi.analysis.models.dilute_hard_sphere_relaxation), and G', G'' with each short-time
 rule and window against the exact moduli (sdmpi.analysis.models.dilute_hard_sphere_moduli).
 phi = 0.3: the Brownian and collision rows of Green-Kubo and of oscillatory runs of the
-same model (free draining; far field).
+same model (free draining; far field). Full SD at phi = 0.45 (--sd): every short-time
+rule against the oscillatory study of Schaink et al. (2000) reproduced in
+docs/validation/schaink2000 and against its 80 pi control at the run's own time step.
 """
 
 import argparse
@@ -258,8 +261,9 @@ def main():
     parser.add_argument("--study", help="the oscillatory study's moduli.csv")
     parser.add_argument("--study-job", help="the study's job file (for its steps)")
     parser.add_argument("--same-dt", help="an oscillatory moduli.csv at the run's dt")
-    parser.add_argument("--sd-window", type=float, nargs="*", default=[None],
-                        help="Green-Kubo windows (t_D) for --sd; default: the reducer's")
+    parser.add_argument("--sd-window", nargs="*", default=[None],
+                        type=lambda x: None if x == "default" else float(x),
+                        help="Green-Kubo windows (t_D) for --sd, 'default' the reducer's")
     args = parser.parse_args()
     if args.dilute:
         dilute(args.dilute)
