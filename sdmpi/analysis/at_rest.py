@@ -36,9 +36,12 @@ Short times: lags 0-4 are replaced by the hard-sphere form fitted to lags 5-20 (
 Validation status. Free draining is validated (tests/test_green_kubo.py: the dilute
 O(phi^2) G(t) and moduli; docs/validation/green_kubo/). With hydrodynamic interactions
 (``far-field``, ``stokesian``) the sampled Brownian stress carries per-step estimator
-noise (white in far field at phi = 0.3: lag 0 only), lubrication changes the short-time
-form: the result is NOT validated, and the reduction says so in a warning, in
-``green_kubo.json`` and on the terminal.
+noise (white at lag 0 in far field at phi = 0.3 and full SD at phi = 0.45) and
+lubrication makes G(t) finite at t = 0, which the default short-time rule does not
+assume. Full SD at phi = 0.45, N = 27, against the oscillatory study of Schaink et al.
+(2000): eta_H from the frames and G'' with the ``lag1`` rule agree at 2-80 pi, G' is
+19-35% high from 8 pi up (docs/validation/green_kubo/). The result is NOT validated, and
+the reduction says so in a warning, in ``green_kubo.json`` and on the terminal.
 
 Units: t and 1/omega in t_D, G, G', G'' in eta_m/t_D, eta', eta'' relative to eta_m.
 """
@@ -272,7 +275,7 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None, omega=None) ->
         f"validated (only free draining is): the sampled Brownian stress carries per-step "
         f"estimator noise (the short-time rule removes it where it is white) and "
         f"lubrication changes the short-time form; compare with oscillatory runs before "
-        f"using these moduli"]
+        f"using these moduli (docs/validation/green_kubo/README.md says what agrees)"]
     tasks = []                                    # (file index, task) over all files
     for i, s in enumerate(summaries):
         tasks += [(i, t) for t in s.tasks]
