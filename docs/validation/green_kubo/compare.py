@@ -175,6 +175,27 @@ def same_dt(reds, g, path):
                   f"({z(g.hydro.eta_h, g.hydro.err, h[2] / w, h[3] / w):+.1f}) |")
 
 
+def totals_and_cost(reds, g, study, steps, gk_steps):
+    """The total G'' per rule against the study's, and the steps the run at rest needs
+    for the study's error bar of the Brownian G', G''."""
+    b = STREAMS.index("brownian")
+    print(f"\nTotal G'' (medium + hydrodynamic from the frames + configurational) and the "
+          f"cost of the Brownian row: the steps Green-Kubo needs for the study's error bar, "
+          f"{gk_steps} x (err_GK/err_study)^2, against the study's steps at that frequency "
+          f"(every frequency from the same run at rest):\n")
+    print("| omega | rule | total G'' | study | z | steps for G'_B | for G''_B | study's steps |")
+    print("|---|---|---|---|---|---|---|---|")
+    for k, w in enumerate(STUDY_OMEGA):
+        key = min({q[0] for q in study}, key=lambda q: abs(q - w))
+        t, b1, b2 = study[(key, "total")], study[(key, "brownian")][1], study[(key, "brownian")][3]
+        for rule in RULES:
+            r, mod = reds[rule], reds[rule].groups[0].moduli
+            a, e = r.value(g.phi, w, "total", "G_dprime"), r.value(g.phi, w, "total", "G_dprime_err")
+            print(f"| {w / math.pi:g} pi | `{rule}` | {pm(a, e, 1)} | {pm(t[2], t[3], 1)} | "
+                  f"{z(a, e, t[2], t[3]):+.1f} | {gk_steps * (mod.err[b, 0, k] / b1) ** 2:.3g} | "
+                  f"{gk_steps * (mod.err[b, 1, k] / b2) ** 2:.3g} | {steps[key]:.3g} |")
+
+
 def schaink(rest, study_csv, study_job, window, same_dt_csv=None):
     """Full SD at rest against the oscillatory study: G(t), eta_H, and per frequency, row
     and short-time rule G', G'' with the combined-error distance and the cost."""
@@ -230,21 +251,7 @@ def schaink(rest, study_csv, study_job, window, same_dt_csv=None):
                     a, e = mod.mean[c, q, k], mod.err[c, q, k]
                     cells.append(f"{pm(a, e)} ({z(a, e, v[2 * q], v[2 * q + 1]):+.1f})")
             print(f"| | GK `{rule}` | " + " | ".join(cells) + " |")
-    print(f"\nTotal G'' (medium + hydrodynamic from the frames + configurational) and the "
-          f"cost of the Brownian row: the steps Green-Kubo needs for the study's error bar, "
-          f"{gk_steps} x (err_GK/err_study)^2, against the study's steps at that frequency "
-          f"(every frequency from the same run at rest):\n")
-    print("| omega | rule | total G'' | study | z | steps for G'_B | for G''_B | study's steps |")
-    print("|---|---|---|---|---|---|---|---|")
-    for k, w in enumerate(STUDY_OMEGA):
-        key = min({q[0] for q in study}, key=lambda q: abs(q - w))
-        t, b1, b2 = study[(key, "total")], study[(key, "brownian")][1], study[(key, "brownian")][3]
-        for rule in RULES:
-            r, mod = reds[rule], reds[rule].groups[0].moduli
-            a, e = r.value(g.phi, w, "total", "G_dprime"), r.value(g.phi, w, "total", "G_dprime_err")
-            print(f"| {w / math.pi:g} pi | `{rule}` | {pm(a, e, 1)} | {pm(t[2], t[3], 1)} | "
-                  f"{z(a, e, t[2], t[3]):+.1f} | {gk_steps * (mod.err[b, 0, k] / b1) ** 2:.3g} | "
-                  f"{gk_steps * (mod.err[b, 1, k] / b2) ** 2:.3g} | {steps[key]:.3g} |")
+    totals_and_cost(reds, g, study, steps, gk_steps)
     if same_dt_csv:
         same_dt(reds, g, same_dt_csv)
     print()
