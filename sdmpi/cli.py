@@ -460,6 +460,11 @@ def _add_reduce(subparsers) -> None:
              "relaxation.csv, moduli_gk.csv and green_kubo.json: the window t_M in t_D over "
              "which G(t) is integrated (default: 1/8 of the longest analysed realisation; "
              "see docs/reduce.md)")
+    parser.add_argument(
+        "--gk-lag0", default=None, metavar="RULE",
+        help="runs at rest: the short-time rule, how the first lags of G(t) are treated "
+             "(default contact, validated for free draining; the rules and when each "
+             "applies: docs/reduce.md)")
     parser.set_defaults(handler=_reduce)
 
 
@@ -479,9 +484,9 @@ def _reduce(args) -> int:
         from .analysis.at_rest import quiescent
         if quiescent(args.runs[0]):
             return _reduce_at_rest(args, zip(media, names))
-        if args.gk_window is not None:
-            raise ReduceError("--gk-window applies only to runs at rest (shear.protocol = "
-                              "\"none\"), reduced by Green-Kubo")
+        if args.gk_window is not None or args.gk_lag0 is not None:
+            raise ReduceError("--gk-window and --gk-lag0 apply only to runs at rest "
+                              "(shear.protocol = \"none\"), reduced by Green-Kubo")
         views = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
@@ -523,9 +528,9 @@ def _reduce_at_rest(args, media) -> int:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PartialRunWarning)  # the notes say it all
-        views = [("", reduce_at_rest(args.runs, window=args.gk_window))]
-        views += [(name, reduce_at_rest(args.runs, window=args.gk_window, medium=medium))
-                  for medium, name in media]
+        views = [("", reduce_at_rest(args.runs, window=args.gk_window, lag0=args.gk_lag0))]
+        views += [(name, reduce_at_rest(args.runs, window=args.gk_window, lag0=args.gk_lag0,
+                                        medium=medium)) for medium, name in media]
     paths = []
     for name, red in views:
         more, _ = write_at_rest(red, os.path.join(args.output, name), plots=not args.no_plots,

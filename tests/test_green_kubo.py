@@ -127,6 +127,30 @@ def test_white_estimator_noise_biases_lag_0_only_and_the_lag1_rule_removes_it():
         assert np.all(np.abs(est.mean[-1, 1] - g2) < 4 * est.err[-1, 1])
 
 
+def test_linear_rule_for_a_g_finite_at_t_0_and_the_contact_rule_s_bias_there():
+    """A G(t) finite and smooth at t = 0 (hard spheres with lubrication): the "linear"
+    rule rebuilds lags 0-4 of a straight line exactly whatever lag 0 holds (white noise),
+    and on an exponential G = 30 exp(-t/tau), tau = 0.05 (100 steps of 5e-4: the
+    full-SD Brownian G(t) falls 17% over its first 20 lags) changes G', G'' at 2 ... 80
+    pi by at most its curvature error, (fit span/tau)^2 ~ 3% of G''; "lag1" by less than
+    1%; the "contact" rule fits a t^-1/2 term to the same curve and more than doubles G''
+    at 80 pi."""
+    dt, tau = 5e-4, 0.05
+    m = np.arange(4001)
+    line = 30.0 - 500.0 * m * dt
+    noisy = line.copy()
+    noisy[0] += 90.0
+    assert gk.apply_lag0(noisy[:40], "linear") == pytest.approx(line[:40], rel=1e-12)
+    c = 30.0 * np.exp(-m * dt / tau)
+    w = np.array([2, 8, 16, 32, 80]) * math.pi
+    e1, e2 = gk.transform(c, dt, w)
+    g1, g2 = gk.transform(gk.apply_lag0(c, "linear"), dt, w)
+    assert np.all(np.abs(g1 / e1 - 1) < 1e-3) and np.all(np.abs(g2 / e2 - 1) < 0.03)
+    assert gk.transform(gk.apply_lag0(c, "contact"), dt, w)[1][-1] > 2 * e2[-1]
+    h1, h2 = gk.transform(gk.apply_lag0(c, "lag1"), dt, w)   # G''(80 pi) loses G(0) dt/tau w dt/2
+    assert np.all(h1 == e1) and np.all(np.abs(h2 / e2 - 1) < 0.01)
+
+
 def test_transform_of_the_step_average_of_a_t_to_the_minus_half_singularity():
     """G(t) = t^-1/2 (the short-time form of hard spheres), sampled as its mean over each
     step (the correlation of step averages: G smoothed by a triangle of half-width dt).
@@ -293,12 +317,36 @@ def test_several_files_task_and_bad_input(tiny_runs, tmp_path, capsys):
         if r[2] == "hydrodynamic":
             assert (float(r[4]), float(r[6])) == pytest.approx(
                 tuple(0.5 * x for x in medium[r[1]]), rel=1e-12)     # 5/2 phi, phi = 0.2
-    for args in (["--task", "7"], ["--gk-window", "-1"], ["--gk-window", "100"]):
+    for args in (["--task", "7"], ["--gk-window", "-1"], ["--gk-window", "100"],
+                 ["--gk-lag0", "lag2"]):
         bad = tmp_path / "bad"
         assert main(["reduce", str(tiny_runs[0]), "-o", str(bad), *args]) == 2
         err = capsys.readouterr().err
         assert "Traceback" not in err and not bad.exists(), args
-    assert "needs" in err       # a window longer than the data: what it needs, said
+        if args == ["--gk-window", "100"]:
+            assert "needs" in err   # a window longer than the data: what it needs, said
+        if args[0] == "--gk-lag0":
+            assert "allowed: keep, lag1, contact, linear" in err
+    linear = tmp_path / "linear"
+    assert main(["reduce", str(tiny_runs[0]), "-o", str(linear), "--no-plots",
+                 "--gk-lag0", "linear"]) == 0
+    meta = json.loads((linear / "green_kubo.json").read_text())
+    assert meta["lag0_rule"] == "linear" and meta["validated"] is False
+
+
+def test_frequencies_given_instead_of_the_grid(tiny_runs):
+    """reduce_at_rest(omega=...) reports exactly those frequencies, with the same values
+    the grid gives where they coincide; frequencies beyond MAX_OMEGA_DT/dt are refused."""
+    from sdmpi.analysis.reduce import ReduceError
+    grid = reduce_at_rest([tiny_runs[0]])
+    w = grid.groups[0].omega
+    chosen = reduce_at_rest([tiny_runs[0]], omega=[w[2], 30.0])
+    assert list(chosen.groups[0].omega) == [w[2], 30.0]
+    for col in ("G_prime", "G_dprime_err"):
+        assert chosen.value(0.2, w[2], "collision", col) == grid.value(0.2, w[2], "collision", col)
+    assert math.isfinite(chosen.value(0.2, 30.0, "collision", "G_dprime"))
+    with pytest.raises(ReduceError, match="omega"):
+        reduce_at_rest([tiny_runs[0]], omega=[0.21 / 0.002])
 
 
 def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
@@ -320,6 +368,63 @@ def test_partial_run_and_an_unvalidated_model_are_said(tmp_path, capsys):
     assert meta["validated"] is False and "NOT validated" in meta["warnings"][0]
     rows = [r.split(",") for r in (out / "moduli_gk.csv").read_text().splitlines()[1:]]
     assert all(r[4] == "nan" for r in rows if r[2] in ("hydrodynamic", "total"))
+    assert "no trajectory frames" in meta["groups"][0]["eta_h_how"]
+    assert any("hydrodynamic and total rows NaN" in n for n in meta["notes"])
+    sheared = tmp_path / "osc.h5"          # the Green-Kubo options on an oscillatory run
+    write_run(sheared, job_text(realisations=2, phi="[0.3]"), {"brownian": (1.0, 2.0)})
+    for option in (["--gk-lag0", "lag1"], ["--gk-window", "1"]):
+        assert main(["reduce", str(sheared), "-o", str(tmp_path / "o"), *option]) == 2
+        assert "apply only to runs at rest" in capsys.readouterr().err
+
+
+def test_hydrodynamic_row_at_rest_is_eta_h_of_the_trajectory_frames(tmp_path, capsys):
+    """Full SD at rest (N = 8, phi = 0.3, 2 realisations of 400 steps, a frame every 50):
+    the hydrodynamic row is eta_H times the medium's moduli, eta_H the ensemble average of
+    (1/V) sum S_xy per unit shear rate over the frames from discard_steps on, recomputed
+    here from the frames with solve_mobility (to 1e-12); G'_H = 0; the total is the sum
+    of the rows; the tables are byte-identical on re-reduction. Fails for frames of the
+    start-up counted, a wrong box or rate (E_xy = 1/2 per unit rate), a medium factor
+    missing, or the row left NaN. Lubrication settings solve_mobility cannot reproduce
+    give NaN with the reason."""
+    import h5py
+    from sdmpi import load_job
+    from sdmpi.analysis.at_rest import hydrodynamic_settings
+    from sdmpi.hydro import solve_mobility
+    job = tmp_path / "sd.toml"
+    job.write_text(TINY.format(seed=41).replace('"free-draining"', '"stokesian"')
+                   .replace("phi = [0.2]", "phi = [0.3]").replace("n_steps = 1200", "n_steps = 400")
+                   .replace("checkpoint_every = 400", "checkpoint_every = 200\ntrajectory_every = 50"))
+    run = sdmpi_run(job, tmp_path / "sd.h5")
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out in (a, b):
+        assert main(["reduce", str(run), "-o", str(out), "--no-plots"]) == 0
+    assert "NOT validated" in capsys.readouterr().err
+    for name in OUTPUTS:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    per_realisation, tol = [], load_job(str(job)).ewald_tolerance
+    unit_rate = np.array([[0, 0.5, 0], [0.5, 0, 0], [0, 0, 0]])
+    with h5py.File(run, "r") as f:
+        for t in (0, 1):
+            box = f[f"tasks/{t:06d}"].attrs["box"]
+            frames = f[f"particles/task_{t:06d}/position/value"][2:]       # steps 100 .. 350
+            s = [solve_mobility(x, box, rate_of_strain=unit_rate, ewald_tol=tol)[2] for x in frames]
+            per_realisation.append(np.mean([si[:, 0, 1].sum() / np.prod(box) for si in s]))
+    eta_h = np.mean(per_realisation)
+    assert 0.5 < eta_h < 2.0          # 2.5 phi = 0.75 raised by the hydrodynamic interactions
+    red = reduce_at_rest([run])
+    g = red.groups[0]
+    assert g.hydro.frames == 12 and g.hydro.eta_h == pytest.approx(eta_h, rel=1e-12)
+    meta = json.loads((a / "green_kubo.json").read_text())
+    assert meta["groups"][0]["eta_h"] == pytest.approx(eta_h, rel=1e-12)
+    for w in g.omega[:3]:
+        assert red.value(0.3, w, "hydrodynamic", "G_dprime") == pytest.approx(eta_h * w, rel=1e-12)
+        assert red.value(0.3, w, "hydrodynamic", "G_prime") == 0.0
+        assert red.value(0.3, w, "hydrodynamic", "G_dprime_err") > 0
+        total = sum(red.value(0.3, w, c, "G_dprime") for c in TABLE_COMPONENTS[:-1])
+        assert red.value(0.3, w, "total", "G_dprime") == pytest.approx(total, rel=1e-12)
+    other = load_job(str(job), ["hydrodynamics.min_gap=0.001"])
+    assert "min_gap" in hydrodynamic_settings(other)
+    assert hydrodynamic_settings(load_job(str(job)))["lubrication"] is True
 
 
 #: the validation's dilute job (docs/validation/green_kubo/), shortened to 16 t_D

@@ -6,18 +6,29 @@ samples only) and writes the tables.
 
 Per task, the stress 6-vectors of the configurational contributions (Brownian,
 interparticle, collision; :data:`STREAMS`) after ``integration.discard_steps`` are
-correlated with their sum. The hydrodynamic stress at rest is not used: the hydrodynamic
-part of the moduli is instantaneous, eta'_inf, the equilibrium average of the
-configurations' hydrodynamic stresslet response to a rate of strain, which a run at rest
-does not sample. Rows of ``moduli_gk.csv`` (the columns of moduli.csv):
+correlated with their sum. The hydrodynamic stress sampled at rest is not used: the
+hydrodynamic part of the moduli is instantaneous, eta_H G*_medium/(i omega) with eta_H =
+eta'_inf - 1 the equilibrium average of (1/V) sum_i S_H,xy per unit shear rate of force-
+and torque-free spheres (Schaink et al. 2000, eqs. 32-38; Batchelor 1970), which no sample
+stream of a run at rest holds. It is computed here from the configurations the run file
+keeps: each committed trajectory frame (``output.trajectory_every``) at or after
+``integration.discard_steps`` gives one eta_H by :func:`sdmpi.hydro.bulk.
+hydrodynamic_viscosity` with the job's hydrodynamics (far field by Ewald sums to
+``hydrodynamics.ewald_tolerance``, lubrication when the model has it), one resistance
+solve per frame; errors as for the stress samples (:func:`.errors.ensemble_average`:
+blocking of each realisation's frames, the larger of the spread between realisations and
+the propagated errors within). Rows of ``moduli_gk.csv`` (the columns of moduli.csv):
 
 * ``medium``: exact, as in the oscillatory tables (Schaink et al. 2000 eq. 36);
 * ``hydrodynamic``: free draining (each sphere's stresslet (20/3) pi a^3 E in the
-  medium, Einstein): 5/2 phi times the medium's moduli, exact (error 0); other models:
-  NaN (not in the data; ``sdmpi run`` with oscillatory shear measures it);
+  medium, Einstein): 5/2 phi times the medium's moduli, exact (error 0); with
+  hydrodynamic interactions eta_H times the medium's moduli from the frames, NaN without
+  frames or with lubrication settings :func:`sdmpi.hydro.solve_mobility` does not take
+  (:func:`hydrodynamic_settings`; ``green_kubo.json`` says which);
 * ``brownian``, ``interparticle``, ``collision``: Green-Kubo, each the cross-correlation
   of that contribution with the configurational stress;
-* ``total``: medium + hydrodynamic + the three (NaN where the hydrodynamic row is).
+* ``total``: medium + hydrodynamic + the three (NaN where the hydrodynamic row is); its
+  error the hydrodynamic row's and the configurational stress's in quadrature.
 
 Short times: lags 0-4 are replaced by the hard-sphere form fitted to lags 5-20 (the
 ``contact`` rule of :mod:`.green_kubo`, whose docstring gives the measurement behind it).
@@ -25,9 +36,12 @@ Short times: lags 0-4 are replaced by the hard-sphere form fitted to lags 5-20 (
 Validation status. Free draining is validated (tests/test_green_kubo.py: the dilute
 O(phi^2) G(t) and moduli; docs/validation/green_kubo/). With hydrodynamic interactions
 (``far-field``, ``stokesian``) the sampled Brownian stress carries per-step estimator
-noise (white in far field at phi = 0.3: lag 0 only), lubrication changes the short-time
-form and the hydrodynamic row is missing: the result is NOT validated, and the reduction
-says so in a warning, in ``green_kubo.json`` and on the terminal.
+noise (white at lag 0 in far field at phi = 0.3 and full SD at phi = 0.45) and
+lubrication makes G(t) finite at t = 0, which the default short-time rule does not
+assume. Full SD at phi = 0.45, N = 27, against the oscillatory study of Schaink et al.
+(2000): eta_H from the frames and G'' with the ``lag1`` rule agree at 2-80 pi, G' is
+19-35% high from 8 pi up (docs/validation/green_kubo/). The result is NOT validated, and
+the reduction says so in a warning, in ``green_kubo.json`` and on the terminal.
 
 Units: t and 1/omega in t_D, G, G', G'' in eta_m/t_D, eta', eta'' relative to eta_m.
 """
@@ -38,6 +52,7 @@ import json
 import math
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -66,8 +81,9 @@ EINSTEIN = 2.5
 class Group:
     """One volume fraction: dt, box volume, window (max_lag steps), the reported lags and
     frequencies, the ensembles of G(t) (fields (S + 1, L)) and of (G', G'') (fields
-    (S + 1, 2, W)), per-realisation G(t) of the sum (R, L; NaN when absent) and, per
-    realisation, the file index and task id."""
+    (S + 1, 2, W)), per-realisation G(t) of the sum (R, L; NaN when absent), per
+    realisation the file index and task id, the tail check and ``hydro``: the
+    :class:`Hydrodynamic` factor of the hydrodynamic row."""
     phi: float
     dt: float
     volume: float
@@ -80,6 +96,17 @@ class Group:
     file_index: tuple
     task_id: tuple
     tail: tuple
+    hydro: "Hydrodynamic"
+
+
+class Hydrodynamic(NamedTuple):
+    """The hydrodynamic row of a group as eta_H times the medium's moduli: ``eta_h`` and
+    its standard error ``err`` (NaN when unknown), the configurations it rests on
+    (``frames``, 0 when exact or unknown) and how it was obtained (``how``)."""
+    eta_h: float
+    err: float
+    frames: int
+    how: str
 
 
 @dataclass(frozen=True)
@@ -124,13 +151,14 @@ class RestReduction:
             e = g.moduli
             for k, w in enumerate(g.omega):
                 med = np.array(medium_moduli(self.job, w))
-                hyd = (EINSTEIN * g.phi * med if self.job.hydrodynamics.model == "free-draining"
-                       else np.full(2, np.nan))
                 n = int(e.n_realisations[-1, 0, k])
-                values = {"medium": (med, np.zeros(2)), "hydrodynamic": (hyd, np.zeros(2))}
+                values = {"medium": (med, np.zeros(2)),
+                          "hydrodynamic": (g.hydro.eta_h * med, g.hydro.err * np.abs(med))}
                 for c, name in enumerate(STREAMS):
                     values[name] = (e.mean[c, :, k], e.err[c, :, k])
-                values["total"] = (med + hyd + e.mean[-1, :, k], e.err[-1, :, k])
+                hyd, hyd_err = values["hydrodynamic"]
+                values["total"] = (med + hyd + e.mean[-1, :, k],
+                                   np.hypot(hyd_err, e.err[-1, :, k]))
                 for name in TABLE_COMPONENTS:
                     (g1, g2), (s1, s2) = values[name]
                     out.append({"phi": g.phi, "omega": float(w), "component": name,
@@ -174,10 +202,13 @@ class RestReduction:
                            f"{gk.CONTACT_FIT_LAGS[-1]} (the hard-sphere short-time form); "
                            "measured on free draining against the exact dilute G(t): the "
                            "sampled lags 0-4 are 2.6, 0.62, 0.95, 1.02, 1.09 times exact, "
-                           "lags 5-32 1.13-1.20 (the O(phi^3) excess)"}[self.lag0],
-            "hydrodynamic_row": ("5/2 phi x the medium's moduli, exact (free draining)"
-                                 if job.hydrodynamics.model == "free-draining" else
-                                 "NaN: eta'_inf is not sampled at rest"),
+                           "lags 5-32 1.13-1.20 (the O(phi^3) excess)",
+                "linear": f"lags 0-{gk.CONTACT_REPLACED - 1} replaced by the straight line "
+                          f"a + b t fitted to lags {gk.CONTACT_FIT_LAGS[0]}-"
+                          f"{gk.CONTACT_FIT_LAGS[-1]} (a G(t) finite and smooth at t = 0, as "
+                          "with full lubrication)"}[self.lag0],
+            "hydrodynamic_row": "eta_H x the medium's moduli, eta_H per group (eta_h, "
+                                "eta_h_err, eta_h_frames, eta_h_how)",
             "errors": "one standard error: per realisation, Flyvbjerg-Petersen blocking of "
                       f"{gk.BASE_BLOCKS} blocks of time origins; over realisations the "
                       "larger of the between spread and the propagated within errors "
@@ -189,7 +220,9 @@ class RestReduction:
                         else None, "omega_max": float(g.omega[-1]) if g.omega.size else None,
                         "n_realisations": int(g.relaxation.n_realisations[-1, 0]),
                         "tail_decayed": g.tail[0], "tail_mean": g.tail[1],
-                        "tail_err": g.tail[2]} for g in self.groups],
+                        "tail_err": g.tail[2], "eta_h": g.hydro.eta_h,
+                        "eta_h_err": g.hydro.err, "eta_h_frames": g.hydro.frames,
+                        "eta_h_how": g.hydro.how} for g in self.groups],
             "units": {"t": "t_D", "omega": "1/t_D", "G": "eta_m/t_D", "G_prime": "eta_m/t_D",
                       "G_dprime": "eta_m/t_D", "eta_prime": "eta_m", "eta_dprime": "eta_m",
                       "volume": "a^3", "dt": "t_D", "window": "t_D"},
@@ -212,14 +245,16 @@ def quiescent(path) -> bool:
         return False
 
 
-def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReduction:
+def reduce_at_rest(paths, *, window=None, lag0=None, medium=None, omega=None) -> RestReduction:
     """Green-Kubo reduction of one or several run files at rest of the same system.
 
     window: t_M in t_D (default: :data:`.green_kubo.WINDOW_FRACTION` of the longest
     analysed realisation of each group); lag0: :data:`.green_kubo.LAG0_RULES` (default
     "contact", the only one validated); medium: as :func:`.reduce.reduce_runs`
-    (the medium and hydrodynamic rows). Raises ReduceError for unusable input; warns
-    (:class:`.reduce.PartialRunWarning`) for unfinished tasks."""
+    (the medium and hydrodynamic rows); omega: the frequencies (1/t_D) to report instead
+    of the grid :func:`.green_kubo.omega_grid` (each in (0, MAX_OMEGA_DT/dt]). Raises
+    ReduceError for unusable input; warns (:class:`.reduce.PartialRunWarning`) for
+    unfinished tasks."""
     paths = [str(p) for p in paths]
     summaries, job, job_text, viewed = open_runs(paths, medium)
     if job.shear.protocol != "none":
@@ -238,75 +273,163 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None) -> RestReducti
     warn = [] if validated else [
         f"Green-Kubo with hydrodynamics.model = {model!r} and lag-0 rule {rule!r} is NOT "
         f"validated (only free draining is): the sampled Brownian stress carries per-step "
-        f"estimator noise (the short-time rule removes it where it is white), lubrication "
-        f"changes the short-time form, and the hydrodynamic row (eta'_inf) is not measured "
-        f"at rest; compare with oscillatory runs before using these moduli"]
-
+        f"estimator noise (the short-time rule removes it where it is white) and "
+        f"lubrication changes the short-time form; compare with oscillatory runs before "
+        f"using these moduli (docs/validation/green_kubo/README.md says what agrees)"]
     tasks = []                                    # (file index, task) over all files
     for i, s in enumerate(summaries):
         tasks += [(i, t) for t in s.tasks]
-    phis = list(dict.fromkeys(t.phi for _, t in tasks))
     groups, notes, partial = [], [], []
-    committed = np.array([int(summaries[i].progress[t.task_id]) for i, t in tasks])
-    planned = np.array([t.n_steps for _, t in tasks])
-    for phi in phis:
+    for phi in dict.fromkeys(t.phi for _, t in tasks):
         members = [(i, t) for i, t in tasks if t.phi == phi]
-        lengths = [max(int(summaries[i].progress[t.task_id]) - t.discard_steps, 0)
-                   for i, t in members]
-        dt, longest = members[0][1].dt, max(lengths)
-        max_lag = (int(round(window / dt)) if window is not None
-                   else int(gk.WINDOW_FRACTION * longest))
-        need = 2 * max_lag + gk.BASE_BLOCKS
-        if max_lag < MIN_LAGS or longest < need:
-            raise ReduceError(
-                f"phi = {phi:g}: Green-Kubo with a window of {max_lag} lags "
-                f"({max_lag * dt:.4g} t_D; at least {MIN_LAGS}) needs {need} samples after "
-                f"the start-up in a realisation (twice the window plus {gk.BASE_BLOCKS}); "
-                f"the longest has {longest}: nothing to reduce ("
-                + ("a longer --gk-window" if max_lag < MIN_LAGS else
-                   "a shorter --gk-window, or longer runs") + ")")
-        lags = gk.report_lags(max_lag)
-        omega = gk.omega_grid(dt, max_lag * dt)
-        values, volume = [], None
-        for (i, t), n in zip(members, lengths):
-            done = int(summaries[i].progress[t.task_id])
-            if done < t.n_steps:
-                partial.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}, realisation "
-                               f"{t.realisation}) unfinished: {done}/{t.n_steps} steps")
-            if n < need:
-                values.append(None)
-                notes.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}) has {n} samples "
-                             f"after the start-up; Green-Kubo needs {need} (twice the window "
-                             f"of {max_lag} lags plus {gk.BASE_BLOCKS}): contributes nothing")
-                continue
-            with open_read(paths[i]) as f:
-                from ..ensemble.store import task_key
-                volume = float(np.prod(f[f"tasks/{task_key(t.task_id)}"].attrs["box"]))
-                stress = read_stress(f, job, t, done, viewed, slice(None))[1:]
-            values.append(gk.realisation_values(stress[:, t.discard_steps:], dt, volume,
-                                                gk_kt(), max_lag, omega, lags, rule))
-        relax, mod = gk.ensemble(values)
-        per = np.array([v.relaxation.mean[-1] if v is not None else np.full(lags.size, np.nan)
-                        for v in values])
-        tail = gk.tail_check(relax.mean[-1], relax.err[-1])
-        if not tail[0]:
-            notes.append(f"phi = {phi:g}: G(t) has not decayed within the window "
-                         f"t_M = {max_lag * dt:.4g} t_D (its last tenth averages "
-                         f"{tail[1]:.3g} +- {tail[2]:.3g}): the moduli miss the tail; "
-                         f"use a longer window (--gk-window) or longer runs")
-        r = int(relax.n_realisations[-1, 0])
-        if r < 4:
-            notes.append(f"phi = {phi:g}: only {r} realisation(s): the error bars rest on "
-                         f"few runs")
-        groups.append(Group(float(phi), float(dt), volume, max_lag, lags, omega, relax,
-                            mod, per, tuple(i for i, _ in members),
-                            tuple(t.task_id for _, t in members), tail))
+        group = _reduce_group(float(phi), members, summaries, paths, job, viewed, window,
+                              omega, rule, notes, partial)
+        groups.append(group)
     if partial:
         warnings.warn(f"partial run: {len(partial)} of {len(tasks)} tasks unfinished; "
                       f"reducing what is committed", PartialRunWarning, stacklevel=2)
+    committed = np.array([int(summaries[i].progress[t.task_id]) for i, t in tasks])
+    planned = np.array([t.n_steps for _, t in tasks])
     return RestReduction(job, job_text, tuple(paths), tuple(s.job.job.seed for s in summaries),
                          tuple(groups), rule, validated, tuple(warn), tuple(partial + notes),
                          committed, planned, viewed)
+
+
+def _window(phi, members, summaries, window, omega):
+    """(dt, max_lag, samples needed per realisation, lags, omega) of one group; ReduceError
+    when no realisation is long enough or a frequency is outside (0, MAX_OMEGA_DT/dt]."""
+    lengths = [max(int(summaries[i].progress[t.task_id]) - t.discard_steps, 0)
+               for i, t in members]
+    dt, longest = members[0][1].dt, max(lengths)
+    max_lag = (int(round(window / dt)) if window is not None
+               else int(gk.WINDOW_FRACTION * longest))
+    need = 2 * max_lag + gk.BASE_BLOCKS
+    if max_lag < MIN_LAGS or longest < need:
+        raise ReduceError(
+            f"phi = {phi:g}: Green-Kubo with a window of {max_lag} lags "
+            f"({max_lag * dt:.4g} t_D; at least {MIN_LAGS}) needs {need} samples after "
+            f"the start-up in a realisation (twice the window plus {gk.BASE_BLOCKS}); "
+            f"the longest has {longest}: nothing to reduce ("
+            + ("a longer --gk-window" if max_lag < MIN_LAGS else
+               "a shorter --gk-window, or longer runs") + ")")
+    if omega is None:
+        omega = gk.omega_grid(dt, max_lag * dt)
+    else:
+        omega = np.array(omega, float).ravel()
+        if not np.all((omega > 0) & (omega <= gk.MAX_OMEGA_DT / dt * (1 + 1e-12))):
+            raise ReduceError(f"omega = {list(omega)}: each must lie in (0, "
+                              f"{gk.MAX_OMEGA_DT / dt:.6g}] (MAX_OMEGA_DT/dt at dt = {dt:g})")
+    return dt, max_lag, need, gk.report_lags(max_lag), omega
+
+
+def _reduce_group(phi, members, summaries, paths, job, viewed, window, omega, rule, notes,
+                  partial) -> Group:
+    """One volume fraction's :class:`Group` from its (file index, task) members; appends
+    to ``notes`` and ``partial`` what the reduction should say."""
+    from ..ensemble.store import task_key
+    dt, max_lag, need, lags, omega = _window(phi, members, summaries, window, omega)
+    values, frames, volume = [], [], None
+    for i, t in members:
+        done = int(summaries[i].progress[t.task_id])
+        n = max(done - t.discard_steps, 0)
+        if done < t.n_steps:
+            partial.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}, realisation "
+                           f"{t.realisation}) unfinished: {done}/{t.n_steps} steps")
+        if n < need:
+            values.append(None)
+            notes.append(f"{paths[i]}: task {t.task_id} (phi = {phi:g}) has {n} samples "
+                         f"after the start-up; Green-Kubo needs {need} (twice the window "
+                         f"of {max_lag} lags plus {gk.BASE_BLOCKS}): contributes nothing")
+            continue
+        with open_read(paths[i]) as f:
+            box = np.array(f[f"tasks/{task_key(t.task_id)}"].attrs["box"], float)
+            stress = read_stress(f, job, t, done, viewed, slice(None))[1:]
+        volume = float(np.prod(box))
+        values.append(gk.realisation_values(stress[:, t.discard_steps:], dt, volume,
+                                            gk_kt(), max_lag, omega, lags, rule))
+        frames.append((paths[i], t, box))
+    relax, mod = gk.ensemble(values)
+    per = np.array([v.relaxation.mean[-1] if v is not None else np.full(lags.size, np.nan)
+                    for v in values])
+    tail = gk.tail_check(relax.mean[-1], relax.err[-1])
+    if not tail[0]:
+        notes.append(f"phi = {phi:g}: G(t) has not decayed within the window "
+                     f"t_M = {max_lag * dt:.4g} t_D (its last tenth averages "
+                     f"{tail[1]:.3g} +- {tail[2]:.3g}): the moduli miss the tail; "
+                     f"use a longer window (--gk-window) or longer runs")
+    r = int(relax.n_realisations[-1, 0])
+    if r < 4:
+        notes.append(f"phi = {phi:g}: only {r} realisation(s): the error bars rest on "
+                     f"few runs")
+    hydro = hydrodynamic_factor(job, phi, frames)
+    if math.isnan(hydro.eta_h):
+        notes.append(f"phi = {phi:g}: hydrodynamic and total rows NaN: {hydro.how}")
+    return Group(phi, float(dt), volume, max_lag, lags, omega, relax, mod, per,
+                 tuple(i for i, _ in members), tuple(t.task_id for _, t in members), tail,
+                 hydro)
+
+
+def hydrodynamic_settings(job):
+    """The :func:`sdmpi.hydro.solve_mobility` keywords that reproduce the job's
+    hydrodynamic stresslets at unit rate (far field to ``hydrodynamics.ewald_tolerance``,
+    lubrication when the model has it and ``hydrodynamics.lubrication`` is on, the job's
+    solver backend), or a str saying why none do: solve_mobility applies lubrication with
+    the default cut-off and minimum gap of :mod:`sdmpi.hydro.lubrication` only."""
+    from ..hydro.lubrication import DEFAULT_CUTOFF, DEFAULT_MIN_GAP
+    from ..registry import HYDRODYNAMIC_MODELS
+    hyd = job.hydrodynamics
+    lubrication = HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication
+    if lubrication and (hyd.lubrication_cutoff, hyd.min_gap) != (DEFAULT_CUTOFF,
+                                                                 DEFAULT_MIN_GAP):
+        return (f"eta_H from frames needs hydrodynamics.lubrication_cutoff = "
+                f"{DEFAULT_CUTOFF:g} and hydrodynamics.min_gap = {DEFAULT_MIN_GAP:g} (the "
+                f"job has {hyd.lubrication_cutoff:g}, {hyd.min_gap:g})")
+    return dict(lubrication=bool(lubrication), ewald_tol=job.ewald_tolerance,
+                solver=job.solver.backend)
+
+
+def frame_viscosities(path, task, box, settings) -> np.ndarray:
+    """eta_H (:func:`sdmpi.hydro.bulk.hydrodynamic_viscosity`, relative to eta_m) of each
+    committed trajectory frame of ``task`` in the run file ``path`` taken at or after
+    ``task.discard_steps``, in the periodic ``box``, solved with ``settings``
+    (:func:`hydrodynamic_settings`); empty when the file keeps no frames."""
+    from ..ensemble.trajectory import group_name
+    from ..hydro.bulk import hydrodynamic_viscosity
+    from .trajectories import groups, read
+    name = group_name(task.task_id)
+    if name not in groups(path):
+        return np.zeros(0)
+    traj = read(path, name)
+    with open_read(path) as f:
+        radii = np.array(f[f"particles/{name}/radius"], float)
+    keep = np.flatnonzero(traj.step >= task.discard_steps)
+    return np.array([hydrodynamic_viscosity(traj.positions[k], box, radii=radii,
+                                            strain=float(np.nan_to_num(traj.strain[k])),
+                                            **settings) for k in keep])
+
+
+def hydrodynamic_factor(job, phi, frames) -> Hydrodynamic:
+    """The group's :class:`Hydrodynamic`: free draining 5/2 phi (Einstein, exact); with
+    hydrodynamic interactions the ensemble average of :func:`frame_viscosities` over the
+    realisations ``frames`` ((path, task, box) each), NaN with the reason when
+    there are no frames or :func:`hydrodynamic_settings` has none."""
+    from ..registry import HYDRODYNAMIC_MODELS
+    from .errors import ensemble_average
+    if not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves:
+        return Hydrodynamic(EINSTEIN * phi, 0.0, 0, "5/2 phi (free draining, exact)")
+    settings = hydrodynamic_settings(job)
+    if isinstance(settings, str):
+        return Hydrodynamic(math.nan, math.nan, 0, settings)
+    values = [frame_viscosities(path, t, box, settings) for path, t, box in frames]
+    count = sum(v.size for v in values)
+    if count == 0:
+        return Hydrodynamic(math.nan, math.nan, 0, "no trajectory frames after the start-up "
+                            "(output.trajectory_every = K > 0 keeps them)")
+    e = ensemble_average([v for v in values if v.size])
+    return Hydrodynamic(float(e.mean), float(e.err), count,
+                        f"(1/V) sum S_H,xy per unit shear rate (sdmpi.hydro.bulk."
+                        f"hydrodynamic_viscosity) of {count} trajectory frames after the "
+                        f"start-up, averaged over the realisations")
 
 
 def gk_kt() -> float:

@@ -76,7 +76,14 @@ layer gives G ~ t^-1/2 (Brady 1993; the dilute limit,
 :func:`.models.dilute_hard_sphere_relaxation`), and a constant for stresses that are smooth
 over a few steps. ``lag0 = "keep"`` uses the sampled lags as they are; ``"lag1"`` replaces
 lag 0 alone by lag 1 (it removes white estimator noise, but not the collision stream's
-lag-1 deficit). Which rule a reduction used is in its metadata.
+lag-1 deficit); ``"linear"`` replaces lags 0-4 by the straight line a + b t fitted (least
+squares) to lags 5-20: the short-time form of a G(t) that is finite and smooth at t = 0,
+as for hard spheres with full lubrication, whose high-frequency modulus G'_inf = G(0+) is
+finite (Lionberger & Russel, J. Rheol. 38, 1885 (1994); without lubrication it diverges,
+Brady 1993), with the Brownian estimator noise of lag 0 removed. Fitted to a smooth G,
+the contact form's t^-1/2 term extrapolates a spurious rise into lags 0-4 (an exponential
+G with lags 5-20 spanning 0.1-0.4 of its decay time: G(0) 3.3 times too large). Which
+rule a reduction used is in its metadata.
 
 Units: reduced, a = 1, eta_m = 1, t in t_D, kT = 6 pi eta_m a^3/t_D, stresses and moduli
 in eta_m/t_D, omega in 1/t_D.
@@ -102,8 +109,8 @@ MAX_OMEGA_DT = 0.2
 #: the omega grid: 2 pi 2^(j/POINTS_PER_OCTAVE), j integer
 POINTS_PER_OCTAVE = 4
 #: the short-time rules (module docstring; "contact" is the reducer's)
-LAG0_RULES = ("keep", "lag1", "contact")
-#: the lags fitted by the "contact" rule, and the lags it replaces
+LAG0_RULES = ("keep", "lag1", "contact", "linear")
+#: the lags fitted by the "contact" and "linear" rules, and the lags they replace
 CONTACT_FIT_LAGS = tuple(range(5, 21))
 CONTACT_REPLACED = 5
 #: lags reported in relaxation tables: every lag up to this, then ~LAGS_PER_DECADE per decade
@@ -156,23 +163,28 @@ def step_averaged_inverse_sqrt(lags):
     return 4.0 / 3.0 * ((m + 1) ** 1.5 - 2 * m ** 1.5 + np.abs(m - 1) ** 1.5)
 
 
+#: the short-time forms fitted by a rule: lags -> (lags, 2) basis functions
+SHORT_TIME_FORMS = {
+    "contact": lambda m: np.stack([step_averaged_inverse_sqrt(m), np.ones(m.size)], axis=1),
+    "linear": lambda m: np.stack([m.astype(float), np.ones(m.size)], axis=1)}
+
+
 def apply_lag0(g, rule):
     """G(t) on lags 0 .. M along the last axis with the short-time rule applied (module
-    docstring): "keep" returns it unchanged, "lag1" with G(0) := G(dt), "contact" with
-    the lags below CONTACT_REPLACED replaced by the step means of c t^-1/2 + b fitted
-    (least squares) to the lags CONTACT_FIT_LAGS. Every rule is linear in g."""
+    docstring): "keep" returns it unchanged, "lag1" with G(0) := G(dt), "contact" and
+    "linear" with the lags below CONTACT_REPLACED replaced by their form
+    (:data:`SHORT_TIME_FORMS`: the step means of c t^-1/2 + b, or a + b t) fitted (least
+    squares) to the lags CONTACT_FIT_LAGS. Every rule is linear in g."""
     if rule not in LAG0_RULES:
         raise ValueError(f"lag0 = {rule!r}; allowed: {', '.join(LAG0_RULES)}")
     g = np.array(g, float)
     if rule == "lag1":
         g[..., 0] = g[..., 1]
-    elif rule == "contact":
+    elif rule in SHORT_TIME_FORMS:
+        form = SHORT_TIME_FORMS[rule]
         fit = np.array(CONTACT_FIT_LAGS)
-        design = np.stack([step_averaged_inverse_sqrt(fit), np.ones(fit.size)], axis=1)
-        coef = g[..., fit] @ np.linalg.pinv(design).T                  # (..., 2): c, b
-        short = np.arange(CONTACT_REPLACED)
-        g[..., short] = coef @ np.stack([step_averaged_inverse_sqrt(short),
-                                         np.ones(short.size)])
+        coef = g[..., fit] @ np.linalg.pinv(form(fit)).T                # (..., 2)
+        g[..., :CONTACT_REPLACED] = coef @ form(np.arange(CONTACT_REPLACED)).T
     return g
 
 
