@@ -92,7 +92,7 @@ def test_run_file_too_big_for_the_disk(ensemble_job, tmp_path, monkeypatch, caps
     need = f"{run_file_bytes(job) / 1024:.0f}"  # the estimate is checked against the file elsewhere
     with pytest.raises(runner.BadInput, match=r"integration.periods = 3: the run file needs "
                                               rf"about {need} KiB, but .* has 0.977 KiB free"):
-        runner._check_resources(job, ensemble_job, tmp_path / "run.h5", False, 1)
+        runner._check_resources(job, "dense", ensemble_job, tmp_path / "run.h5", False, 1)
     assert main(["validate", str(ensemble_job), "-o", str(tmp_path / "run.h5")]) == 0
     assert "WARNING: integration.periods = 3: the run file needs" in capsys.readouterr().out
     assert os.listdir(tmp_path) == []  # nothing written
