@@ -114,6 +114,7 @@ def test_resumed_realisations_get_the_backend_and_finish_bit_identical(
                       stream=io.StringIO())
     assert seen and set(seen) == {"dense"}
     assert task_data(out) == task_data(ensemble_reference)
+    assert _plan(job, out, ranks_per_task=2).mode == "complete"  # nothing to run: not refused
 
 
 def test_an_extension_keeps_the_recorded_backend(killed_auto_run, tmp_path):

@@ -194,8 +194,9 @@ def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) ->
     if holder is not None:  # before reading the file: a live file is never "damaged"
         raise BadInput(_in_use(out, holder))
     plan = _mode(job, out, new, extend)
-    _check_backend(job, plan.backend, job_path)
-    _check_resources(job, plan.backend, job_path, out, new, size, extend)
+    if plan.mode != "complete":  # a run file with nothing left to do is left alone
+        _check_backend(job, plan.backend, job_path)
+        _check_resources(job, plan.backend, job_path, out, new, size, extend)
     if 0 in plan.progress and plan.mode != "complete":  # tasks to start: check their start
         try:
             start_file.load(job)
@@ -226,7 +227,7 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
                 raise BadInput("\n".join([f"{out}: cannot be extended to this job:",
                                           *(f"  {p}" for p in problems), "Left untouched."]))
             return Plan(canonical_text(job), "extend", tuple(int(p) for p in summary.progress),
-                        summary.slots, *meta, backend=_recorded_backend(out, summary, job))
+                        summary.slots, *meta, backend=_recorded_backend(summary, job))
         progress = tuple(step for step, _ in summary.resume)
         slots = tuple(slot for _, slot in summary.resume)
         mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
@@ -239,32 +240,18 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
         if mode == "resume":
             notes += _stack_note(out, summary.sessions[-1], json.loads(meta[0]))
         return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged,
-                    backend=_recorded_backend(out, summary, job))
+                    backend=_recorded_backend(summary, job))
     return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta,
                 backend=job_backend(job))
 
 
-def _recorded_backend(out: Path, summary, job) -> str:
+def _recorded_backend(summary, job) -> str:
     """The backend a run file's tasks solve on: the one recorded at its creation
     (``solver_backend``), so that a resumed "auto" run never switches backend, whatever
-    the rank count; for a file without the record, what job.solver.backend stands for at
-    the job's N and ensemble.ranks_per_task. Refused (:class:`BadInput`) when the recorded
-    backend is not registered here, or runs a task on one rank and the job asks for
-    several."""
-    backend = summary.attrs.get("solver_backend")
-    if backend is None:
-        return job_backend(job)
-    named, rpt = job.solver.backend, job.ensemble.ranks_per_task
-    why = f'{out}: its tasks solve on the "{backend}" backend' + (
-        "" if named == backend else f' (what solver.backend = "{named}" stood for when the '
-        "run file was created; a resumed run keeps its backend)")
-    if backend not in SOLVER_BACKENDS:
-        raise BadInput(f"{why}, which this sdmpi does not have (registered: "
-                       f"{', '.join(SOLVER_BACKENDS.names())}). Nothing written.")
-    if rpt > 1 and not SOLVER_BACKENDS[backend].several_ranks:
-        raise BadInput(f"{why}, which runs a task on one rank: ensemble.ranks_per_task = "
-                       f"{rpt}; allowed: 1 for this run file. Nothing written.")
-    return backend
+    the rank count (`_check_backend` refuses one that cannot run here); for a file
+    without the record, what job.solver.backend stands for at the job's N and
+    ensemble.ranks_per_task."""
+    return summary.attrs.get("solver_backend") or job_backend(job)
 
 
 def _stack_note(out: Path, last: dict, now: dict) -> tuple[str, ...]:
@@ -296,12 +283,22 @@ def _extended(plan: Plan, out: Path) -> Plan:
 
 def _check_backend(job, used: str, job_path) -> None:
     """The backend the job runs on (``used``: named, recorded in the run file, or what
-    "auto" picks for this N and ranks_per_task) must suit its drift scheme
-    (`config.checks.scheme_problems`), and a PETSc backend needs petsc4py: refuse the job
-    before anything is written otherwise."""
+    "auto" picks for this N and ranks_per_task) must be registered here, run a task on
+    ensemble.ranks_per_task ranks, suit the drift scheme (`config.checks.scheme_problems`),
+    and have petsc4py if it needs PETSc: refuse the job before anything is written
+    otherwise."""
     from ..hydro.petsc_dense import PetscUnavailable, import_petsc4py
 
-    backend = job.solver.backend
+    backend, rpt = job.solver.backend, job.ensemble.ranks_per_task
+    why = f'the run file\'s tasks solve on the "{used}" backend' + (
+        f' (what solver.backend = "{backend}" stood for when the run file was created; a '
+        "resumed run keeps its backend)" if backend != used else "")
+    if used not in SOLVER_BACKENDS:
+        raise BadInput(f"{why}, which this sdmpi does not have (registered: "
+                       f"{', '.join(SOLVER_BACKENDS.names())}). Nothing written.")
+    if rpt > 1 and not SOLVER_BACKENDS[used].several_ranks:
+        raise BadInput(f"{why}, which runs a task on one rank: ensemble.ranks_per_task = "
+                       f"{rpt}; allowed: 1 for this run file. Nothing written.")
     problems = scheme_problems(job, used)
     if problems:
         raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
