@@ -132,3 +132,20 @@ def test_an_extension_keeps_the_recorded_backend(killed_auto_run, tmp_path):
     extension.extend(out, runner.parse_job(plan.job_text), plan.job_text, plan.versions)
     with h5py.File(out, "r") as f:
         assert f.attrs["solver_backend"] == "petsc-dense" and "extended" in f.attrs
+
+
+def test_pinning_the_resolved_backend_keeps_the_stream():
+    """A realisation built from the job with "auto" replaced by what it stands for
+    (`runner._pinned`, as sdmpi run builds them) steps bit for bit as one built from the
+    job itself (demo job, N = 8: dense)."""
+    from pathlib import Path
+
+    from sdmpi.config import enumerate_tasks, load_job
+    from sdmpi.dynamics import Realisation
+
+    job = load_job(str(Path(__file__).parents[1] / "jobs" / "demo.toml"), ['solver.backend="auto"'])
+    pinned = runner._pinned(job, runner.job_backend(job))
+    assert pinned.solver.backend == "dense" and pinned.system == job.system
+    task = enumerate_tasks(job)[0]
+    a, b = Realisation(job, task).advance(12), Realisation(pinned, task).advance(12)
+    assert a.keys() == b.keys() and all(a[k].tobytes() == b[k].tobytes() for k in a)
