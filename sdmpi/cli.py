@@ -404,6 +404,9 @@ def info_text(run, running=None) -> str:
         frames = sum(frames_done(p, every) for p in done)
         lines.append(f"trajectory: H5MD, a frame every {every} steps, {frames} frames "
                      f"committed (particles/task_NNNNNN; docs/trajectories.md)")
+    if "solver_backend" in a:
+        lines.append(f"solver backend: {a['solver_backend']} (recorded at creation; a resume "
+                     "keeps it)")
     if "extended" in a:
         lines.append(f"extended {len(json.loads(a['extended']))} time(s) (sdmpi run --extend)")
     if not run.checksummed:

@@ -51,7 +51,11 @@ class BackendSpec:
         several_ranks: a task may solve on several ranks (ensemble.ranks_per_task > 1).
         needs_petsc: needs petsc4py (``sdmpi run`` refuses the job where it is missing).
         dense_matrices: how many (11 N)^2 matrices of doubles a task holds at once (the
-            memory estimate), spread over the task's ranks; 0: O(N) memory, not estimated.
+            memory estimate), spread over the task's ranks.
+        bytes_per_particle: bytes per sphere that every rank of a task holds besides the
+            dense matrices (the memory estimate of an O(N) backend, measured).
+        spread_bytes_per_particle: bytes per sphere spread over the task's ranks (the
+            same, for the part each rank holds a share of).
     """
 
     name: str
@@ -61,14 +65,26 @@ class BackendSpec:
     several_ranks: bool = False
     needs_petsc: bool = False
     dense_matrices: int = 0
+    bytes_per_particle: float = 0.0
+    spread_bytes_per_particle: float = 0.0
 
     def load(self) -> Any:
         """The implementation class (imported on first use)."""
         return _load(self.implementation)
 
     def memory_per_rank(self, n_particles: int, ranks: int) -> float:
-        """Bytes per rank of the dense matrices of N spheres solved on ``ranks`` ranks."""
-        return self.dense_matrices * (11 * n_particles) ** 2 * DOUBLE / ranks
+        """Bytes per rank of the solver's data for N spheres solved on ``ranks`` ranks."""
+        spread = self.dense_matrices * (11 * n_particles) ** 2 * DOUBLE + self.spread_bytes_per_particle * n_particles
+        return spread / ranks + self.bytes_per_particle * n_particles
+
+    def memory_text(self) -> str:
+        """What memory_per_rank counts, for people."""
+        if self.dense_matrices:
+            return f"{self.dense_matrices} matrices of (11 N)^2 doubles"
+        if self.bytes_per_particle or self.spread_bytes_per_particle:
+            return (f"~{self.bytes_per_particle / 1024:.0f} KiB per sphere on every rank of a task "
+                    f"and {self.spread_bytes_per_particle / 1024:.0f} KiB shared by them")
+        return "no solver matrices"
 
 
 @dataclass(frozen=True)
@@ -154,6 +170,12 @@ AUTO = "auto"
 #: dense 11N x 11N matrix); on one rank at the default tolerances dense stays the faster up to
 #: N ~ 1000 (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
 AUTO_KRYLOV_MIN_N = 300
+#: petsc-krylov's memory per sphere at phi = 0.45, tolerances 1e-4 (bytes): every rank holds
+#: about KRYLOV_BYTES, the task's ranks share KRYLOV_SPREAD_BYTES (real-space blocks,
+#: lubrication, stencils of the start and the midpoint, work vectors), fitted to the peak
+#: resident memory per rank measured at N = 216 and 1000 on one rank, 1000 and 4096 on
+#: two (bench/krylov_shares.py, docs/performance.md), from above
+KRYLOV_BYTES, KRYLOV_SPREAD_BYTES = 56e3, 400e3
 #: 11N x 11N matrices alive at once in a dense evaluation, rounded up (it holds 218 N^2
 #: doubles: S^-1, X, U_b, the lubrication's dense partitions and R_FU's factor; assembling
 #: one peaks at 242 N^2; the midpoint scheme holds one evaluation while it assembles
@@ -170,7 +192,8 @@ SOLVER_BACKENDS.register(BackendSpec(
     several_ranks=True, needs_petsc=True, dense_matrices=DENSE_MATRICES))
 SOLVER_BACKENDS.register(BackendSpec(
     "petsc-krylov", "matrix-free mixed-form GMRES and Lanczos Brownian forces (large N)",
-    "sdmpi.hydro.krylov:KrylovSolver", matrix_free=True, several_ranks=True, needs_petsc=True))
+    "sdmpi.hydro.krylov:KrylovSolver", matrix_free=True, several_ranks=True, needs_petsc=True,
+    bytes_per_particle=KRYLOV_BYTES, spread_bytes_per_particle=KRYLOV_SPREAD_BYTES))
 
 
 def backend_for(name: str, n_particles: int, ranks: int) -> str:

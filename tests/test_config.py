@@ -470,6 +470,22 @@ def test_cli_validate_checks_the_fewest_ranks_a_job_runs_on(capsys):
     assert "checking for" not in capsys.readouterr().out
 
 
+def test_cli_validate_the_large_n_job_as_it_stands(capsys):
+    """jobs/large_n_krylov.toml (two ranks per task) validates without options: checked
+    for its two ranks, on petsc-krylov with the spectral far field, with the memory that
+    backend needs per rank at its N (`resources.memory_per_rank`)."""
+    from sdmpi.config import resources
+
+    path = ROOT / "jobs" / "large_n_krylov.toml"
+    assert main(["validate", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "checking for 2 ranks, the fewest this job runs on" in out
+    assert "backend petsc-krylov, spectral far field, 2 rank(s) per task" in out
+    need = resources.memory_per_rank(load_job(str(path)), "petsc-krylov")
+    assert need > resources.BASE_BYTES + 2 ** 27  # the backend's share at N = 1000: ~240 MiB
+    assert f"memory: about {resources.gib(need)} per rank" in out
+
+
 def test_cli_validate_names_the_krylov_far_field(capsys):
     """For petsc-krylov the summary says which far field runs: by N (dense below
     krylov.DENSE_FAR_FIELD_MAX_N, spectral from there on) or as solver.far_field says."""

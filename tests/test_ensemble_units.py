@@ -105,9 +105,10 @@ def test_petsc_backend_without_petsc4py_is_bad_input(monkeypatch):
     for backend, rpt in (("petsc-krylov", 1), ("petsc-dense", 2), ("auto", 2)):
         job = load_job(demo, [f'solver.backend="{backend}"', f"ensemble.ranks_per_task={rpt}"])
         with pytest.raises(runner.BadInput, match=f"solver.backend = '{backend}' needs PETSc"):
-            runner._check_backend(job, demo)
-    runner._check_backend(load_job(demo), demo)  # dense
-    runner._check_backend(load_job(demo, ['solver.backend="auto"']), demo)  # N = 8: dense
+            runner._check_backend(job, runner.job_backend(job), demo)
+    runner._check_backend(load_job(demo), "dense", demo)
+    auto = load_job(demo, ['solver.backend="auto"'])
+    runner._check_backend(auto, runner.job_backend(auto), demo)  # N = 8: dense
 
 
 def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):

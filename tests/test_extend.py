@@ -142,6 +142,6 @@ def test_extension_needs_room_for_the_whole_longer_file(job_file, short, monkeyp
     assert free > needed - short.stat().st_size
     monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(
         10 ** 9, 10 ** 9 - free, free))
-    runner._check_resources(job, job_file, short, False, 1)  # a resume: nothing to create
+    runner._check_resources(job, "dense", job_file, short, False, 1)  # a resume: nothing to create
     with pytest.raises(runner.BadInput, match="the run file needs about"):
-        runner._check_resources(job, job_file, short, False, 1, extend=True)
+        runner._check_resources(job, "dense", job_file, short, False, 1, extend=True)

@@ -3,6 +3,7 @@ run-file size against free disk; `validate` estimates and warns, `run` refuses (
 the key named, nothing written)."""
 
 import errno
+import json
 import os
 import shutil
 from pathlib import Path
@@ -36,6 +37,32 @@ def test_dense_job_too_big_for_memory(ensemble_job, tmp_path, capsys):
     assert res.returncode == 2 and "system.n_particles = 125000" in res.stderr, res.stderr
     assert "Nothing written" in res.stderr and "Traceback" not in res.stderr
     assert os.listdir(tmp_path) == []  # nothing written
+
+
+def test_krylov_job_too_big_for_memory(capsys):
+    """petsc-krylov's memory grows with N (its bytes per sphere), so a large enough job
+    is warned about by validate, the key and the backend's share named."""
+    assert main(["validate", DEMO, "--set", 'solver.backend="petsc-krylov"',
+                 "--set", "system.n_particles=10000000"]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: system.n_particles = 10000000: the job needs about" in out
+    assert "petsc-krylov solver: ~55 KiB per sphere on every rank of a task and 391 KiB" in out
+
+
+def test_krylov_memory_estimate_covers_the_measured_peaks():
+    """At every (job, N, ranks) of bench/krylov_shares.json the estimate per rank lies
+    at or above the largest peak resident memory measured on a rank (ru_maxrss), and
+    within 1.6 x of it (the estimate is linear in N, the base of 300 MiB generous)."""
+    root = Path(__file__).parents[1]
+    rows = [r for r in json.loads((root / "bench" / "krylov_shares.json").read_text()).values()
+            if "peak_rss_gib_per_rank" in r]
+    assert {(r["n"], r["ranks"]) for r in rows} >= {(1000, 1), (1000, 2), (4096, 2)}
+    for row in rows:
+        job = load_job(str(root / row["job"]), row["overrides"])
+        assert (job.system.n_particles, job.ensemble.ranks_per_task) == (row["n"], row["ranks"])
+        need = resources.memory_per_rank(job, "petsc-krylov")
+        peak = max(row["peak_rss_gib_per_rank"]) * 2 ** 30
+        assert peak <= need <= 1.6 * peak, (row["n"], row["ranks"], need / peak)
 
 
 def test_free_draining_needs_no_dense_matrices(ensemble_job):
@@ -92,7 +119,7 @@ def test_run_file_too_big_for_the_disk(ensemble_job, tmp_path, monkeypatch, caps
     need = f"{run_file_bytes(job) / 1024:.0f}"  # the estimate is checked against the file elsewhere
     with pytest.raises(runner.BadInput, match=r"integration.periods = 3: the run file needs "
                                               rf"about {need} KiB, but .* has 0.977 KiB free"):
-        runner._check_resources(job, ensemble_job, tmp_path / "run.h5", False, 1)
+        runner._check_resources(job, "dense", ensemble_job, tmp_path / "run.h5", False, 1)
     assert main(["validate", str(ensemble_job), "-o", str(tmp_path / "run.h5")]) == 0
     assert "WARNING: integration.periods = 3: the run file needs" in capsys.readouterr().out
     assert os.listdir(tmp_path) == []  # nothing written

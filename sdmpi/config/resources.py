@@ -4,12 +4,13 @@ refuses with exit 2).
 
 Memory per rank, in bytes (estimates, documented in docs/cli.md):
 
-* the solver backend's dense matrices (`sdmpi.registry.BackendSpec.dense_matrices`): the
-  direct backends hold about `sdmpi.registry.DENSE_MATRICES` matrices of the 11N x 11N FTS grand
+* the solver backend's data (`sdmpi.registry.BackendSpec.memory_per_rank`): the direct
+  backends hold about `sdmpi.registry.DENSE_MATRICES` matrices of the 11N x 11N FTS grand
   mobility / resistance problem (6 force/torque and 5 stresslet unknowns per sphere),
   8 bytes per entry, spread over the task's ranks by those that solve on several; a
-  matrix-free backend needs O(N) and is not estimated, nor is a model that solves nothing
-  (free draining: no hydrodynamic matrices);
+  matrix-free backend declares its measured bytes per sphere (`petsc-krylov`:
+  `sdmpi.registry.KRYLOV_BYTES` on every rank and `KRYLOV_SPREAD_BYTES` shared by the
+  task's ranks); a model that solves nothing (free draining) needs none of them;
 * the hard-sphere start's cell list: one 8-byte head per cell of side >= the contact
   distance 2 a_max, (L / 2 a_max)^3 cells for a cubic box of side L; a very dilute job
   (phi -> 0) makes L, and this list, explode: more than ``MAX_CELL_BYTES`` is refused on
@@ -44,8 +45,8 @@ def gib(n_bytes: float) -> str:
 
 
 def dense_bytes(job, backend: str) -> float:
-    """Bytes per rank of the resolved ``backend``'s dense matrices (0 for a matrix-free
-    backend and for a model that solves nothing)."""
+    """Bytes per rank of the resolved ``backend``'s data (`BackendSpec.memory_per_rank`;
+    0 for a model that solves nothing)."""
     if not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves:
         return 0.0
     return SOLVER_BACKENDS[backend].memory_per_rank(job.system.n_particles, job.ensemble.ranks_per_task)
@@ -120,14 +121,14 @@ def memory_problems(job, backend: str, ranks: int, available: float | None) -> l
     need, allowed = memory_per_rank(job, backend), MEMORY_SHARE * available / ranks
     if need <= allowed:
         return []
-    matrices, lean = SOLVER_BACKENDS[backend].dense_matrices, SOLVER_BACKENDS.names(lambda b: not b.dense_matrices)
+    spec, lean = SOLVER_BACKENDS[backend], SOLVER_BACKENDS.names(lambda b: not b.dense_matrices)
+    other = "" if backend in lean else f", or solver.backend = {quoted(lean)} (O(N) memory)"
     return [Problem("system.n_particles", f"the job needs about {gib(need)} per rank "
-                    f"({backend} solver: {matrices} matrices of (11 N)^2 doubles; "
+                    f"({backend} solver: {spec.memory_text()}; "
                     f"start cell list {gib(start_cells_bytes(job))}), more than the "
                     f"{gib(allowed)} available to each of {ranks} rank(s) here",
                     job.system.n_particles,
-                    allowed="fewer particles, fewer ranks per machine, or "
-                            f"solver.backend = {quoted(lean)} (O(N) memory)")]
+                    allowed=f"fewer particles, fewer ranks per machine{other}")]
 
 
 def min_phi(job, cell_bytes: float) -> float:

@@ -4,7 +4,8 @@ Every dataset of a run file is preallocated at its final length (docs/store.md),
 is extended by writing a new file: rank 0 alone creates the longer job's complete layout
 into ``RUN.h5.part`` (:func:`sdmpi.ensemble.store.create` on MPI_COMM_SELF), copies every
 committed value into it (the samples and trajectory frames below each task's
-``/progress``, both checkpoint slots and their steps, ``/progress``), syncs it, and renames
+``/progress``, both checkpoint slots and their steps, ``/progress``) and the recorded solver
+backend (``solver_backend``: the extended run solves on it), syncs it, and renames
 it to ``RUN.h5``. A kill before the rename leaves ``RUN.h5`` as it was (the leftover
 ``.part`` is overwritten by the next attempt); after it, the file is an ordinary
 resumable run of the longer job. The run then resumes from each task's last checkpoint:
@@ -55,7 +56,7 @@ def extend(path: Path, job, job_text: str, versions: str) -> store.RunSummary:
         history = json.loads(old.attrs.get("extended", "[]"))
         history.append({"time": _now(), "job_hash": old.attrs["job_hash"]})
         store.create(part, job, job_text, layouts, MPI.COMM_SELF, versions,
-                     old.attrs["created"])
+                     old.attrs["created"], old.attrs.get("solver_backend"))
         with h5py.File(part, "r+") as new:
             new.attrs["extended"] = json.dumps(history)
             sessions = new["sessions"]

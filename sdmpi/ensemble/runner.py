@@ -80,6 +80,7 @@ class Plan:
     rewind: tuple = ()    # (task id, step): /progress to move back before running
     damaged: tuple = ()   # (task id, slot): checkpoint slots that fail their checksums
     extension: str = ""  # what --extend did (said before the run starts)
+    backend: str = ""    # the solver backend the tasks solve on ("auto" resolved)
 
 
 def run(job_path, overrides, output, *, new=False, extend=False, realisation_factory=None,
@@ -188,13 +189,14 @@ def _plan(job_path, overrides, out: Path, new: bool, extend: bool, size: int) ->
     if size % rpt:
         raise BadInput(f"ensemble.ranks_per_task = {rpt} does not divide the {size} MPI "
                        f"ranks; run with a multiple of {rpt} ranks")
-    _check_backend(job, job_path)
     _check_output(out, new)
     holder = lock_holder(out)
     if holder is not None:  # before reading the file: a live file is never "damaged"
         raise BadInput(_in_use(out, holder))
-    _check_resources(job, job_path, out, new, size, extend)
     plan = _mode(job, out, new, extend)
+    if plan.mode != "complete":  # a run file with nothing left to do is left alone
+        _check_backend(job, plan.backend, job_path)
+        _check_resources(job, plan.backend, job_path, out, new, size, extend)
     if 0 in plan.progress and plan.mode != "complete":  # tasks to start: check their start
         try:
             start_file.load(job)
@@ -225,7 +227,7 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
                 raise BadInput("\n".join([f"{out}: cannot be extended to this job:",
                                           *(f"  {p}" for p in problems), "Left untouched."]))
             return Plan(canonical_text(job), "extend", tuple(int(p) for p in summary.progress),
-                        summary.slots, *meta)
+                        summary.slots, *meta, backend=_recorded_backend(summary, job))
         progress = tuple(step for step, _ in summary.resume)
         slots = tuple(slot for _, slot in summary.resume)
         mode = "complete" if all(p == t.n_steps for p, t in zip(progress, tasks)) else "resume"
@@ -237,8 +239,19 @@ def _mode(job, out: Path, new: bool, extend: bool) -> Plan:
         damaged = tuple((d.task_id, d.slot) for d in summary.damage if d.what == "state")
         if mode == "resume":
             notes += _stack_note(out, summary.sessions[-1], json.loads(meta[0]))
-        return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged)
-    return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta)
+        return Plan(canonical_text(job), mode, progress, slots, *meta, notes, rewind, damaged,
+                    backend=_recorded_backend(summary, job))
+    return Plan(canonical_text(job), "new", (0,) * len(tasks), (-1,) * len(tasks), *meta,
+                backend=job_backend(job))
+
+
+def _recorded_backend(summary, job) -> str:
+    """The backend a run file's tasks solve on: the one recorded at its creation
+    (``solver_backend``), so that a resumed "auto" run never switches backend, whatever
+    the rank count (`_check_backend` refuses one that cannot run here); for a file
+    without the record, what job.solver.backend stands for at the job's N and
+    ensemble.ranks_per_task."""
+    return summary.attrs.get("solver_backend") or job_backend(job)
 
 
 def _stack_note(out: Path, last: dict, now: dict) -> tuple[str, ...]:
@@ -268,14 +281,24 @@ def _extended(plan: Plan, out: Path) -> Plan:
                                slots=summary.slots, extension=said)
 
 
-def _check_backend(job, job_path) -> None:
-    """The backend the job runs on (named, or what "auto" picks for this N and
-    ranks_per_task) must suit its drift scheme (`config.checks.scheme_problems`), and a
-    PETSc backend needs petsc4py: refuse the job before anything is written otherwise."""
+def _check_backend(job, used: str, job_path) -> None:
+    """The backend the job runs on (``used``: named, recorded in the run file, or what
+    "auto" picks for this N and ranks_per_task) must be registered here, run a task on
+    ensemble.ranks_per_task ranks, suit the drift scheme (`config.checks.scheme_problems`),
+    and have petsc4py if it needs PETSc: refuse the job before anything is written
+    otherwise."""
     from ..hydro.petsc_dense import PetscUnavailable, import_petsc4py
 
-    backend = job.solver.backend
-    used = job_backend(job)
+    backend, rpt = job.solver.backend, job.ensemble.ranks_per_task
+    why = f'the run file\'s tasks solve on the "{used}" backend' + (
+        f' (what solver.backend = "{backend}" stood for when the run file was created; a '
+        "resumed run keeps its backend)" if backend != used else "")
+    if used not in SOLVER_BACKENDS:
+        raise BadInput(f"{why}, which this sdmpi does not have (registered: "
+                       f"{', '.join(SOLVER_BACKENDS.names())}). Nothing written.")
+    if rpt > 1 and not SOLVER_BACKENDS[used].several_ranks:
+        raise BadInput(f"{why}, which runs a task on one rank: ensemble.ranks_per_task = "
+                       f"{rpt}; allowed: 1 for this run file. Nothing written.")
     problems = scheme_problems(job, used)
     if problems:
         raise BadInput(f"{JobError(problems, str(job_path))}\nNothing written.")
@@ -287,12 +310,11 @@ def _check_backend(job, job_path) -> None:
         raise BadInput(f"solver.backend = {backend!r} needs PETSc here: {err}") from None
 
 
-def _check_resources(job, job_path, out: Path, new: bool, size: int,
+def _check_resources(job, backend: str, job_path, out: Path, new: bool, size: int,
                      extend: bool = False) -> None:
-    """Refuse a job that cannot fit: the memory of the ranks on this machine, and (for a
-    run file still to be created, or the longer copy an extension writes beside the run
-    file) the room for it in the output's file system."""
-    backend = job_backend(job)
+    """Refuse a job that cannot fit on its ``backend``: the memory of the ranks on this
+    machine, and (for a run file still to be created, or the longer copy an extension
+    writes beside the run file) the room for it in the output's file system."""
     creating = new or extend or not out.exists()
     replaced = out.stat().st_size if out.exists() and creating and not extend else 0
     problems = resources.problems(job, backend, resources.ranks_on_this_node(size),
@@ -417,6 +439,15 @@ class _Stop:
 # --------------------------------------------------------------------------- the driver
 
 
+def _pinned(job, backend: str):
+    """The job with solver.backend = ``backend`` (the one its tasks solve on), which the
+    realisations are built from: "auto" resolved once, by the plan, not again by each
+    realisation on its communicator."""
+    if job.solver.backend == backend:
+        return job
+    return dataclasses.replace(job, solver=dataclasses.replace(job.solver, backend=backend))
+
+
 class _Driver:
     def __init__(self, comm, job, plan: Plan, out: Path, factory, stream):
         self.comm, self.job, self.plan, self.out = comm, job, plan, out
@@ -451,7 +482,7 @@ class _Driver:
             self.say(f"resuming {self.out}: {len(tasks) - len(todo)}/{len(tasks)} tasks "
                      f"complete, {sum(plan.progress)} steps committed")
         self.say(f"job {job.job.name!r}: {len(todo)} tasks to run ({steps_todo} steps) on "
-                 f"{comm.size} rank(s), {rpt} per task -> {self.out}")
+                 f"{comm.size} rank(s), {rpt} per task, backend {plan.backend} -> {self.out}")
 
         if not kernels_cached():
             self.say("compiling the numba kernels (the first run of this installation, "
@@ -461,7 +492,8 @@ class _Driver:
             # with ranks_per_task > 1 every rank of a group builds and steps the same
             # realisations on the group's communicator (collective solves); the leader writes
             extra = {"comm": group} if group.size > 1 else {}
-            realisations = {tid: self.factory(job, tasks[tid], **extra) for tid in mine}
+            solving = _pinned(job, plan.backend)
+            realisations = {tid: self.factory(solving, tasks[tid], **extra) for tid in mine}
             fresh = [tid for tid in mine if plan.progress[tid] == 0]
             if fresh and job.system.start == "file":
                 configurations = start_file.load(job)
@@ -507,10 +539,10 @@ class _Driver:
         part = self.out.with_name(self.out.name + ".part")
         if store.parallel_hdf5():
             store.create(part, self.job, self.plan.job_text, merged, self.comm,
-                         self.plan.versions, self.plan.created)
+                         self.plan.versions, self.plan.created, self.plan.backend)
         elif self.rank == 0:  # serial h5py: rank 0 writes the file for all
             store.create(part, self.job, self.plan.job_text, merged, MPI.COMM_SELF,
-                         self.plan.versions, self.plan.created)
+                         self.plan.versions, self.plan.created, self.plan.backend)
         self.comm.Barrier()
         if self.rank == 0:
             os.replace(part, self.out)

@@ -168,9 +168,11 @@ def _open_collective(path, mode: str, comm, **kwargs) -> h5py.File:
 
 
 def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versions: str,
-           created: str) -> None:
+           created: str, backend: str | None = None) -> None:
     """Create the complete run file at ``path`` (collective over ``comm``; every rank
-    passes the same arguments). ``versions`` is a JSON text, ``created`` UTC ISO 8601."""
+    passes the same arguments). ``versions`` is a JSON text, ``created`` UTC ISO 8601,
+    ``backend`` the solver backend the tasks solve on (solver.backend with "auto"
+    resolved), recorded as the ``solver_backend`` attribute (None: not recorded)."""
     tasks = enumerate_tasks(job)
     with _open_collective(path, "w", comm, libver="earliest") as f:
         f.attrs.update({
@@ -179,6 +181,8 @@ def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versi
             "time_unit": job.time_unit, "stress_unit": STRESS_UNITS[job.time_unit],
             "component_order": COMPONENT_ORDER, "versions": versions, "created": created,
             "n_tasks": len(tasks)})
+        if backend is not None:
+            f.attrs["solver_backend"] = backend
         scales = units.scales(job)
         if scales is not None:  # [physical]: SI value of each reduced unit
             f.attrs["physical_units"] = json.dumps(scales.as_dict())
