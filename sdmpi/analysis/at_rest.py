@@ -59,7 +59,7 @@ import numpy as np
 from ..config.stresses import CONTRIBUTIONS
 from ..ensemble.h5 import open_read
 from . import green_kubo as gk
-from .reduce import (TABLE_COMPONENTS, MODULI_COLUMNS, PartialRunWarning, ReduceError,
+from .reduce import (MODULI_COLUMNS, TABLE_COMPONENTS, PartialRunWarning, ReduceError,
                      medium_moduli, open_runs, read_stress)
 
 #: the configurational contributions correlated at rest (the rows of relaxation.csv
@@ -97,6 +97,8 @@ class Group:
     task_id: tuple
     tail: tuple
     hydro: "Hydrodynamic"
+    #: the rows of ``relaxation``, in order
+    components: tuple = RELAXATION_COMPONENTS
 
 
 class Hydrodynamic(NamedTuple):

@@ -348,11 +348,10 @@ def plot_green_kubo(red, group, path, task_id=None) -> Path:
     """A run at rest (:mod:`.at_rest`): G(t) per configurational contribution and their
     sum (log-log, t > 0, one standard error; the thin line: task ``task_id`` of the first
     file alone), and the Green-Kubo G'(w), G''(w) rows of moduli_gk.csv (log-log)."""
-    from .at_rest import RELAXATION_COMPONENTS
     fig, (ax_t, ax_w) = _figure(2)
     t = group.lags * group.dt
     shown = []
-    for c, name in enumerate(RELAXATION_COMPONENTS):
+    for c, name in enumerate(group.components):
         m, e = group.relaxation.mean[c], group.relaxation.err[c]
         if name != "total" and not np.any(np.abs(m[np.isfinite(m)]) > 0):
             continue
