@@ -1,16 +1,18 @@
-"""The registries of sdmpi's extension points: solver backends and hydrodynamic models.
+"""The registries of sdmpi's extension points: solver backends, hydrodynamic models, drift
+schemes and integrators.
 
 A registry maps a name, as a job file spells it (``solver.backend``,
-``hydrodynamics.model``), to an entry: a frozen spec that declares what the job loader,
+``hydrodynamics.model``, ``brownian.scheme``, ``integration.scheme``), to an entry: a frozen spec that declares what the job loader,
 the checks, the resource estimates, the command line and the key reference need to know
 of an implementation, and where the implementation is (the class itself, or
 ``"module:Class"``, imported on first use). Every list of choices users see is read from
 here. This module uses only the standard library, so that `sdmpi.config` derives its
-choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`
-and `sdmpi.dynamics.models` build the implementations it names.
+choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`,
+`sdmpi.dynamics.models` and `sdmpi.dynamics.realisation` build the implementations it names.
 
 Adding an implementation: docs/extending.md. In short, one module with the class
-(`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`) and one
+(`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`,
+`sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`) and one
 ``register``: an entry below for those shipped with sdmpi, or a call of
 ``SOLVER_BACKENDS.register(BackendSpec(...))`` in the user's own module before the job is
 loaded.
@@ -98,7 +100,56 @@ class ModelSpec:
         return _load(self.implementation)
 
 
-E = TypeVar("E", BackendSpec, ModelSpec)
+@dataclass(frozen=True)
+class DriftSpec:
+    """A drift scheme of the resistance models (brownian.scheme), as sdmpi's job checks know it.
+
+    Attributes:
+        name: its brownian.scheme value.
+        summary: what it is, one phrase (the key reference).
+        implementation: a `sdmpi.dynamics.drift.DriftScheme` class (built without
+            arguments), or "module:Class".
+        matrix_free: it suits the matrix-free (iterative) backends (`BackendSpec.matrix_free`);
+            every scheme suits the direct ones.
+        why_not: why it does not suit the matrix-free backends (the checks' message).
+    """
+
+    name: str
+    summary: str
+    implementation: Any
+    matrix_free: bool = True
+    why_not: str = ""
+
+    def load(self) -> Any:
+        """The implementation class (imported on first use)."""
+        return _load(self.implementation)
+
+
+@dataclass(frozen=True)
+class IntegratorSpec:
+    """A time integrator (integration.scheme), as sdmpi's job checks know it.
+
+    Attributes:
+        name: its integration.scheme value.
+        summary: what it is, one phrase (the key reference).
+        implementation: a `sdmpi.dynamics.integrators.Integrator` class, or "module:Class".
+        brownian: it integrates Brownian motion (False: brownian.enabled = true is refused).
+        contacts: it integrates frictional contacts (interparticle.kind = "frictional",
+            whose tangential springs are state advanced by each step's velocities).
+    """
+
+    name: str
+    summary: str
+    implementation: Any
+    brownian: bool = True
+    contacts: bool = True
+
+    def load(self) -> Any:
+        """The implementation class (imported on first use)."""
+        return _load(self.implementation)
+
+
+E = TypeVar("E", BackendSpec, ModelSpec, DriftSpec, IntegratorSpec)
 
 
 class Registry(Generic[E]):
@@ -202,3 +253,41 @@ HYDRODYNAMIC_MODELS.register(ModelSpec(
 HYDRODYNAMIC_MODELS.register(ModelSpec(
     "free-draining", "none (Stokes drag of isolated spheres)", "sdmpi.dynamics.models:FreeDrainingModel",
     solves=False))
+
+
+# --------------------------------------------------------------------------- drift schemes
+
+#: brownian.scheme absent: the first registered scheme that suits the backend
+DRIFT_SCHEMES: Registry[DriftSpec] = Registry("brownian.scheme")
+DRIFT_SCHEMES.register(DriftSpec(
+    "rfd", "random finite difference at every step (exact in the mean at every gap)",
+    "sdmpi.dynamics.drift:RandomFiniteDifference", matrix_free=False,
+    why_not="the random finite difference takes a difference over ~1e-6 a, which an iterative "
+            "solver's tolerance would swamp"))
+DRIFT_SCHEMES.register(DriftSpec(
+    "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt)", "sdmpi.dynamics.drift:Midpoint"))
+
+
+def drift_schemes_for(backend: str) -> tuple[str, ...]:
+    """The brownian.scheme values that suit the solver backend ``backend`` (a registered
+    name), the default first."""
+    matrix_free = SOLVER_BACKENDS[backend].matrix_free
+    return DRIFT_SCHEMES.names(lambda scheme: scheme.matrix_free or not matrix_free)
+
+
+def default_drift_scheme(backend: str) -> str:
+    """The drift scheme a backend gets when brownian.scheme is absent: the first registered
+    that suits it (rfd on the direct backends, midpoint on the matrix-free ones)."""
+    return drift_schemes_for(backend)[0]
+
+
+# --------------------------------------------------------------------------- integrators
+
+INTEGRATORS: Registry[IntegratorSpec] = Registry("integration.scheme")
+INTEGRATORS.register(IntegratorSpec(
+    "euler-maruyama", "explicit Euler-Maruyama, the hydrodynamics evaluated once per step",
+    "sdmpi.dynamics.integrators:EulerMaruyama"))
+INTEGRATORS.register(IntegratorSpec(
+    "adams-bashforth-4", "fourth-order Adams-Bashforth (non-Brownian jobs; Dratler & Schowalter "
+    "1996), started by three classical Runge-Kutta steps", "sdmpi.dynamics.integrators:AdamsBashforth4",
+    brownian=False, contacts=False))
