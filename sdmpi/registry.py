@@ -39,7 +39,22 @@ def _load(implementation: Any) -> Any:
 
 
 @dataclass(frozen=True)
-class BackendSpec:
+class Spec:
+    """An implementation of an extension point, as sdmpi's job checks know it: its
+    ``name`` (the job key's value), ``summary`` (one phrase for the key reference and
+    ``sdmpi validate``) and ``implementation`` (the class, or "module:Class")."""
+
+    name: str
+    summary: str
+    implementation: Any
+
+    def load(self) -> Any:
+        """The implementation class (imported on first use)."""
+        return _load(self.implementation)
+
+
+@dataclass(frozen=True)
+class BackendSpec(Spec):
     """A solver backend of the resistance problem, as sdmpi's job checks know it.
 
     Attributes:
@@ -48,25 +63,18 @@ class BackendSpec:
         implementation: a `sdmpi.hydro.backend.SolverBackend` class, or "module:Class".
         matrix_free: solves without forming R, iteratively, from a
             `sdmpi.hydro.resistance.SplitResistance` (solver.far_field applies); such a
-            backend gets the midpoint drift scheme, refuses rfd (its tolerance would swamp
-            the random finite difference) and no near-contact correction.
+            backend gets the drift schemes that suit it (`DriftSpec.matrix_free`) and no
+            near-contact correction.
         several_ranks: a task may solve on several ranks (ensemble.ranks_per_task > 1).
         needs_petsc: needs petsc4py (``sdmpi run`` refuses the job where it is missing).
         dense_matrices: how many (11 N)^2 matrices of doubles a task holds at once (the
             memory estimate), spread over the task's ranks; 0: O(N) memory, not estimated.
     """
 
-    name: str
-    summary: str
-    implementation: Any
     matrix_free: bool = False
     several_ranks: bool = False
     needs_petsc: bool = False
     dense_matrices: int = 0
-
-    def load(self) -> Any:
-        """The implementation class (imported on first use)."""
-        return _load(self.implementation)
 
     def memory_per_rank(self, n_particles: int, ranks: int) -> float:
         """Bytes per rank of the dense matrices of N spheres solved on ``ranks`` ranks."""
@@ -74,7 +82,7 @@ class BackendSpec:
 
 
 @dataclass(frozen=True)
-class ModelSpec:
+class ModelSpec(Spec):
     """A hydrodynamic model, as sdmpi's job checks know it.
 
     Attributes:
@@ -89,19 +97,12 @@ class ModelSpec:
             no solver memory, one rank per task, no drift scheme).
     """
 
-    name: str
-    summary: str
-    implementation: Any
     lubrication: bool = False
     solves: bool = True
 
-    def load(self) -> Any:
-        """The implementation class (imported on first use)."""
-        return _load(self.implementation)
-
 
 @dataclass(frozen=True)
-class DriftSpec:
+class DriftSpec(Spec):
     """A drift scheme of the resistance models (brownian.scheme), as sdmpi's job checks know it.
 
     Attributes:
@@ -114,19 +115,12 @@ class DriftSpec:
         why_not: why it does not suit the matrix-free backends (the checks' message).
     """
 
-    name: str
-    summary: str
-    implementation: Any
     matrix_free: bool = True
     why_not: str = ""
 
-    def load(self) -> Any:
-        """The implementation class (imported on first use)."""
-        return _load(self.implementation)
-
 
 @dataclass(frozen=True)
-class IntegratorSpec:
+class IntegratorSpec(Spec):
     """A time integrator (integration.scheme), as sdmpi's job checks know it.
 
     Attributes:
@@ -138,18 +132,11 @@ class IntegratorSpec:
             whose tangential springs are state advanced by each step's velocities).
     """
 
-    name: str
-    summary: str
-    implementation: Any
     brownian: bool = True
     contacts: bool = True
 
-    def load(self) -> Any:
-        """The implementation class (imported on first use)."""
-        return _load(self.implementation)
 
-
-E = TypeVar("E", BackendSpec, ModelSpec, DriftSpec, IntegratorSpec)
+E = TypeVar("E", bound=Spec)
 
 
 class Registry(Generic[E]):

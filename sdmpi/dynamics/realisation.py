@@ -5,9 +5,10 @@ Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 
     dx = [U_inf(x) + R_FU^-1 (F_P + R_FE e_inf) + kT div R_FU^-1] dt
          + sqrt(2 kT dt) R_FU^-1/2 dW,
 
-integrated explicitly (Euler-Maruyama) with the hydrodynamics of a model
-(`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated once per step
-at the step's start,
+stepped by the integrator of integration.scheme (`integrators`, registered in
+`sdmpi.registry.INTEGRATORS`) with the hydrodynamics of a model
+(`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated at the step's
+start x_k; by default explicitly (Euler-Maruyama),
 
     x_{k+1} = x_k + (gamma(t_{k+1}) - gamma(t_k)) y e_x + dt U(x_k),
 
@@ -19,7 +20,7 @@ the step's own strain (with the start's rate gamma_dot(t_k) in the disturbance, 
 driven like the rate of A/(2(1 - A)) steps later). A Brownian force F_B = sqrt(2 kT/dt) C z
 with R_FU = C C^T and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation),
 and the drift kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et
-al. eq. 16) estimated by the model's drift scheme (`models`: a random finite difference
+al. eq. 16) estimated by the model's drift scheme (`drift`: a random finite difference
 along the noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys.
 118, 10323 (2003)).
 
