@@ -324,6 +324,26 @@ def scheme_problems(job, backend: str) -> list[Problem]:
                     allowed=f'{quoted(drift_schemes_for(backend))} (or absent) with solver.backend = "{backend}"{where}')]
 
 
+def _far_field_refresh(job):
+    """A far field held between refreshes needs a model with one on a backend that forms
+    it, and no Brownian motion (whose drift is the divergence of the configuration's own
+    mobility)."""
+    hyd = job.hydrodynamics
+    if hyd.far_field_refresh == 0.0:
+        return []
+    direct = SOLVER_BACKENDS.names(lambda b: not b.matrix_free)
+    for broken, why, allowed in (
+            (job.brownian.enabled, "the Brownian drift needs the mobility of the step's own configuration",
+             "0, or brownian.enabled = false"),
+            (not HYDRODYNAMIC_MODELS[hyd.model].solves, f"the {hyd.model} model has no far field",
+             f"0 with hydrodynamics.model = \"{hyd.model}\""),
+            (job.solver.backend not in direct, "the far field is held only by the backends that form it",
+             f"0, or solver.backend = {quoted(direct)}")):
+        if broken:
+            return [Problem("hydrodynamics.far_field_refresh", why, hyd.far_field_refresh, allowed=allowed)]
+    return []
+
+
 def _integrator(job):
     """What the integrator supports (`sdmpi.registry.IntegratorSpec`): Brownian motion,
     frictional contacts."""
@@ -383,4 +403,6 @@ CROSS_CHECKS: tuple[CrossCheck, ...] = (
       "hydrodynamics.lubrication_cutoff"), _frictional),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
     (("integration.scheme", "brownian.enabled", "interparticle.kind"), _integrator),
+    (("hydrodynamics.far_field_refresh", "hydrodynamics.model", "brownian.enabled", "solver.backend"),
+     _far_field_refresh),
 )

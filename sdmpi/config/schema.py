@@ -575,6 +575,12 @@ class Hydrodynamics:
                                  + ", ".join(HYDRODYNAMIC_MODELS.names(lambda m: m.lubrication))
                                  + "), reflect for the others (see docs/physics.md)",
                                  allowed=Choice(("separate", "reflect")), optional=True)
+    far_field_refresh: float = key(0.0, "float", "time between recomputations of the far-field "
+                                   "mobility M_inf (lubrication every step): the far field of the "
+                                   "last refresh is used in between (Dratler & Schowalter 1996: "
+                                   "0.1); rounded to whole time steps; 0: every step; "
+                                   "non-Brownian jobs on a direct backend only", unit="time unit",
+                                   allowed=Range(0.0, None))
 
 
 @dataclass(frozen=True)

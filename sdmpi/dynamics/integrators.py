@@ -213,6 +213,8 @@ class AdamsBashforth4:
         return d - side * np.round(d / side)
 
     def _g(self, velocity, t, dy):
+        """g = U' + gamma_dot(t) dy e_x (N, 3) for velocities U' (N, 6) and heights dy
+        relative to the step's start."""
         g = velocity[:, :3].copy()
         g[:, 0] += self.motion.protocol.rate(t) * dy
         return g

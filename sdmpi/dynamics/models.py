@@ -190,6 +190,8 @@ class ResistanceModel(HydrodynamicModel):
                                                                lanczos_tolerance=lanczos_tolerance)
         self._separate = separate  # positions, strain -> (positions, overlaps found)
         self._on_error = on_error  # LinAlgError -> exception to raise
+        self._held = None  # (positions, strain) of the far field held (`hold_far_field`)
+        self._held_blocks = None  # its far-field blocks, computed on first use
 
     @classmethod
     def from_job(cls, job, radii, box, comm=None, separate=None, on_error=None):
@@ -212,15 +214,32 @@ class ResistanceModel(HydrodynamicModel):
                 raise
             raise self._on_error(err) from err
 
-    def _assemble(self, positions, strain, plan=None):
+    def _assemble(self, positions, strain, plan=None, **far):
         return self._guarded(assemble, self.backend, positions, self.radii, self.box, strain, plan=plan,
-                             comm=self.comm, **self._hydro)
+                             comm=self.comm, **self._hydro, **far)
+
+    def hold_far_field(self, positions, strain):
+        """From now on, evaluate with the far-field mobility of (positions, strain) and the
+        lubrication of each evaluation's own configuration (hydrodynamics.far_field_refresh;
+        the direct backends, whose resistance holds the far field's blocks). The blocks are
+        computed at the next evaluation, so that a state restored with the positions of the
+        last refresh evaluates as the run it was saved from."""
+        self._held, self._held_blocks = (np.array(positions, dtype=float), strain), None
+
+    def _far(self):
+        """{"far": the held far-field blocks (S^-1, X, U_b)}, or {} when none is held."""
+        if self._held is None:
+            return {}
+        if self._held_blocks is None:
+            res = self._assemble(*self._held)
+            self._held_blocks = (res.s_inverse, res.x_ab, res.chol_bb)
+        return {"far": self._held_blocks}
 
     def _solver(self, resistance):
         return self._guarded(make_solver, self.backend, resistance, self.comm, **self._solver_args)
 
     def at(self, positions, strain):
-        res = self._assemble(positions, strain)
+        res = self._assemble(positions, strain, **self._far())
         if self.lubrication:
             pairs = res.pairs  # the lubrication pairs are the force pairs (same cut-off)
         else:

@@ -178,6 +178,10 @@ class Realisation:
             self.maxwell = MaxwellFilter(tuple(m.eta for m in modes), tuple(m.lam for m in modes), self.dt)
             self.modes = np.zeros((len(modes), n, 5))
             self.source_prev = np.zeros((n, 5))
+        # hydrodynamics.far_field_refresh: the far field held for this many steps (0: never held)
+        refresh = hyd.far_field_refresh
+        self.far_field_every = max(1, round(refresh / self.dt)) if refresh > 0 else 0
+        self.far_field_positions = np.zeros((n, 3))  # the start of the last refresh
         motion = Motion(n, self.box, self.dt, self.protocol, self._separate if self._corrects_overlaps() else None,
                         self.collision_rule, self._velocity_at)
         self.integrator = INTEGRATORS[job.integration.scheme].load()(motion)
@@ -200,6 +204,8 @@ class Realisation:
             fields["contact_stretch"] = (self.contacts.stretch.shape, "f8")
         if self.monolayer is not None:
             fields["stopped_at"] = ((1,), "i8")
+        if self.far_field_every:
+            fields["far_field_positions"] = ((n, 3), "f8")
         return {**fields, **self.integrator.state_fields()}
 
     def get_state(self):
@@ -214,6 +220,8 @@ class Realisation:
             state["contact_stretch"] = self.contacts.stretch.copy()
         if self.monolayer is not None:
             state["stopped_at"] = np.array([self.monolayer.stopped_at], dtype=np.int64)
+        if self.far_field_every:
+            state["far_field_positions"] = self.far_field_positions.copy()
         return {**state, **self.integrator.get_state()}
 
     def set_state(self, state):
@@ -231,6 +239,9 @@ class Realisation:
         if self.monolayer is not None:
             self.monolayer.stopped_at = int(state["stopped_at"][0])
         self.integrator.set_state(state)
+        if self.far_field_every and self.step % self.far_field_every:
+            self._hold_far_field(np.array(state["far_field_positions"], dtype=float),
+                                 self.step - self.step % self.far_field_every)
 
     def advance(self, n):
         """The next n samples (dict of arrays with leading axis n); steps n times."""
@@ -303,6 +314,8 @@ class Realisation:
         if self.monolayer is not None and self.monolayer.stops(k, started.deepest, self.task.task_id):
             self.step += 1
             return self.monolayer.stopped_sample(self.sample_fields(), t0, strain, rate)
+        if self.far_field_every and k % self.far_field_every == 0:
+            self._hold_far_field(pos, k)
         at = self.model.at(pos, strain)
         n = self.n_particles
         e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
@@ -336,6 +349,12 @@ class Realisation:
             sample["stresslets"] = s_h
         self.step += 1
         return sample
+
+    def _hold_far_field(self, positions, k):
+        """Evaluate the model with the far field of the start ``positions`` of step k until
+        the next refresh (hydrodynamics.far_field_refresh, Dratler & Schowalter 1996)."""
+        self.far_field_positions = positions.copy()
+        self.model.hold_far_field(positions, self.protocol.strain(k * self.dt))
 
     def _pair_forces(self, at):
         """The pair forces of the force law on the evaluation's pairs: (forces (N, 6), virial
