@@ -108,7 +108,8 @@ class RandomFiniteDifference:
     F = C z, m = R_FU^-1 F, eps = `rfd_length`, both to first order in
     Delta R = R(x + eps m) - R (docs/numerics.md)."""
 
-    def brownian(self, evaluation, z, kT, dt, near):
+    def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
+                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
         solver = evaluation.solver
         zero = np.zeros((evaluation.n_particles, 5))
         m = solver.brownian_velocities(z)
@@ -128,7 +129,8 @@ class Midpoint:
     kT div R_FU^-1 to O(dt)), the Brownian stresslets -[(R_SU R_FU^-1)(x*) -
     (R_SU R_FU^-1)(x)] F_B (Banchio & Brady 2003; docs/numerics.md)."""
 
-    def brownian(self, evaluation, z, kT, dt, near):
+    def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
+                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
         solver = evaluation.solver
         zero = np.zeros((evaluation.n_particles, 5))
         unit_force = solver.brownian_forces(z)
@@ -143,7 +145,8 @@ class Midpoint:
                              found)
 
 
-def squeeze_fraction(mobility, gap, radius_i, radius_j):
+def squeeze_fraction(mobility: np.ndarray, gap: np.ndarray, radius_i: np.ndarray,
+                     radius_j: np.ndarray) -> np.ndarray:
     """kappa = G h |d(f.R_2B f)/dh| / |f|^4 (|f|^2 = 2) of pairs with relative mobility
     G = f.R_FU^-1.f (`unit_pair_forces` f) at gap h: the derivative of the pair's relative
     diffusivity along its own mobility response over D_rr/h (docs/numerics.md), from the
@@ -153,7 +156,7 @@ def squeeze_fraction(mobility, gap, radius_i, radius_j):
     return mobility * squeeze_slope(gap, radius_i, radius_j) / 4.0
 
 
-def unit_pair_forces(i, j, e, n):
+def unit_pair_forces(i: np.ndarray, j: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
     """Force sets (P, N, 6): for each pair p a unit force e_p on j_p and -e_p on i_p (its
     line of centres), no torques."""
     forces = np.zeros((len(i), n, 6))

@@ -122,10 +122,10 @@ class EulerMaruyama:
     def __init__(self, motion: Motion):
         self.motion = motion
 
-    def disturbance_rate(self, t0, t1):
+    def disturbance_rate(self, t0: float, t1: float) -> float:
         return self.motion.protocol.mean_rate(t0, t1)
 
-    def move(self, step):
+    def move(self, step: Step) -> tuple[np.ndarray, Collisions]:
         motion = self.motion
         pos, drift, noise, dt = step.positions, step.velocity, step.noise, motion.dt
         strain, strain1 = motion.protocol.strain(step.k * dt), motion.protocol.strain((step.k + 1) * dt)
@@ -145,13 +145,13 @@ class EulerMaruyama:
                                        mobility=mobility)
         return moved, Collisions.joined(first, second)
 
-    def state_fields(self):
+    def state_fields(self) -> dict[str, tuple[tuple[int, ...], str]]:
         return {}
 
-    def get_state(self):
+    def get_state(self) -> dict[str, np.ndarray]:
         return {}
 
-    def set_state(self, state):
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
         pass
 
 
@@ -192,17 +192,17 @@ class AdamsBashforth4:
         self.history_velocities = np.zeros((AB4_HISTORY, motion.n_particles, 3))
         self.history_heights = np.zeros((AB4_HISTORY, motion.n_particles))
 
-    def disturbance_rate(self, t0, t1):
+    def disturbance_rate(self, t0: float, t1: float) -> float:
         return self.motion.protocol.rate(t0)
 
-    def state_fields(self):
+    def state_fields(self) -> dict[str, tuple[tuple[int, ...], str]]:
         return {"ab4_velocities": (self.history_velocities.shape, "f8"),
                 "ab4_heights": (self.history_heights.shape, "f8")}
 
-    def get_state(self):
+    def get_state(self) -> dict[str, np.ndarray]:
         return {"ab4_velocities": self.history_velocities.copy(), "ab4_heights": self.history_heights.copy()}
 
-    def set_state(self, state):
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
         self.history_velocities = np.array(state["ab4_velocities"], dtype=float)
         self.history_heights = np.array(state["ab4_heights"], dtype=float)
 
@@ -243,7 +243,7 @@ class AdamsBashforth4:
             total += weight * self._g(self.history_velocities[back], t, dy)
         return (dt / 24.0) * total
 
-    def move(self, step):
+    def move(self, step: Step) -> tuple[np.ndarray, Collisions]:
         motion, pos = self.motion, step.positions
         dt = motion.dt
         strain, strain1 = motion.protocol.strain(step.k * dt), motion.protocol.strain((step.k + 1) * dt)

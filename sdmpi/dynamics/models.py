@@ -124,11 +124,13 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         return self.solver.mobility_forms(unit_pair_forces(i, j, e, self.n_particles))
 
     @property
-    def radii(self):
+    def radii(self) -> np.ndarray:
+        """(N,) sphere radii."""
         return self.model.radii
 
     @property
-    def min_gap(self):
+    def min_gap(self) -> float:
+        """hydrodynamics.min_gap (mean radii)."""
         return self.model.min_gap
 
     def brownian(self, rng, kT, dt):
@@ -138,7 +140,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         # the iterative backend's Brownian forces (Lanczos) need a positive definite M_inf
         return self.model._guarded(self.brownian_terms, z, kT, dt, z_near)
 
-    def brownian_terms(self, z, kT, dt, z_near=None):
+    def brownian_terms(self, z: np.ndarray, kT: float, dt: float, z_near: np.ndarray | None = None) -> BrownianTerms:
         """The step's `BrownianTerms` by the model's drift scheme (`drift`) for the standard
         normal noise z (the solver's noise_shape); z_near: the independent noise z' of the
         near-contact correction (`drift.near_contact_velocities`; None: no correction)."""
@@ -147,14 +149,14 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
 
         return self.model.drift.brownian(self, z, kT, dt, near)
 
-    def displaced(self, positions):
+    def displaced(self, positions: np.ndarray) -> tuple[Any, int]:
         """The solver at ``positions`` with this evaluation's pair sets and strain, overlaps
         first separated (counted); its solves join `stats`. Returns (solver, overlaps)."""
         solver, found = self.model.displaced(self, positions, separate=True)
         self._solvers.append(solver)
         return solver, found
 
-    def resistance_change(self, positions, vector):
+    def resistance_change(self, positions: np.ndarray, vector: np.ndarray) -> np.ndarray:
         """[R(positions) - R] v (N, 11) about this configuration, to first order
         (`hydro.resistance.resistance_change`)."""
         return resistance_change(self.resistance, positions, vector, self.min_gap)
@@ -218,7 +220,7 @@ class ResistanceModel(HydrodynamicModel):
         return self._guarded(assemble, self.backend, positions, self.radii, self.box, strain, plan=plan,
                              comm=self.comm, **self._hydro, **far)
 
-    def hold_far_field(self, positions, strain):
+    def hold_far_field(self, positions: np.ndarray, strain: float) -> None:
         """From now on, evaluate with the far-field mobility of (positions, strain) and the
         lubrication of each evaluation's own configuration (hydrodynamics.far_field_refresh;
         the direct backends, whose resistance holds the far field's blocks). The blocks are
