@@ -23,7 +23,7 @@ import numpy as np
 
 from sdmpi.config.loader import parse_job
 from sdmpi.config.tasks import enumerate_tasks
-from sdmpi.dynamics.models import MODELS
+from sdmpi.registry import HYDRODYNAMIC_MODELS
 from sdmpi.dynamics.realisation import KT_REDUCED, Realisation
 
 JOB = """
@@ -60,7 +60,7 @@ def measure(model, n, phi, dt, min_gap, steps, blocks=10):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", choices=MODELS, default="stokesian")
+    parser.add_argument("--model", choices=HYDRODYNAMIC_MODELS.names(), default="stokesian")
     parser.add_argument("--n", type=int, default=27)
     parser.add_argument("--phi", type=float, default=0.45)
     parser.add_argument("--steps", type=int, default=3000)

@@ -2,7 +2,7 @@
 
 Near contact a pair's gap h follows a squared Bessel process, dh = c dt + sqrt(2 c h) dW
 with D_rr = kT G = c h (G its relative mobility along the line of centres,
-`sdmpi.dynamics.models`), whose exact step from h0 is h1 = (c dt / 2) X with X a
+`sdmpi.dynamics.drift`), whose exact step from h0 is h1 = (c dt / 2) X with X a
 non-central chi-square of 2 degrees of freedom and non-centrality 2 h0 / (c dt). Over one
 run at rest (no shear; the setting of `bench/near_contact_structure.py`) this counts the
 pairs the step leaves closer than the floor hydrodynamics.min_gap (the samples'
@@ -28,7 +28,7 @@ from scipy.stats import ncx2
 
 from near_contact_structure import job_at_rest, use_kappa_one
 from sdmpi.config.tasks import enumerate_tasks
-from sdmpi.dynamics import models
+from sdmpi.dynamics import drift
 from sdmpi.dynamics.realisation import Realisation
 
 
@@ -36,7 +36,7 @@ def exact_floor_probability(evaluation, kT, dt, min_gap):
     """Sum over the pairs of evaluation closer than NEAR_CONTACT_GAP of the exact squared
     Bessel probability that one step of dt leaves the pair below min_gap."""
     pairs = evaluation.pairs
-    close = pairs.gap < models.NEAR_CONTACT_GAP
+    close = pairs.gap < drift.NEAR_CONTACT_GAP
     if not close.any():
         return 0.0
     i, j, dx = pairs.i[close], pairs.j[close], pairs.dx[close]

@@ -15,7 +15,7 @@ a block).
         [--ewald-tolerance TOL]
 
 MODEL is a hydrodynamics.model (stokesian, far-field, free-draining); --uncorrected switches
-the near-contact correction of `sdmpi.dynamics.models` off, --kappa-one gives it the
+the near-contact correction of `sdmpi.dynamics.drift` off, --kappa-one gives it the
 isolated pair's kappa = 1 for every pair instead of the pair's own (both for comparison); --collisions
 chooses the overlap correction's rule (`sdmpi.dynamics.collisions`; absent: the model's);
 --symmetric moves only the two spheres of a pair in contact, by half the separation change
@@ -35,12 +35,13 @@ import numpy as np
 
 from sdmpi.analysis.trajectories import ideal_pair_counts, pair_counts
 from sdmpi.config.loader import parse_job
-from sdmpi.dynamics import models
+from sdmpi.dynamics import drift
 from sdmpi.dynamics.collisions import RULES, default_rule
 from sdmpi.dynamics.initial import _mc_sweeps, hard_sphere_fluid
 from sdmpi.dynamics.realisation import Realisation
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
+from sdmpi.registry import HYDRODYNAMIC_MODELS
 from sdmpi.hydro.geometry import Lattice
 
 #: shells of surface gap (in a) where g is counted; after them, one more column: the first
@@ -116,7 +117,7 @@ def job_at_rest(model, n, phi, steps, dt, collisions=None, ewald_tolerance=None,
 def use_kappa_one():
     """The near-contact correction with kappa = 1 for every pair (the isolated pair at
     contact) in this process and the worker processes it forks."""
-    models.squeeze_fraction = lambda mobility, gap, radius_i, radius_j: np.ones(len(gap))
+    drift.squeeze_fraction = lambda mobility, gap, radius_i, radius_j: np.ones(len(gap))
 
 
 def dynamics(model, n, phi, steps, eta_every, dt, collisions, ewald_tolerance=None, seed=11):
@@ -144,7 +145,7 @@ def summary(samples, blocks=None):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("model", choices=models.MODELS)
+    parser.add_argument("model", choices=HYDRODYNAMIC_MODELS.names())
     parser.add_argument("--n", type=int, default=27)
     parser.add_argument("--phi", type=float, default=0.45)
     parser.add_argument("--steps", type=int, default=10000)
@@ -163,7 +164,7 @@ def main():
     parser.add_argument("--out", default=str(Path(__file__).with_name("near_contact_structure.json")))
     args = parser.parse_args()
     if args.uncorrected:
-        models.NEAR_CONTACT_GAP = 0.0
+        drift.NEAR_CONTACT_GAP = 0.0
     if args.kappa_one:
         use_kappa_one()
     if args.symmetric:

@@ -23,6 +23,7 @@ import numpy as np
 
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics.initial import hard_sphere_fluid
+from sdmpi.dynamics.drift import rfd_length
 from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.realisation import KT_REDUCED
 
@@ -34,7 +35,7 @@ def exact_difference(at, z, kT):
     n, zero = at.n_particles, np.zeros((at.n_particles, 5))
     unit_force = at.solver.brownian_forces(z)
     m = at.solver.velocities(unit_force, zero)
-    step = at.model.rfd_step * 6 * math.pi
+    step = rfd_length(at.min_gap)
     moved, _ = at.model.displaced(at, at.positions + step * m[:, :3], separate=False)
     m_moved = moved.velocities(unit_force, zero)
     return ((kT / step) * (m_moved - m),

@@ -1,16 +1,18 @@
-"""The registries of sdmpi's extension points: solver backends and hydrodynamic models.
+"""The registries of sdmpi's extension points: solver backends, hydrodynamic models, drift
+schemes and integrators.
 
 A registry maps a name, as a job file spells it (``solver.backend``,
-``hydrodynamics.model``), to an entry: a frozen spec that declares what the job loader,
+``hydrodynamics.model``, ``brownian.scheme``, ``integration.scheme``), to an entry: a frozen spec that declares what the job loader,
 the checks, the resource estimates, the command line and the key reference need to know
 of an implementation, and where the implementation is (the class itself, or
 ``"module:Class"``, imported on first use). Every list of choices users see is read from
 here. This module uses only the standard library, so that `sdmpi.config` derives its
-choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`
-and `sdmpi.dynamics.models` build the implementations it names.
+choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`,
+`sdmpi.dynamics.models` and `sdmpi.dynamics.realisation` build the implementations it names.
 
 Adding an implementation: docs/extending.md. In short, one module with the class
-(`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`) and one
+(`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`,
+`sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`) and one
 ``register``: an entry below for those shipped with sdmpi, or a call of
 ``SOLVER_BACKENDS.register(BackendSpec(...))`` in the user's own module before the job is
 loaded.
@@ -37,7 +39,22 @@ def _load(implementation: Any) -> Any:
 
 
 @dataclass(frozen=True)
-class BackendSpec:
+class Spec:
+    """An implementation of an extension point, as sdmpi's job checks know it: its
+    ``name`` (the job key's value), ``summary`` (one phrase for the key reference and
+    ``sdmpi validate``) and ``implementation`` (the class, or "module:Class")."""
+
+    name: str
+    summary: str
+    implementation: Any
+
+    def load(self) -> Any:
+        """The implementation class (imported on first use)."""
+        return _load(self.implementation)
+
+
+@dataclass(frozen=True)
+class BackendSpec(Spec):
     """A solver backend of the resistance problem, as sdmpi's job checks know it.
 
     Attributes:
@@ -46,8 +63,8 @@ class BackendSpec:
         implementation: a `sdmpi.hydro.backend.SolverBackend` class, or "module:Class".
         matrix_free: solves without forming R, iteratively, from a
             `sdmpi.hydro.resistance.SplitResistance` (solver.far_field applies); such a
-            backend gets the midpoint drift scheme, refuses rfd (its tolerance would swamp
-            the random finite difference) and no near-contact correction.
+            backend gets the drift schemes that suit it (`DriftSpec.matrix_free`) and no
+            near-contact correction.
         several_ranks: a task may solve on several ranks (ensemble.ranks_per_task > 1).
         needs_petsc: needs petsc4py (``sdmpi run`` refuses the job where it is missing).
         dense_matrices: how many (11 N)^2 matrices of doubles a task holds at once (the
@@ -58,19 +75,12 @@ class BackendSpec:
             same, for the part each rank holds a share of).
     """
 
-    name: str
-    summary: str
-    implementation: Any
     matrix_free: bool = False
     several_ranks: bool = False
     needs_petsc: bool = False
     dense_matrices: int = 0
     bytes_per_particle: float = 0.0
     spread_bytes_per_particle: float = 0.0
-
-    def load(self) -> Any:
-        """The implementation class (imported on first use)."""
-        return _load(self.implementation)
 
     def memory_per_rank(self, n_particles: int, ranks: int) -> float:
         """Bytes per rank of the solver's data for N spheres solved on ``ranks`` ranks."""
@@ -88,7 +98,7 @@ class BackendSpec:
 
 
 @dataclass(frozen=True)
-class ModelSpec:
+class ModelSpec(Spec):
     """A hydrodynamic model, as sdmpi's job checks know it.
 
     Attributes:
@@ -103,18 +113,46 @@ class ModelSpec:
             no solver memory, one rank per task, no drift scheme).
     """
 
-    name: str
-    summary: str
-    implementation: Any
     lubrication: bool = False
     solves: bool = True
 
-    def load(self) -> Any:
-        """The implementation class (imported on first use)."""
-        return _load(self.implementation)
+
+@dataclass(frozen=True)
+class DriftSpec(Spec):
+    """A drift scheme of the resistance models (brownian.scheme), as sdmpi's job checks know it.
+
+    Attributes:
+        name: its brownian.scheme value.
+        summary: what it is, one phrase (the key reference).
+        implementation: a `sdmpi.dynamics.drift.DriftScheme` class (built without
+            arguments), or "module:Class".
+        matrix_free: it suits the matrix-free (iterative) backends (`BackendSpec.matrix_free`);
+            every scheme suits the direct ones.
+        why_not: why it does not suit the matrix-free backends (the checks' message).
+    """
+
+    matrix_free: bool = True
+    why_not: str = ""
 
 
-E = TypeVar("E", BackendSpec, ModelSpec)
+@dataclass(frozen=True)
+class IntegratorSpec(Spec):
+    """A time integrator (integration.scheme), as sdmpi's job checks know it.
+
+    Attributes:
+        name: its integration.scheme value.
+        summary: what it is, one phrase (the key reference).
+        implementation: a `sdmpi.dynamics.integrators.Integrator` class, or "module:Class".
+        brownian: it integrates Brownian motion (False: brownian.enabled = true is refused).
+        contacts: it integrates frictional contacts (interparticle.kind = "frictional",
+            whose tangential springs are state advanced by each step's velocities).
+    """
+
+    brownian: bool = True
+    contacts: bool = True
+
+
+E = TypeVar("E", bound=Spec)
 
 
 class Registry(Generic[E]):
@@ -225,3 +263,41 @@ HYDRODYNAMIC_MODELS.register(ModelSpec(
 HYDRODYNAMIC_MODELS.register(ModelSpec(
     "free-draining", "none (Stokes drag of isolated spheres)", "sdmpi.dynamics.models:FreeDrainingModel",
     solves=False))
+
+
+# --------------------------------------------------------------------------- drift schemes
+
+#: brownian.scheme absent: the first registered scheme that suits the backend
+DRIFT_SCHEMES: Registry[DriftSpec] = Registry("brownian.scheme")
+DRIFT_SCHEMES.register(DriftSpec(
+    "rfd", "random finite difference at every step (exact in the mean at every gap)",
+    "sdmpi.dynamics.drift:RandomFiniteDifference", matrix_free=False,
+    why_not="the random finite difference takes a difference over ~1e-6 a, which an iterative "
+            "solver's tolerance would swamp"))
+DRIFT_SCHEMES.register(DriftSpec(
+    "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt)", "sdmpi.dynamics.drift:Midpoint"))
+
+
+def drift_schemes_for(backend: str) -> tuple[str, ...]:
+    """The brownian.scheme values that suit the solver backend ``backend`` (a registered
+    name), the default first."""
+    matrix_free = SOLVER_BACKENDS[backend].matrix_free
+    return DRIFT_SCHEMES.names(lambda scheme: scheme.matrix_free or not matrix_free)
+
+
+def default_drift_scheme(backend: str) -> str:
+    """The drift scheme a backend gets when brownian.scheme is absent: the first registered
+    that suits it (rfd on the direct backends, midpoint on the matrix-free ones)."""
+    return drift_schemes_for(backend)[0]
+
+
+# --------------------------------------------------------------------------- integrators
+
+INTEGRATORS: Registry[IntegratorSpec] = Registry("integration.scheme")
+INTEGRATORS.register(IntegratorSpec(
+    "euler-maruyama", "explicit Euler-Maruyama, the hydrodynamics evaluated once per step",
+    "sdmpi.dynamics.integrators:EulerMaruyama"))
+INTEGRATORS.register(IntegratorSpec(
+    "adams-bashforth-4", "fourth-order Adams-Bashforth (non-Brownian jobs; Dratler & Schowalter "
+    "1996), started by three classical Runge-Kutta steps", "sdmpi.dynamics.integrators:AdamsBashforth4",
+    brownian=False, contacts=False))

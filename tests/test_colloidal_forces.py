@@ -3,6 +3,7 @@
 shifted-force truncation at the lubrication cut-off; job keys and cross-key checks; and
 two-sphere trajectories of sdmpi's stepping against an independent ODE integration."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ from scipy.integrate import solve_ivp
 from sdmpi.config import JobError, enumerate_tasks
 from sdmpi.dynamics.checks import parse_job
 from sdmpi.dynamics import Realisation
+from sdmpi.dynamics.integrators import EulerMaruyama
 from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.forces import (FORCE_UNIT, Combined, DoubleLayer, Repulsion, VanDerWaals,
                                    force_law, pair_forces)
@@ -195,6 +197,7 @@ def sd_gaps(inter, h0, dt, t_end):
     real.n_particles, real.radii = 2, np.ones(2)
     real.box, real.volume = np.full(3, BOX), BOX ** 3
     real.model = hydrodynamic_model(job, real.radii, real.box)
+    real.integrator = EulerMaruyama(dataclasses.replace(real.integrator.motion, n_particles=2, box=real.box))
     c = BOX / 2
     real.positions = np.array([[c, c, c - 1 - h0 / 2], [c, c, c + 1 + h0 / 2]])
     gaps = [h0]

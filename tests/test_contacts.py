@@ -4,6 +4,7 @@ torques, the virial, Coulomb's limit, the history (tangent, sign, reset, overflo
 sliding velocity, the job keys, a two-sphere trajectory against an independent
 integration, and checkpoint/resume bit for bit (in process, and under mpirun -n 2)."""
 
+import dataclasses
 import importlib.util
 import math
 import shutil
@@ -22,6 +23,7 @@ from sdmpi.dynamics.models import hydrodynamic_model
 from sdmpi.dynamics.contacts import (ContactLaw, CriticalLoadRepulsion, FrictionalContacts,
                                      contact_model, sliding_mobility, sliding_velocity, tangent)
 from sdmpi.dynamics.forces import FORCE_UNIT, force_law
+from sdmpi.dynamics.integrators import EulerMaruyama
 from sdmpi.hydro import solve_mobility
 from sdmpi.hydro.basis import to_five
 from sdmpi.hydro.lubrication import close_pairs
@@ -264,6 +266,7 @@ def sd_contact(dt, t_end):
     real.n_particles, real.radii = 2, np.ones(2)
     real.box, real.volume = np.full(3, BOX), BOX ** 3
     real.model = hydrodynamic_model(job, real.radii, real.box)
+    real.integrator = EulerMaruyama(dataclasses.replace(real.integrator.motion, n_particles=2, box=real.box))
     real.contacts = FrictionalContacts(real.contacts.law, 2, 4)
     real.contacts.partners[0, 0] = 1
     real.contacts.stretch[0, 0] = [XI0, 0.0, 0.0]

@@ -14,7 +14,9 @@ import pytest
 import sdmpi
 from sdmpi.cli import main
 from sdmpi.config import JobError, parse_job, resources
-from sdmpi.registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, BackendSpec, ModelSpec
+from sdmpi.dynamics.drift import BrownianTerms
+from sdmpi.registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, BackendSpec,
+                            DriftSpec, IntegratorSpec, ModelSpec)
 
 from .runs import child_env, fresh_lubrication_tables
 
@@ -112,3 +114,46 @@ def test_unregistered_names_are_refused():
         parse_job('[solver]\nbackend = "test-gpu"\n')
     with pytest.raises(ValueError, match="registered already"):
         SOLVER_BACKENDS.register(BackendSpec("dense", "again", "nowhere:Solver"))
+
+
+class NoDrift:
+    """Brownian velocities without drift or Brownian stress (the example of
+    docs/extending.md)."""
+
+    def brownian(self, evaluation, z, kT, dt, near):
+        m = evaluation.solver.brownian_velocities(z)
+        return BrownianTerms(np.sqrt(2 * kT / dt) * m + near(m), np.zeros((evaluation.n_particles, 5)))
+
+
+@pytest.fixture
+def no_drift():
+    """NoDrift registered as brownian.scheme = "no-drift" (direct backends only), and an
+    integrator of deterministic motion, for one test."""
+    drift = DRIFT_SCHEMES.register(DriftSpec("no-drift", "no drift", NoDrift, matrix_free=False,
+                                             why_not="a test of the direct backends"))
+    integrator = INTEGRATORS.register(IntegratorSpec("test-deterministic", "a test integrator", "nowhere:Cls",
+                                                     brownian=False))
+    yield drift
+    DRIFT_SCHEMES.unregister(drift.name)
+    INTEGRATORS.unregister(integrator.name)
+
+
+def test_registered_drift_scheme_and_integrator_are_choices_and_checked(no_drift):
+    """A registered drift scheme runs a Brownian job (its zero Brownian stress is in the
+    samples; the same noise as rfd, so the first step's start is the same) and is refused
+    on a matrix-free backend with its own reason; a registered integrator's spec drives
+    the Brownian check without importing it."""
+    sets = ["system.n_particles=4", "ensemble.realisations=1"]
+    fresh_lubrication_tables()
+    ours = sdmpi.Realisation(sdmpi.load_job(DEMO, [*sets, 'brownian.scheme="no-drift"']), 0).advance(3)
+    fresh_lubrication_tables()
+    rfd = sdmpi.Realisation(sdmpi.load_job(DEMO, [*sets, 'brownian.scheme="rfd"']), 0).advance(3)
+    assert not np.asarray(ours["stress_brownian"]).any() and np.asarray(rfd["stress_brownian"]).any()
+    assert np.array_equal(ours["stress_hydrodynamic"][0], rfd["stress_hydrodynamic"][0])
+    assert not np.array_equal(ours["stress_hydrodynamic"][1:], rfd["stress_hydrodynamic"][1:])
+    with pytest.raises(JobError, match=r'brownian.scheme = "no-drift": a test of the direct backends; '
+                                       r'allowed: "midpoint" \(or absent\) with solver.backend = "petsc-krylov"'):
+        parse_job('[solver]\nbackend = "petsc-krylov"\n[brownian]\nscheme = "no-drift"\n')
+    with pytest.raises(JobError, match=r'integration.scheme = "test-deterministic": .* allowed: '
+                                       r'"euler-maruyama", or brownian.enabled = false'):
+        parse_job('[integration]\nscheme = "test-deterministic"\n')

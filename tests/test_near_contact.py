@@ -8,7 +8,8 @@ import pytest
 from scipy import stats
 
 from sdmpi.dynamics.collisions import SEPARATION, remove_overlaps, separate
-from sdmpi.dynamics.models import ResistanceModel, squeeze_fraction, unit_pair_forces
+from sdmpi.dynamics.drift import near_contact_velocities, squeeze_fraction, unit_pair_forces
+from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.dynamics.realisation import KT_REDUCED
 from sdmpi.hydro.geometry import Lattice
 from sdmpi.hydro.lubrication import close_pairs
@@ -78,7 +79,7 @@ def test_near_contact_correction_has_zero_mean():
     for z in basis:
         m = at.solver.velocities(at.solver.brownian_forces(z), np.zeros((2, 5)))
         for z_near in basis:
-            v = at._near_contact(m, z_near, KT_REDUCED, 5e-4)
+            v = near_contact_velocities(at, m, z_near, KT_REDUCED, 5e-4)
             mean += v / len(basis) ** 2
             scale = max(scale, np.abs(v).max())
     assert scale > 0
@@ -96,7 +97,7 @@ def test_near_contact_correction_is_pair_forces_through_the_mobility():
     rng = np.random.default_rng(5)
     z, z_near = rng.standard_normal((2, 3, 6))
     m = at.solver.velocities(at.solver.brownian_forces(z), np.zeros((3, 5)))
-    v = at._near_contact(m, z_near, KT_REDUCED, 5e-4)
+    v = near_contact_velocities(at, m, z_near, KT_REDUCED, 5e-4)
     r_fu = at.resistance.blocks()[0]
     force = (r_fu @ v.ravel()).reshape(3, 6)
     e01, e02 = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from sdmpi.dynamics.drift import rfd_length
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.dynamics.realisation import KT_REDUCED
 from sdmpi.hydro.farfield import far_field_mobility, far_field_product, plan_far_field
@@ -118,7 +119,7 @@ def test_rfd_drift_matches_the_difference_of_two_full_evaluations():
     at = model.at(CONFIG, STRAIN)
     n, zero = len(CONFIG), np.zeros((len(CONFIG), 5))
     rng = np.random.default_rng(4)
-    step = model.rfd_step * 6 * math.pi
+    step = rfd_length(model.min_gap)
     for _ in range(8):
         z = rng.standard_normal((n, 6))
         unit_force = at.solver.brownian_forces(z)

@@ -13,7 +13,8 @@ import dataclasses
 import math
 from collections.abc import Callable
 
-from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, several_rank_choices
+from ..registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, drift_schemes_for,
+                        several_rank_choices)
 from .problems import Problem
 from .schema import START_PHI_LIMIT, TWO_PI, Job, quoted
 
@@ -308,19 +309,55 @@ def _model(job):
 
 
 def scheme_problems(job, backend: str) -> list[Problem]:
-    """brownian.scheme = "rfd" on a matrix-free (iterative) backend: the random finite
-    difference takes a difference over ~1e-6 a, which an iterative solver's tolerance would
-    swamp. backend: the one the job runs on (the loader passes solver.backend, whose rule
-    "auto" is judged once resolved; `sdmpi run` and `sdmpi validate` pass what it stands
-    for, `sdmpi.registry.backend_for`)."""
-    if job.brownian.scheme != "rfd" or not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves or \
-            backend not in SOLVER_BACKENDS or not SOLVER_BACKENDS[backend].matrix_free:
+    """brownian.scheme must suit the backend (`sdmpi.registry.DriftSpec.matrix_free`): the
+    rfd difference over ~1e-6 a would be swamped by an iterative solver's tolerance.
+    backend: the one the job runs on (the loader passes solver.backend, whose rule "auto" is
+    judged once resolved; `sdmpi run` and `sdmpi validate` pass what it stands for,
+    `sdmpi.registry.backend_for`)."""
+    scheme = job.brownian.scheme
+    if scheme is None or not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves or \
+            backend not in SOLVER_BACKENDS or scheme in drift_schemes_for(backend):
         return []
     named = job.solver.backend
     where = "" if named == backend else f' (what "{named}" stands for with {job.system.n_particles} particles)'
-    return [Problem("brownian.scheme", "the random finite difference takes a difference over "
-                    "~1e-6 a, which an iterative solver's tolerance would swamp", "rfd",
-                    allowed=f'"midpoint" (or absent) with solver.backend = "{backend}"{where}')]
+    return [Problem("brownian.scheme", DRIFT_SCHEMES[scheme].why_not, scheme,
+                    allowed=f'{quoted(drift_schemes_for(backend))} (or absent) with solver.backend = "{backend}"{where}')]
+
+
+def _far_field_refresh(job):
+    """A far field held between refreshes needs a model with one on a backend that forms
+    it, and no Brownian motion (whose drift is the divergence of the configuration's own
+    mobility)."""
+    hyd = job.hydrodynamics
+    if hyd.far_field_refresh == 0.0:
+        return []
+    direct = SOLVER_BACKENDS.names(lambda b: not b.matrix_free)
+    for broken, why, allowed in (
+            (job.brownian.enabled, "the Brownian drift needs the mobility of the step's own configuration",
+             "0, or brownian.enabled = false"),
+            (not HYDRODYNAMIC_MODELS[hyd.model].solves, f"the {hyd.model} model has no far field",
+             f"0 with hydrodynamics.model = \"{hyd.model}\""),
+            (job.solver.backend not in direct, "the far field is held only by the backends that form it",
+             f"0, or solver.backend = {quoted(direct)}")):
+        if broken:
+            return [Problem("hydrodynamics.far_field_refresh", why, hyd.far_field_refresh, allowed=allowed)]
+    return []
+
+
+def _integrator(job):
+    """What the integrator supports (`sdmpi.registry.IntegratorSpec`): Brownian motion,
+    frictional contacts."""
+    spec, problems = INTEGRATORS[job.integration.scheme], []
+    able = INTEGRATORS.names(lambda i: i.brownian)
+    if job.brownian.enabled and not spec.brownian:
+        problems.append(Problem("integration.scheme", "integrates deterministic motion only (a smooth "
+                                "velocity), not Brownian motion", spec.name,
+                                allowed=f"{quoted(able)}, or brownian.enabled = false"))
+    if job.interparticle.kind == "frictional" and not spec.contacts:
+        problems.append(Problem("integration.scheme", "does not integrate the frictional contacts' "
+                                "tangential springs (non-smooth in time)", spec.name,
+                                allowed=quoted(INTEGRATORS.names(lambda i: i.contacts))))
+    return problems
 
 
 def _maxwell_forces(job):
@@ -365,4 +402,7 @@ CROSS_CHECKS: tuple[CrossCheck, ...] = (
     (("interparticle.kind", "interparticle.repulsion_length", "brownian.enabled",
       "hydrodynamics.lubrication_cutoff"), _frictional),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
+    (("integration.scheme", "brownian.enabled", "interparticle.kind"), _integrator),
+    (("hydrodynamics.far_field_refresh", "hydrodynamics.model", "brownian.enabled", "solver.backend"),
+     _far_field_refresh),
 )

@@ -23,7 +23,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from ..registry import HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, Registry, several_rank_choices
+from ..registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, Registry,
+                        default_drift_scheme, several_rank_choices)
 
 TWO_PI = 2.0 * math.pi
 #: volume fractions of the initial configurations: below the lattice limit a lattice
@@ -381,12 +382,9 @@ class Brownian:
 
     enabled: bool = key(True, "bool", "include Brownian motion")
     scheme: str | None = key(None, "str", "how the Brownian drift kT div R_FU^-1 and the Brownian "
-                             "stresslets are estimated: rfd = random finite difference at every "
-                             "step (exact in the mean at every gap), midpoint = Fixman's midpoint "
-                             "(too small a drift at gaps below ~4 dt); absent: rfd on the direct "
-                             "backends, midpoint on the matrix-free ones ("
-                             + ", ".join(SOLVER_BACKENDS.names(lambda b: b.matrix_free)) + ") (see docs/physics.md)",
-                             allowed=Choice(("rfd", "midpoint")), optional=True)
+                             "stresslets are estimated: " + DRIFT_SCHEMES.summaries() + "; absent: "
+                             + "; ".join(f"{default_drift_scheme(b.name)} on {b.name}" for b in SOLVER_BACKENDS)
+                             + " (see docs/numerics.md)", allowed=Choice(DRIFT_SCHEMES), optional=True)
 
 
 @dataclass(frozen=True)
@@ -438,6 +436,8 @@ class Integration:
     discard_steps: int | None = key(1000, "int", "leading steps left out of averages; "
                                     "< n_steps", allowed=Range(0, None),
                                     only_if=STEADY_OR_NONE)
+    scheme: str = key("euler-maruyama", "str", "time integrator: " + INTEGRATORS.summaries()
+                      + " (see docs/numerics.md)", allowed=Choice(INTEGRATORS))
 
 
 @dataclass(frozen=True)
@@ -576,6 +576,12 @@ class Hydrodynamics:
                                  + ", ".join(HYDRODYNAMIC_MODELS.names(lambda m: m.lubrication))
                                  + "), reflect for the others (see docs/physics.md)",
                                  allowed=Choice(("separate", "reflect")), optional=True)
+    far_field_refresh: float = key(0.0, "float", "time between recomputations of the far-field "
+                                   "mobility M_inf (lubrication every step): the far field of the "
+                                   "last refresh is used in between (Dratler & Schowalter 1996: "
+                                   "0.1); rounded to whole time steps; 0: every step; "
+                                   "non-Brownian jobs on a direct backend only", unit="time unit",
+                                   allowed=Range(0.0, None))
 
 
 @dataclass(frozen=True)

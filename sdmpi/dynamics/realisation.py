@@ -5,9 +5,10 @@ Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 
     dx = [U_inf(x) + R_FU^-1 (F_P + R_FE e_inf) + kT div R_FU^-1] dt
          + sqrt(2 kT dt) R_FU^-1/2 dW,
 
-integrated explicitly (Euler-Maruyama) with the hydrodynamics of a model
-(`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated once per step
-at the step's start,
+stepped by the integrator of integration.scheme (`integrators`, registered in
+`sdmpi.registry.INTEGRATORS`) with the hydrodynamics of a model
+(`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated at the step's
+start x_k; by default explicitly (Euler-Maruyama),
 
     x_{k+1} = x_k + (gamma(t_{k+1}) - gamma(t_k)) y e_x + dt U(x_k),
 
@@ -19,7 +20,7 @@ the step's own strain (with the start's rate gamma_dot(t_k) in the disturbance, 
 driven like the rate of A/(2(1 - A)) steps later). A Brownian force F_B = sqrt(2 kT/dt) C z
 with R_FU = C C^T and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation),
 and the drift kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et
-al. eq. 16) estimated by the model's drift scheme (`models`: a random finite difference
+al. eq. 16) estimated by the model's drift scheme (`drift`: a random finite difference
 along the noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys.
 118, 10323 (2003)).
 
@@ -55,14 +56,16 @@ from ..config.stresses import CONTRIBUTIONS
 from ..hydro.basis import BASIS, to_five
 from ..hydro.farfield import FarFieldIndefinite
 from ..hydro.geometry import Lattice
+from ..registry import INTEGRATORS
 from .collisions import Collisions, default_rule, separate
 from .contacts import contact_model
 from .forces import force_law, pair_forces
 from .initial import hard_sphere_fluid
+from .integrators import Motion, Step
 from .media import MaxwellFilter
 from .models import hydrodynamic_model
 from .monolayer import Monolayer
-from .shear import NoShear, Oscillatory, Steady, affine_displacement, rate_of_strain
+from .shear import NoShear, Oscillatory, Steady, rate_of_strain
 
 
 class RealisationFailed(RuntimeError):
@@ -175,6 +178,13 @@ class Realisation:
             self.maxwell = MaxwellFilter(tuple(m.eta for m in modes), tuple(m.lam for m in modes), self.dt)
             self.modes = np.zeros((len(modes), n, 5))
             self.source_prev = np.zeros((n, 5))
+        # hydrodynamics.far_field_refresh: the far field held for this many steps (0: never held)
+        refresh = hyd.far_field_refresh
+        self.far_field_every = max(1, round(refresh / self.dt)) if refresh > 0 else 0
+        self.far_field_positions = np.zeros((n, 3))  # the start of the last refresh
+        motion = Motion(n, self.box, self.dt, self.protocol, self._separate if self._corrects_overlaps() else None,
+                        self.collision_rule, self._velocity_at)
+        self.integrator = INTEGRATORS[job.integration.scheme].load()(motion)
 
     # ------------------------------------------------------------------ interface
 
@@ -194,7 +204,9 @@ class Realisation:
             fields["contact_stretch"] = (self.contacts.stretch.shape, "f8")
         if self.monolayer is not None:
             fields["stopped_at"] = ((1,), "i8")
-        return fields
+        if self.far_field_every:
+            fields["far_field_positions"] = ((n, 3), "f8")
+        return {**fields, **self.integrator.state_fields()}
 
     def get_state(self):
         """The full state as arrays (see state_fields)."""
@@ -208,7 +220,9 @@ class Realisation:
             state["contact_stretch"] = self.contacts.stretch.copy()
         if self.monolayer is not None:
             state["stopped_at"] = np.array([self.monolayer.stopped_at], dtype=np.int64)
-        return state
+        if self.far_field_every:
+            state["far_field_positions"] = self.far_field_positions.copy()
+        return {**state, **self.integrator.get_state()}
 
     def set_state(self, state):
         """Restore a state from get_state()."""
@@ -224,6 +238,10 @@ class Realisation:
             self.contacts.stretch[:] = state["contact_stretch"]
         if self.monolayer is not None:
             self.monolayer.stopped_at = int(state["stopped_at"][0])
+        self.integrator.set_state(state)
+        if self.far_field_every and self.step % self.far_field_every:
+            self._hold_far_field(np.array(state["far_field_positions"], dtype=float),
+                                 self.step - self.step % self.far_field_every)
 
     def advance(self, n):
         """The next n samples (dict of arrays with leading axis n); steps n times."""
@@ -287,83 +305,39 @@ class Realisation:
         self._unchecked = False
         return self._separate(pos, strain)
 
-    def _move(self, pos, drift, noise, strain, strain1, at):
-        """The step's end positions from its start's, the deterministic velocities (N, 6)
-        and the Brownian ones, and the Collisions of their correction (module docstring,
-        `collisions`; the rule reflect acts through the mobility of the step's model
-        evaluation `at`)."""
-        affine = affine_displacement(pos, strain, strain1)
-        lattice = Lattice(self.box, strain1)
-        if not self._corrects_overlaps():
-            return lattice.wrap(pos + self.dt * (drift + noise)[:, :3] + affine), Collisions.none()
-        if self.collision_rule == "separate":
-            return self._separate(lattice.wrap(pos + self.dt * (drift + noise)[:, :3] + affine), strain1)
-        zero = np.zeros((self.n_particles, 5))
-
-        def mobility(forces):
-            return at.velocities(forces, zero)
-
-        moved, first = self._separate(lattice.wrap(pos + self.dt * drift[:, :3] + affine), strain1,
-                                      mobility=mobility)
-        moved, second = self._separate(lattice.wrap(moved + self.dt * noise[:, :3]), strain1, reflect=True,
-                                       mobility=mobility)
-        return moved, Collisions.joined(first, second)
-
     def _one_step(self):
         k = self.step
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
-        step_rate = self.protocol.mean_rate(t0, t1)
+        step_rate = self.integrator.disturbance_rate(t0, t1)
         pos, started = self._start(k, strain, Lattice(self.box, strain))
         if self.monolayer is not None and self.monolayer.stops(k, started.deepest, self.task.task_id):
             self.step += 1
             return self.monolayer.stopped_sample(self.sample_fields(), t0, strain, rate)
+        if self.far_field_every and k % self.far_field_every == 0:
+            self._hold_far_field(pos, k)
         at = self.model.at(pos, strain)
         n = self.n_particles
-        zero = np.zeros((n, 5))
         e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
-
         u_flow = at.velocities(np.zeros((n, 6)), e5)
         s_h = at.stresslets(u_flow, e5)
-        velocity = _at_step_rate(at, u_flow, rate, step_rate)
-        forces, virial = pair_forces(self.force_law, at.pairs, n, self.radii)
-        forces = np.hstack([forces, np.zeros((n, 3))])
-        contact_sample = {}
-        if self.contacts is not None:
-            contact = self.contacts.forces(at.pairs, self.radii)
-            f6 = np.hstack([contact.forces, contact.torques])
-            u_c = at.velocities(f6, zero)
-            contact_sample = {"stress_contact": self._force_stress(at, u_c, contact.virial),
-                              "n_contacts": contact.n_contacts, "n_sliding": contact.n_sliding}
-            forces, virial = forces + f6, virial + contact.virial
-        stress_p = np.zeros(6)
-        if self.force_law is not None or self.contacts is not None:
-            u_force = at.velocities(forces, zero)
-            velocity = velocity + u_force
-            stress_p = self._force_stress(at, u_force, virial)
+        contributions, contact_sample = self._forces(at)
+        velocity, stress_p = self._with_forces(at, _at_step_rate(at, u_flow, rate, step_rate), contributions)
         stress_b, midpoint_overlaps, noise = np.zeros(6), 0, np.zeros((n, 6))
         if self.kT > 0:
             brownian = at.brownian(self.rng, self.kT, self.dt)
             noise = brownian.velocities
             stress_b = bulk_stress(brownian.stresslets, self.volume)
             midpoint_overlaps = brownian.midpoint_overlaps
-
         if self.contacts is not None:
             self.contacts.advance(velocity + noise, step_rate, self.dt)
-        if self.monolayer is not None:
-            velocity, noise = self.monolayer.in_plane(velocity), self.monolayer.in_plane(noise)
-        strain1 = self.protocol.strain(t1)
-        self.positions, moved = self._move(pos, velocity, noise, strain, strain1, at)
+        self.positions, moved = self.integrator.move(Step(k, pos, self._in_plane(velocity), self._in_plane(noise),
+                                                          at))
         collisions = Collisions.joined(started, moved)
-        stress_c = np.zeros(6)
-        if len(collisions.i):
-            f_c, virial_c = collisions.forces(at.relative_mobility, self.dt, n)
-            stress_c = self._force_stress(at, at.velocities(f_c, zero), virial_c)
-
         sample = {"time": t0, "strain": strain, "rate": rate,
                   "stress_hydrodynamic": bulk_stress(s_h, self.volume),
                   "stress_brownian": stress_b, "stress_interparticle": stress_p,
-                  "stress_collision": stress_c,
+                  "stress_collision": self._collision_stress(at, collisions),
                   "n_overlaps": collisions.n_overlaps, "n_overlaps_midpoint": midpoint_overlaps,
                   "min_gap": min(collisions.deepest, at.pairs.min_gap), **contact_sample, **at.stats()}
         if self.maxwell is not None:
@@ -375,6 +349,68 @@ class Realisation:
             sample["stresslets"] = s_h
         self.step += 1
         return sample
+
+    def _hold_far_field(self, positions, k):
+        """Evaluate the model with the far field of the start ``positions`` of step k until
+        the next refresh (hydrodynamics.far_field_refresh, Dratler & Schowalter 1996)."""
+        self.far_field_positions = positions.copy()
+        self.model.hold_far_field(positions, self.protocol.strain(k * self.dt))
+
+    def _pair_forces(self, at):
+        """The pair forces of the force law on the evaluation's pairs: (forces (N, 6), virial
+        sum x F (3, 3))."""
+        forces, virial = pair_forces(self.force_law, at.pairs, self.n_particles, self.radii)
+        return np.hstack([forces, np.zeros((self.n_particles, 3))]), virial
+
+    def _forces(self, at):
+        """The interparticle force contributions at the evaluation `at`, in order: a list of
+        (forces and torques (N, 6), virial sum x F (3, 3)) (the force law's pair forces, then
+        the frictional contacts'), and the contacts' own sample (empty without them)."""
+        contributions = [self._pair_forces(at)]
+        if self.contacts is None:
+            return contributions, {}
+        contact = self.contacts.forces(at.pairs, self.radii)
+        f6 = np.hstack([contact.forces, contact.torques])
+        u_c = at.velocities(f6, np.zeros((self.n_particles, 5)))
+        contributions.append((f6, contact.virial))
+        return contributions, {"stress_contact": self._force_stress(at, u_c, contact.virial),
+                               "n_contacts": contact.n_contacts, "n_sliding": contact.n_sliding}
+
+    def _with_forces(self, at, velocity, contributions):
+        """The velocities (N, 6) plus those of the summed force contributions, and the
+        interparticle stress of their sum (zero without a force law or contacts)."""
+        if self.force_law is None and self.contacts is None:
+            return velocity, np.zeros(6)
+        forces, virial = contributions[0]
+        for more_forces, more_virial in contributions[1:]:
+            forces, virial = forces + more_forces, virial + more_virial
+        u_force = at.velocities(forces, np.zeros((self.n_particles, 5)))
+        return velocity + u_force, self._force_stress(at, u_force, virial)
+
+    def _in_plane(self, velocity):
+        """Monolayers: the velocities' in-plane part (`monolayer.Monolayer.in_plane`)."""
+        return velocity if self.monolayer is None else self.monolayer.in_plane(velocity)
+
+    def _collision_stress(self, at, collisions):
+        """The stress of the contact impulses of the step's overlap corrections (`collisions`)."""
+        if not len(collisions.i):
+            return np.zeros(6)
+        f_c, virial_c = collisions.forces(at.relative_mobility, self.dt, self.n_particles)
+        return self._force_stress(at, at.velocities(f_c, np.zeros((self.n_particles, 5))), virial_c)
+
+    def _velocity_at(self, positions, t):
+        """The deterministic velocities (N, 6) relative to the imposed flow at (positions, t):
+        the model at strain(t), the disturbance of the rate gamma_dot(t) plus the velocities
+        of the force law's pair forces, in the plane of a monolayer (the velocity field of a
+        multistep integrator's start-up, `integrators.AdamsBashforth4`; frictional contacts,
+        whose springs are state, do not enter it)."""
+        at = self.model.at(positions, self.protocol.strain(t))
+        n = self.n_particles
+        e5 = np.broadcast_to(to_five(rate_of_strain(self.protocol.rate(t))), (n, 5))
+        velocity = at.velocities(np.zeros((n, 6)), e5)
+        if self.force_law is not None:
+            velocity = velocity + at.velocities(self._pair_forces(at)[0], np.zeros((n, 5)))
+        return self._in_plane(velocity)
 
     def _force_stress(self, at, velocities, virial):
         """Stress of forces that drive these velocities with this virial sum x F:

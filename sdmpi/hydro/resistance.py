@@ -277,17 +277,20 @@ def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap,
 
 def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
                      ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
-                     max_overlap=None, plan=None):
+                     max_overlap=None, plan=None, far=None):
     """Assemble R (`GrandResistance`). Positions are wrapped into the sheared cell, unless a
     plan from an earlier call is given: then they are used as given with the plan's pair
     sets (for displaced configurations about that one). max_overlap (mean radii): raise
-    ValueError for deeper overlaps before the expensive work."""
+    ValueError for deeper overlaps before the expensive work. far: the far-field blocks
+    (S^-1, X, U_b) of another configuration to use instead of those at these positions
+    (the far field held fixed between refreshes; None: computed here)."""
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan, far_field=True, ewald_tol=ewald_tol)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
-    far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
+    if far is None:
+        far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
     lub = lubrication_partitions(radii, pairs, len(pos)) if plan.near_images is not None else None
     return from_blocks(far, lub, pairs, plan, pos, radii)
 

@@ -1,0 +1,192 @@
+"""Drift schemes of the resistance models and the near-contact correction beside them.
+
+A drift scheme (``brownian.scheme``, registered in `sdmpi.registry.DRIFT_SCHEMES`) turns
+the step's standard normal noise z into the step's `BrownianTerms` for the Ito equation
+
+    dx = [... + kT div R_FU^-1] dt + sqrt(2 kT dt) R_FU^-1/2 dW:
+
+the Brownian velocities R_FU^-1 F_B + kT div R_FU^-1 (F_B = sqrt(2 kT/dt) C z of covariance
+2 kT R_FU / dt, C C^T = R_FU) and the Brownian stresslets -kT div(R_SU R_FU^-1) (Schaink et
+al. 2000, eq. 16). Each acts on a `SolverEvaluation` (a resistance model at one
+configuration: `sdmpi.dynamics.models.ResistanceEvaluation`):
+
+* `RandomFiniteDifference` (``rfd``): the divergences by a random finite difference along
+  the noise's own directions over a length RFD_STEP hydrodynamics.min_gap, to first order in
+  the change of R (Delong, Balboa Usabiaga & Donev, J. Chem. Phys. 140, 134110 (2014);
+  Sprinkle et al., J. Chem. Phys. 147, 244103 (2017));
+* `Midpoint` (``midpoint``): Fixman's midpoint as used for SD by Banchio & Brady, J. Chem.
+  Phys. 118, 10323 (2003).
+
+The near-contact correction (`near_contact_velocities`) replaces the radial part of one
+explicit step of close pairs by the exact squared-Bessel transition of their gap. The
+derivations, accuracies and measurements are in docs/numerics.md, "Drift schemes and the
+near-contact correction".
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..hydro.farfield import NDOF
+from ..hydro.lubrication import PairList
+from ..hydro.two_sphere import squeeze_slope
+
+#: the random finite difference's length in units of hydrodynamics.min_gap (mean radii)
+RFD_STEP = 1e-2
+#: pairs with surface gaps below this (mean radii) get the near-contact correction
+#: (docs/numerics.md); there lubrication dominates: D_rr/h = 4.0 (h -> 0) to 3.1
+#: (h = 5e-2) D0/a for an isolated pair of equal spheres
+NEAR_CONTACT_GAP = 5e-2
+
+
+@dataclass
+class BrownianTerms:
+    """One step's Brownian velocities (N, 6), drift included, and Brownian stresslets (N, 5),
+    and how many overlapping pairs its displaced evaluation had to separate (midpoint)."""
+
+    velocities: np.ndarray
+    stresslets: np.ndarray
+    midpoint_overlaps: int = 0
+
+
+class SolverEvaluation(Protocol):
+    """What a drift scheme needs of a resistance model at one configuration of N spheres.
+
+    Attributes:
+        solver: the backend's solver (`sdmpi.hydro.backend.SolverBackend`) at the configuration.
+        positions: (N, 3) the configuration.
+        n_particles: N.
+        pairs: the pairs within the interparticle-force cut-off, with true gaps.
+        radii: (N,) sphere radii (a).
+        min_gap: hydrodynamics.min_gap, the lubrication's floor of the gap (mean radii).
+    """
+
+    solver: Any
+    positions: np.ndarray
+    n_particles: int
+    pairs: PairList
+    radii: np.ndarray
+    min_gap: float
+
+    def displaced(self, positions: np.ndarray) -> tuple[Any, int]:
+        """The solver at ``positions`` (N, 3), overlaps first separated, with this
+        evaluation's pair sets and strain, and the number of overlaps separated."""
+        raise NotImplementedError
+
+    def resistance_change(self, positions: np.ndarray, vector: np.ndarray) -> np.ndarray:
+        """[R(positions) - R] vector (N, 11) to first order about this configuration."""
+        raise NotImplementedError
+
+
+class DriftScheme(Protocol):
+    """A drift scheme (``brownian.scheme``), registered in `sdmpi.registry.DRIFT_SCHEMES`
+    (docs/extending.md)."""
+
+    def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
+                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
+        """The step's `BrownianTerms` for the standard normal noise z (the solver's
+        noise_shape) at temperature kT and time step dt; near(m): the velocities (N, 6), or
+        0, that the near-contact correction adds for the step's displacement direction
+        m = R_FU^-1 C z (N, 6)."""
+        raise NotImplementedError
+
+
+def rfd_length(min_gap: float) -> float:
+    """The random finite difference's length along m = R_FU^-1 C z (~1/(6 pi a) per unit of
+    z): 6 pi RFD_STEP min_gap, a displacement of ~RFD_STEP min_gap per sphere."""
+    return RFD_STEP * min_gap * 6 * math.pi
+
+
+class RandomFiniteDifference:
+    """``rfd``: kT div R_FU^-1 ~ (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F and
+    -kT div(R_SU R_FU^-1) ~ -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F with
+    F = C z, m = R_FU^-1 F, eps = `rfd_length`, both to first order in
+    Delta R = R(x + eps m) - R (docs/numerics.md)."""
+
+    def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
+                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
+        solver = evaluation.solver
+        zero = np.zeros((evaluation.n_particles, 5))
+        m = solver.brownian_velocities(z)
+        noise = math.sqrt(2 * kT / dt) * m
+        step = rfd_length(evaluation.min_gap)
+        direction = np.zeros((evaluation.n_particles, NDOF))
+        direction[:, :6] = m
+        change = evaluation.resistance_change(evaluation.positions + step * m[:, :3], direction)
+        dm = -solver.velocities(change[:, :6], zero)  # (R + Delta R)_FU^-1 F - m, first order
+        drift = (kT / step) * dm
+        stress = (kT / step) * (solver.stresslets(dm, zero) - change[:, 6:])
+        return BrownianTerms(noise + drift + near(m), stress)
+
+
+class Midpoint:
+    """``midpoint``: x* = x + (dt/2) R_FU^-1(x) F_B, the velocities R_FU^-1(x*) F_B (mean:
+    kT div R_FU^-1 to O(dt)), the Brownian stresslets -[(R_SU R_FU^-1)(x*) -
+    (R_SU R_FU^-1)(x)] F_B (Banchio & Brady 2003; docs/numerics.md)."""
+
+    def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
+                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
+        solver = evaluation.solver
+        zero = np.zeros((evaluation.n_particles, 5))
+        unit_force = solver.brownian_forces(z)
+        m = solver.velocities(unit_force, zero)
+        noise = math.sqrt(2 * kT / dt) * m
+        correction = near(m)
+        step = 0.5 * dt * math.sqrt(2 * kT / dt)
+        mid, found = evaluation.displaced(evaluation.positions + step * m[:, :3])
+        mid.take_preconditioner(solver)  # petsc-krylov: refactorise the start's factor
+        u_mid = mid.velocities(math.sqrt(2 * kT / dt) * unit_force, zero)
+        return BrownianTerms(u_mid + correction, mid.stresslets(u_mid, zero) - solver.stresslets(noise, zero),
+                             found)
+
+
+def squeeze_fraction(mobility: np.ndarray, gap: np.ndarray, radius_i: np.ndarray,
+                     radius_j: np.ndarray) -> np.ndarray:
+    """kappa = G h |d(f.R_2B f)/dh| / |f|^4 (|f|^2 = 2) of pairs with relative mobility
+    G = f.R_FU^-1.f (`unit_pair_forces` f) at gap h: the derivative of the pair's relative
+    diffusivity along its own mobility response over D_rr/h (docs/numerics.md), from the
+    two-sphere squeeze resistance (`hydro.two_sphere.squeeze_slope`). 1 for two spheres
+    alone at contact; below 1 by the share of the pair's relative mobility the rest of the
+    suspension takes."""
+    return mobility * squeeze_slope(gap, radius_i, radius_j) / 4.0
+
+
+def unit_pair_forces(i: np.ndarray, j: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
+    """Force sets (P, N, 6): for each pair p a unit force e_p on j_p and -e_p on i_p (its
+    line of centres), no torques."""
+    forces = np.zeros((len(i), n, 6))
+    rows = np.arange(len(i))
+    forces[rows, j, :3] = e  # each (row, particle) once per statement: no np.add.at needed
+    forces[rows, i, :3] -= e  # (a self-image pair, i = j, gets zero)
+    return forces
+
+
+def near_contact_velocities(evaluation: SolverEvaluation, m: np.ndarray, z_near: np.ndarray, kT: float,
+                            dt: float) -> np.ndarray:
+    """Velocities (N, 6) of the near-contact correction for the step's direction m (N, 6)
+    and the independent noise z_near (the solver's noise_shape): R_FU^-1 of the pair forces
+    w_p f_p of the pairs with gaps below NEAR_CONTACT_GAP,
+    w_p = (2 kappa_p - 1)^+ kT (m'_h^2 - m_h^2) / (2 G_p h_p), m' = R_FU^-1 C z_near
+    (docs/numerics.md). Mean zero at every gap."""
+    pairs, solver = evaluation.pairs, evaluation.solver
+    mean_radius = 0.5 * pairs.radii_sum
+    close = pairs.gap < NEAR_CONTACT_GAP * mean_radius
+    n, zero = evaluation.n_particles, np.zeros((evaluation.n_particles, 5))
+    if not close.any():
+        return np.zeros((n, 6))
+    i, j = pairs.i[close], pairs.j[close]
+    dx = pairs.dx[close]
+    e = dx / np.sqrt(np.einsum("pc,pc->p", dx, dx))[:, None]
+    m_indep = solver.brownian_velocities(z_near)
+    m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
+    gap = np.maximum(pairs.gap[close], evaluation.min_gap * mean_radius[close])  # the lubrication's floor
+    forces = unit_pair_forces(i, j, e, n)
+    mobility = solver.mobility_forms(forces)
+    kappa = squeeze_fraction(mobility, gap, evaluation.radii[i], evaluation.radii[j])
+    weight = np.maximum(2.0 * kappa - 1.0, 0.0) * 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility * gap)
+    return solver.velocities(np.einsum("p,pkc->kc", weight, forces), zero)
