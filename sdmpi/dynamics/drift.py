@@ -135,14 +135,15 @@ class Midpoint:
         zero = np.zeros((evaluation.n_particles, 5))
         unit_force = solver.brownian_forces(z)
         m = solver.velocities(unit_force, zero)
-        noise = math.sqrt(2 * kT / dt) * m
+        # the start's stresslets of the solve just made (an iterative solver reuses it, so
+        # the start's and the midpoint's solve errors cancel in the difference), scaled
+        start = math.sqrt(2 * kT / dt) * solver.stresslets(m, zero)
         correction = near(m)
         step = 0.5 * dt * math.sqrt(2 * kT / dt)
         mid, found = evaluation.displaced(evaluation.positions + step * m[:, :3])
         mid.take_preconditioner(solver)  # petsc-krylov: refactorise the start's factor
         u_mid = mid.velocities(math.sqrt(2 * kT / dt) * unit_force, zero)
-        return BrownianTerms(u_mid + correction, mid.stresslets(u_mid, zero) - solver.stresslets(noise, zero),
-                             found)
+        return BrownianTerms(u_mid + correction, mid.stresslets(u_mid, zero) - start, found)
 
 
 def squeeze_fraction(mobility: np.ndarray, gap: np.ndarray, radius_i: np.ndarray,
