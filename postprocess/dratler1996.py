@@ -2,7 +2,7 @@
 """Dratler & Schowalter, J. Fluid Mech. 325, 53 (1996): run files -> the study's tables.
 
     postprocess/dratler1996.py [--hydro RUN.h5 ...] [--repulsion RUN.h5 ...]
-        [-o docs/validation/dratler1996] [--no-plots]
+        [-o docs/validation/dratler1996] [--window STRAIN] [--no-plots]
 
 Inputs: run files of jobs/dratler1996_hydro.toml (``--hydro``, interparticle.kind =
 "none") and jobs/dratler1996_repulsion.toml (``--repulsion``), complete or partial
@@ -25,6 +25,9 @@ Outputs in OUTDIR:
   per model, phi_a and trajectory frame (strain), averaged over the realisations that
   have the frame (column ``realisations``), from the runs' trajectories
   (output.trajectory_every > 0; frames after a stop are left out);
+* ``windows.csv``: eta, eta_h, eta_p averaged over consecutive strain windows of width
+  ``--window`` (default 10) from the start (start-up included; the paper's running averages, Figs. 6,
+  7, 9), per model and phi_a, averaged over the realisations that reach the window's end;
 * ``neighbours.png`` (without ``--no-plots``): n(2.01) against strain.
 
 The CSV files are byte-identical when the same run files are processed again. Exit
@@ -46,12 +49,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from monolayer_table import (analysed_samples, eta_of, overlap_statistics,  # noqa: E402
                              ratio_of, reduce_model)
 
-from sdmpi.analysis.reduce import ReduceError, open_run  # noqa: E402
+from sdmpi.analysis.reduce import (COMPONENTS, ReduceError, medium_viscosity,  # noqa: E402
+                                   open_run, read_stress, steady_quantities)
 from sdmpi.analysis.report import write_all  # noqa: E402
 from sdmpi.analysis.trajectories import pair_counts, read  # noqa: E402
 
 #: the paper's neighbour cut-offs r_c (centre distance, a; its Fig. 13)
 CUTOFFS = (2.00, 2.01, 2.05)
+#: default width of the strain windows of windows.csv (the paper's running averages,
+#: Figs. 6, 7, 9)
+WINDOW = 10.0
 #: model name -> the interparticle.kind its job files use
 KINDS = {"hydro": "none", "repulsion": "repulsion"}
 
@@ -63,10 +70,14 @@ def parse_args(argv):
     p.add_argument("--repulsion", nargs="+", default=[], metavar="RUN.h5",
                    help="run files of the model with the repulsion")
     p.add_argument("-o", "--output", default="docs/validation/dratler1996", metavar="OUTDIR")
+    p.add_argument("--window", type=float, default=WINDOW, metavar="STRAIN",
+                   help=f"width of the strain windows of windows.csv (default {WINDOW:g})")
     p.add_argument("--no-plots", action="store_true", help="tables only")
     args = p.parse_args(argv)
     if not args.hydro and not args.repulsion:
         p.error("give --hydro and/or --repulsion run files")
+    if not args.window > 0:
+        p.error(f"--window must be > 0, not {args.window:g}")
     return args
 
 
@@ -146,6 +157,45 @@ def neighbour_rows(name, files):
     return rows
 
 
+def task_windows(summary, f, task, width):
+    """{window index: (eta, eta_h, eta_p)} of one task: the means over consecutive strain
+    windows of this width from t = 0 (start-up included) up to a stop, whole windows
+    only, eta = eta_m + the contributions (the paper's eq. 6)."""
+    job = summary.job
+    _, _, stop = analysed_samples(summary, f, task)
+    done = int(summary.progress[task.task_id])
+    end = done if stop is None else min(done, int(round(stop / task.dt)))
+    per = max(int(round(width / (task.dt * job.shear.rate))), 1)
+    stress = read_stress(f, job, task, end, columns=slice(None))       # (C, end, 6)
+    eta = steady_quantities(stress, job.shear.rate)[:, 0]             # (C, end)
+    hydro = COMPONENTS.index("hydrodynamic") - 1
+    inter = COMPONENTS.index("interparticle") - 1
+    out = {}
+    for k in range(end // per):
+        part = eta[:, k * per:(k + 1) * per].mean(axis=1)
+        out[k] = (medium_viscosity(job) + part.sum(), part[hydro], part[inter])
+    return out
+
+
+def window_rows(name, files, width):
+    """windows.csv rows of one model: per phi_a and strain window, the mean over the
+    realisations that reach the window's end."""
+    acc = {}
+    for path in files:
+        summary = open_run(path)
+        with h5py.File(path, "r", locking=False) as f:
+            for task in summary.tasks:
+                for k, values in task_windows(summary, f, task, width).items():
+                    acc.setdefault((task.phi, k), []).append(values)
+    rows = []
+    for (phi, k), values in sorted(acc.items(), key=lambda kv: (-kv[0][0], kv[0][1])):
+        eta, eta_h, eta_p = np.mean(values, axis=0)
+        rows.append({"model": name, "phi_a": phi, "strain_from": k * width,
+                     "strain_to": (k + 1) * width, "realisations": len(values),
+                     "eta": eta, "eta_h": eta_h, "eta_p": eta_p})
+    return rows
+
+
 def write_csv(path, rows, fields):
     with open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=fields, lineterminator="\n")
@@ -177,7 +227,7 @@ def main(argv=None) -> int:
     out = Path(args.output)
     models = {name: files for name, files in (("hydro", args.hydro),
                                               ("repulsion", args.repulsion)) if files}
-    rows, neighbours = [], []
+    rows, neighbours, windows = [], [], []
     try:
         for name, files in models.items():
             check_model(name, files)
@@ -188,6 +238,7 @@ def main(argv=None) -> int:
                 print(f"note: {name}: {note}", file=sys.stderr)
             rows += model_rows(name, red, files)
             neighbours += neighbour_rows(name, files)
+            windows += window_rows(name, files, args.window)
     except (ReduceError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -195,9 +246,11 @@ def main(argv=None) -> int:
     write_csv(out / "ratio.csv", ratio_rows(rows), ["phi_a", "ratio", "ratio_err"])
     write_csv(out / "neighbours.csv", neighbours, ["model", "phi_a", "strain", "realisations",
                                                    *(f"n_{rc:.2f}" for rc in CUTOFFS)])
+    write_csv(out / "windows.csv", windows, ["model", "phi_a", "strain_from", "strain_to",
+                                             "realisations", "eta", "eta_h", "eta_p"])
     if neighbours and not args.no_plots:
         draw_neighbours(neighbours, out / "neighbours.png")
-    print(f"wrote {out}/ (monolayer.csv, ratio.csv, neighbours.csv)")
+    print(f"wrote {out}/ (monolayer.csv, ratio.csv, neighbours.csv, windows.csv)")
     return 0
 
 

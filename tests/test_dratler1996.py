@@ -41,7 +41,7 @@ def rows(path):
 def regenerate(runs, out):
     hydro, rep = runs
     return script().main(["--hydro", str(hydro), "--repulsion", str(rep), "-o", str(out),
-                          "--no-plots"])
+                          "--window", "0.05", "--no-plots"])
 
 
 def test_tables_agree_with_sdmpi_reduce(runs, tmp_path):
@@ -60,6 +60,17 @@ def test_tables_agree_with_sdmpi_reduce(runs, tmp_path):
         assert table[model]["realisations"] == "2" and float(table[model]["strain"]) == 0.2
     assert float(table["hydro"]["eta_p"]) == 0.0
     assert float(table["repulsion"]["eta_p"]) > 0.0   # the repulsion acted
+    # strain windows of 10 steps: those after the start-up (discard_steps = 10) average to
+    # the table's eta, and the parts add up
+    for model in ("hydro", "repulsion"):
+        win = [r for r in rows(out / "windows.csv") if r["model"] == model]
+        assert np.allclose([float(r["strain_from"]) for r in win], [0.0, 0.05, 0.1, 0.15])
+        assert all(r["realisations"] == "2" for r in win)
+        assert math.isclose(np.mean([float(r["eta"]) for r in win[1:]]),
+                            float(table[model]["eta"]), rel_tol=1e-12)
+        for r in win:
+            assert math.isclose(float(r["eta"]), 1 + float(r["eta_h"]) + float(r["eta_p"]),
+                                rel_tol=1e-12)
     ratio = rows(out / "ratio.csv")[0]
     eta_h, eta_r = float(table["hydro"]["eta"]), float(table["repulsion"]["eta"])
     assert math.isclose(float(ratio["ratio"]), eta_r / eta_h, rel_tol=1e-14)
@@ -100,7 +111,7 @@ def test_neighbour_counts_equal_a_direct_count(runs, tmp_path):
 def test_tables_are_byte_identical_when_regenerated(runs, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     assert regenerate(runs, a) == 0 and regenerate(runs, b) == 0
-    for name in ("monolayer.csv", "ratio.csv", "neighbours.csv", "hydro/viscosity.csv",
+    for name in ("monolayer.csv", "ratio.csv", "neighbours.csv", "windows.csv", "hydro/viscosity.csv",
                  "repulsion/errors.csv"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
