@@ -14,8 +14,8 @@ Outputs in OUTDIR:
 * ``hydro/``, ``repulsion/``: what ``sdmpi reduce`` writes for each model (viscosity.csv
   with eta = 1 + eta_h + eta_p, the paper's eq. 6, its parts per row, N1, N2; errors.csv,
   trust.csv, units.json, viscosity.h5 and, without ``--no-plots``, the running averages);
-* ``monolayer.csv``: per model and areal fraction phi_a, the realisations, the strain
-  run, eta, eta_h, eta_p with one standard error (the larger of the spread between the
+* ``monolayer.csv``: per model and areal fraction phi_a, the realisations, the longest
+  committed strain, eta, eta_h, eta_p with one standard error (the larger of the spread between the
   realisations and the blocking error within them), the overlaps per configuration (mean
   and largest), the deepest overlap and smallest gap (a) and the strains at which
   realisations stopped on an overlap deeper than integration.overlap_stop;
@@ -100,9 +100,10 @@ def model_rows(name, red, files):
         (eta, eta_err), (h, h_err), (p, p_err) = (
             eta_of(red, phi, c) for c in ("total", "hydrodynamic", "interparticle"))
         ov = overlap_statistics(files, phi)
-        integ = red.job.integration
+        g = int(np.flatnonzero(np.isclose(red.phi, phi, rtol=1e-9))[0])
+        strain = float(red.committed[g].max()) * red.job.integration.dt * red.job.shear.rate
         rows.append({"model": name, "phi_a": phi, "realisations": ov["realisations"],
-                     "strain": integ.n_steps * integ.dt, "eta": eta, "eta_err": eta_err,
+                     "strain": strain, "eta": eta, "eta_err": eta_err,
                      "eta_h": h, "eta_h_err": h_err, "eta_p": p, "eta_p_err": p_err,
                      "overlaps_mean": ov["mean"], "overlaps_max": ov["max"],
                      "deepest_overlap": ov["deepest"], "smallest_gap": ov["smallest_gap"],
