@@ -17,10 +17,8 @@ TINY = ["--set", "system.n_particles=9", "--set", "system.phi=[0.5]",
         "--set", "ensemble.realisations=2", "--set", "integration.n_steps=40",
         "--set", "integration.discard_steps=10", "--set", "output.trajectory_every=10",
         "--set", "output.checkpoint_every=20"]
-
-
-def script():
-    return postprocess_script("dratler1996")
+#: postprocess/dratler1996.py as a module
+SCRIPT = postprocess_script("dratler1996")
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +38,7 @@ def rows(path):
 
 def regenerate(runs, out):
     hydro, rep = runs
-    return script().main(["--hydro", str(hydro), "--repulsion", str(rep), "-o", str(out),
+    return SCRIPT.main(["--hydro", str(hydro), "--repulsion", str(rep), "-o", str(out),
                           "--window", "0.05", "--no-plots"])
 
 
@@ -119,11 +117,11 @@ def test_tables_are_byte_identical_when_regenerated(runs, tmp_path):
 def test_bad_input_exits_2_and_writes_nothing(runs, tmp_path, capsys):
     hydro, rep = runs
     out = tmp_path / "bad"
-    assert script().main(["--hydro", str(rep), "-o", str(out)]) == 2
+    assert SCRIPT.main(["--hydro", str(rep), "-o", str(out)]) == 2
     assert "interparticle.kind is 'repulsion'" in capsys.readouterr().err
-    assert script().main(["--hydro", str(hydro), "--repulsion", str(hydro), "-o", str(out)]) == 2
-    assert script().main(["--hydro", str(tmp_path / "missing.h5"), "-o", str(out)]) == 2
+    assert SCRIPT.main(["--hydro", str(hydro), "--repulsion", str(hydro), "-o", str(out)]) == 2
+    assert SCRIPT.main(["--hydro", str(tmp_path / "missing.h5"), "-o", str(out)]) == 2
     assert not out.exists()
     with pytest.raises(SystemExit) as exc:
-        script().main(["-o", str(out)])
+        SCRIPT.main(["-o", str(out)])
     assert exc.value.code == 2
