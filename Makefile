@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test pip-check bench schaink2000 finite-size clean
+.PHONY: setup run test pip-check bench schaink2000 finite-size dratler1996 clean
 
 setup: $(VENV)/.installed
 
@@ -96,6 +96,19 @@ finite-size: setup
 	$(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
 	  out/finite_size/n125.h5 \
 	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
+
+# The Dratler & Schowalter (1996) monolayer study (docs/validation/dratler1996/README.md):
+# both models at the paper's length on RANKS ranks into out/dratler1996/, then its tables
+# into DS_OUT. A stopped study resumes where it stopped when this is run again.
+DS_OUT    ?= docs/validation/dratler1996/full
+dratler1996: setup
+	mkdir -p out/dratler1996
+	for model in hydro repulsion; do \
+	  mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/dratler1996_$$model.toml \
+	    -o out/dratler1996/$$model.h5 || exit 1; \
+	done
+	$(VPY) postprocess/dratler1996.py --hydro out/dratler1996/hydro.h5 \
+	  --repulsion out/dratler1996/repulsion.h5 -o $(DS_OUT)
 
 clean:
 	rm -rf $(VENV) $(PIP_VENV) .numba_cache .numba_cache_pip build *.egg-info

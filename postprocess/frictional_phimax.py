@@ -114,6 +114,8 @@ def table(paths):
         ens, per_real = red.ensemble, red.per_realisation
         for g, phi in enumerate(red.phi):
             present = per_real.n[g, TOTAL, 0] > 0
+            if not present.any():      # a partial run: nothing after the start-up yet
+                continue
             between, within = ens.err_between[g, TOTAL, 0], ens.err_within[g, TOTAL, 0]
             parts = [contact_means(path, red.task_id[g][(red.file_index == k) & present],
                                    discard) for k, path in enumerate(files)

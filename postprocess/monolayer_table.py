@@ -59,6 +59,20 @@ def reduce_model(files):
     return red
 
 
+def analysed_samples(summary, f, task):
+    """(overlaps per configuration, smallest gaps, stop strain or None) of one task of an
+    open run file ``f``: its committed samples after the start-up and before a stop (a
+    stopped realisation's later samples hold n_overlaps < 0)."""
+    done = int(summary.progress[task.task_id])
+    samples = f[f"tasks/{task_key(task.task_id)}/samples"]
+    n = samples["n_overlaps"][:done]
+    gap = samples["min_gap"][:done]
+    stopped = np.flatnonzero(n < 0)
+    end = int(stopped[0]) if stopped.size else done
+    stop = end * task.dt if stopped.size else None
+    return n[task.discard_steps:end], gap[task.discard_steps:end], stop
+
+
 def overlap_statistics(files, phi):
     """Overlap statistics of every realisation at this phi_a in these run files, over the
     samples after the start-up and before a stop: dict with mean and max overlaps per
@@ -72,16 +86,11 @@ def overlap_statistics(files, phi):
                 if not math.isclose(task.phi, phi, rel_tol=1e-9):
                     continue
                 n_real += 1
-                done = int(summary.progress[task.task_id])
-                samples = f[f"tasks/{task_key(task.task_id)}/samples"]
-                n = samples["n_overlaps"][:done]
-                gap = samples["min_gap"][:done]
-                stopped = np.flatnonzero(n < 0)
-                end = stopped[0] if stopped.size else done
-                if stopped.size:
-                    stops.append(end * task.dt)
-                counts.append(n[task.discard_steps:end])
-                gaps.append(gap[task.discard_steps:end])
+                n, gap, stop = analysed_samples(summary, f, task)
+                if stop is not None:
+                    stops.append(stop)
+                counts.append(n)
+                gaps.append(gap)
     counts = np.concatenate(counts) if counts else np.zeros(0)
     gaps = np.concatenate(gaps) if gaps else np.zeros(0)
     smallest = float(gaps.min()) if gaps.size else math.nan
@@ -99,6 +108,13 @@ def eta_of(red, phi, component):
     c = TABLE_COMPONENTS.index(component)
     e = red.ensemble
     return float(e.mean[g, c, 0]), float(e.err[g, c, 0])
+
+
+def ratio_of(num, den):
+    """(a/b, its standard error) of two (mean, standard error) pairs taken as independent."""
+    (a, ae), (b, be) = num, den
+    ratio = a / b
+    return ratio, abs(ratio) * math.hypot(ae / a, be / b)
 
 
 def seed_says(kind, phi):
@@ -143,9 +159,7 @@ def main(argv=None):
         print("|---|---|---|")
         for phi in phis:
             if ("none", phi) in totals and ("repulsion", phi) in totals:
-                (h, he), (r, re) = totals["none", phi], totals["repulsion", phi]
-                ratio = r / h
-                err = ratio * math.hypot(he / h, re / r)
+                ratio, err = ratio_of(totals["repulsion", phi], totals["none", phi])
                 print(f"| {phi:g} | {plus_minus(ratio, err)} | {RATIO_SEED.get(round(phi, 6), '')} |")
     print("\n(+-: one standard error, the larger of the spread between realisations and the "
           "blocking error within them)")

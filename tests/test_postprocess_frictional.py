@@ -73,3 +73,26 @@ def test_phi_scan_fits_resolve_separated_phi_max_and_not_equal_ones():
     assert d[0.1, 0.3]["diff_ci95_lo"] <= 0.04 <= d[0.1, 0.3]["diff_ci95_hi"]
     assert not d[0.3, 0.5]["disjoint"]
     assert d[0.3, 0.5]["diff_ci95_lo"] <= 0 <= d[0.3, 0.5]["diff_ci95_hi"]
+
+
+def test_a_partial_run_is_tabulated_without_its_empty_volume_fractions(tmp_path, capsys):
+    """A scan stopped before its second volume fraction has data after the start-up
+    (killed after the first task's two checkpoints): the script tabulates the first and
+    leaves the second out instead of failing."""
+    import csv
+    import subprocess
+    import sys
+
+    from .runs import ROOT, child_env
+    run = tmp_path / "partial.h5"
+    cmd = [sys.executable, "-m", "sdmpi.cli", "run", str(ROOT / "jobs" / "frictional_mu0.5.toml"),
+           "-o", str(run), "--set", "system.phi=[0.45, 0.5]", "--set", "ensemble.realisations=1",
+           "--set", "integration.n_steps=20", "--set", "integration.discard_steps=5",
+           "--set", "output.checkpoint_every=10"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=600,
+                         env=child_env({"SDMPI_TEST_KILL": "commit:2"}))
+    assert res.returncode != 0 and run.is_file()
+    load_script().main([str(run), "-o", str(tmp_path / "out")])
+    rows = list(csv.DictReader(open(tmp_path / "out" / "frictional_viscosity.csv")))
+    assert [float(r["phi"]) for r in rows] == [0.45]
+    assert float(rows[0]["eta"]) > 1.0 and rows[0]["n_real"] == "1"

@@ -57,6 +57,8 @@ CASES = {
     "frictional_mu0.3": ("frictional_mu0.3.toml", [], 13),
     "frictional_mu0.5": ("frictional_mu0.5.toml", [], 13),
     "large_n_krylov": ("large_n_krylov.toml", ["system.n_particles=8", "ensemble.ranks_per_task=1"], 0),
+    "dratler1996_hydro": ("dratler1996_hydro.toml", ["system.n_particles=9"], 0),
+    "dratler1996_repulsion": ("dratler1996_repulsion.toml", ["system.n_particles=9"], 0),
     "monolayer_hydro": ("monolayer_hydro.toml", ["system.n_particles=9"], 0),
     "monolayer_repulsion": ("monolayer_repulsion.toml", ["system.n_particles=9"], 0),
     "schaink2000_fixed_dt": ("schaink2000_fixed_dt.toml", ["system.n_particles=8"], 0),

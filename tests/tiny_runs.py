@@ -20,10 +20,11 @@ MODES = "[{eta = 0.6, lambda = 0.5}, {eta = 0.4, lambda = 0.05}]"
 MEDIUM_SPEC = "maxwell:eta=0.6,lambda=0.5;eta=0.4,lambda=0.05"
 
 
-def sdmpi_run(path, *extra, job="schaink2000_newtonian.toml"):
-    """Run jobs/<job> shrunk by TINY (and ``extra`` --set items) into ``path``."""
+def sdmpi_run(path, *extra, job="schaink2000_newtonian.toml", shrink=TINY):
+    """Run jobs/<job> shrunk by ``shrink`` (default TINY, for the Schaink et al. jobs; and
+    ``extra`` --set items) into ``path``."""
     cmd = [sys.executable, "-m", "sdmpi.cli", "run", str(ROOT / "jobs" / job), "-o",
-           str(path), *TINY, *extra]
+           str(path), *shrink, *extra]
     res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=600)
     assert res.returncode == 0, res.stderr
     return path

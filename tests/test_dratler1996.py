@@ -1,0 +1,127 @@
+"""postprocess/dratler1996.py, the regeneration path of docs/validation/dratler1996/, on
+tiny real runs of its two job files (N = 9 spheres, 40 steps, 2 realisations): the tables
+agree with `sdmpi reduce`, the neighbour count with a direct count from the stored
+positions, the tables are byte-identical when regenerated, and bad input exits 2."""
+
+import csv
+import math
+
+import h5py
+import numpy as np
+import pytest
+
+from sdmpi.cli import main as sdmpi_main
+from .tiny_runs import postprocess_script, sdmpi_run
+
+TINY = ["--set", "system.n_particles=9", "--set", "system.phi=[0.5]",
+        "--set", "ensemble.realisations=2", "--set", "integration.n_steps=40",
+        "--set", "integration.discard_steps=10", "--set", "output.trajectory_every=10",
+        "--set", "output.checkpoint_every=20"]
+#: postprocess/dratler1996.py as a module
+SCRIPT = postprocess_script("dratler1996")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("dratler")
+    hydro = sdmpi_run(d / "hydro.h5", job="dratler1996_hydro.toml", shrink=TINY)
+    # a shorter range keeps pairs inside it in so few steps (the paper's tau = 1.25e6 acts
+    # only below gaps of ~1e-5 a)
+    rep = sdmpi_run(d / "repulsion.h5", "--set", "interparticle.tau=200.0", "--set",
+                    "interparticle.f0=0.05", job="dratler1996_repulsion.toml", shrink=TINY)
+    return hydro, rep
+
+
+def rows(path):
+    return list(csv.DictReader(open(path)))
+
+
+def regenerate(runs, out):
+    hydro, rep = runs
+    return SCRIPT.main(["--hydro", str(hydro), "--repulsion", str(rep), "-o", str(out),
+                          "--window", "0.05", "--no-plots"])
+
+
+def test_tables_agree_with_sdmpi_reduce(runs, tmp_path):
+    out = tmp_path / "d96"
+    assert regenerate(runs, out) == 0
+    table = {r["model"]: r for r in rows(out / "monolayer.csv")}
+    assert set(table) == {"hydro", "repulsion"}
+    for model, run in zip(("hydro", "repulsion"), runs):
+        assert sdmpi_main(["reduce", str(run), "-o", str(tmp_path / model), "--no-plots"]) == 0
+        assert ((out / model / "viscosity.csv").read_bytes()
+                == (tmp_path / model / "viscosity.csv").read_bytes())
+        total = {r["component"]: r for r in rows(tmp_path / model / "viscosity.csv")}
+        assert float(table[model]["eta"]) == float(total["total"]["eta"])
+        assert float(table[model]["eta_h"]) == float(total["hydrodynamic"]["eta"])
+        assert float(table[model]["eta_p"]) == float(total["interparticle"]["eta"])
+        assert table[model]["realisations"] == "2" and float(table[model]["strain"]) == 0.2
+    assert float(table["hydro"]["eta_p"]) == 0.0
+    assert float(table["repulsion"]["eta_p"]) > 0.0   # the repulsion acted
+    # strain windows of 10 steps: those after the start-up (discard_steps = 10) average to
+    # the table's eta, and the parts add up
+    for model in ("hydro", "repulsion"):
+        win = [r for r in rows(out / "windows.csv") if r["model"] == model]
+        assert np.allclose([float(r["strain_from"]) for r in win], [0.0, 0.05, 0.1, 0.15])
+        assert all(r["realisations"] == "2" for r in win)
+        assert math.isclose(np.mean([float(r["eta"]) for r in win[1:]]),
+                            float(table[model]["eta"]), rel_tol=1e-12)
+        for r in win:
+            assert math.isclose(float(r["eta"]), 1 + float(r["eta_h"]) + float(r["eta_p"]),
+                                rel_tol=1e-12)
+    ratio = rows(out / "ratio.csv")[0]
+    eta_h, eta_r = float(table["hydro"]["eta"]), float(table["repulsion"]["eta"])
+    assert math.isclose(float(ratio["ratio"]), eta_r / eta_h, rel_tol=1e-14)
+
+
+def direct_neighbours(path, task, frame, rc):
+    """n(rc) of one stored frame by the plain minimum-image rule in the (unsheared at
+    frame 0) square cell: every pair's in-plane distance, periodic in x and y."""
+    with h5py.File(path, "r") as f:
+        x = f[f"particles/task_{task:06d}/position/value"][frame]
+        edges = f[f"particles/task_{task:06d}/box/edges"]
+        cell = edges["value"][frame] if isinstance(edges, h5py.Group) else edges[()]
+    box = np.diag(cell) if np.ndim(cell) == 2 else np.asarray(cell)
+    count = 0
+    for i in range(len(x)):
+        for j in range(i + 1, len(x)):
+            d = x[j] - x[i]
+            d[:2] -= box[:2] * np.round(d[:2] / box[:2])
+            count += np.linalg.norm(d) < rc
+    return 2.0 * count / len(x)
+
+
+def test_neighbour_counts_equal_a_direct_count(runs, tmp_path):
+    out = tmp_path / "d96"
+    assert regenerate(runs, out) == 0
+    table = rows(out / "neighbours.csv")
+    first = [r for r in table if r["model"] == "hydro" and float(r["strain"]) == 0.0]
+    assert len(first) == 1 and first[0]["realisations"] == "2"
+    assert len([r for r in table if r["model"] == "hydro"]) == 4   # frames at strain 0 ... 0.15
+    for rc in (2.00, 2.01, 2.05):
+        want = np.mean([direct_neighbours(runs[0], t, 0, rc) for t in (0, 1)])
+        assert math.isclose(float(first[0][f"n_{rc:.2f}"]), want, abs_tol=1e-12), rc
+    # the cut-offs order the counts
+    for r in table:
+        assert float(r["n_2.00"]) <= float(r["n_2.01"]) <= float(r["n_2.05"])
+
+
+def test_tables_are_byte_identical_when_regenerated(runs, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert regenerate(runs, a) == 0 and regenerate(runs, b) == 0
+    for name in ("monolayer.csv", "ratio.csv", "neighbours.csv", "windows.csv", "hydro/viscosity.csv",
+                 "repulsion/errors.csv"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def test_bad_input_exits_2_and_writes_nothing(runs, tmp_path, capsys):
+    hydro, rep = runs
+    out = tmp_path / "bad"
+    assert SCRIPT.main(["--hydro", str(rep), "-o", str(out)]) == 2
+    assert "interparticle.kind is 'repulsion'" in capsys.readouterr().err
+    assert SCRIPT.main(["--hydro", str(hydro), "--repulsion", str(hydro), "-o", str(out)]) == 2
+    assert SCRIPT.main(["--hydro", str(tmp_path / "missing.h5"), "-o", str(out)]) == 2
+    assert not out.exists()
+    with pytest.raises(SystemExit) as exc:
+        SCRIPT.main(["-o", str(out)])
+    assert exc.value.code == 2
