@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from monolayer_table import (analysed_samples, eta_of, overlap_statistics,  # noqa: E402
                              ratio_of, reduce_model)
 
-from sdmpi.analysis.reduce import (COMPONENTS, ReduceError, medium_viscosity,  # noqa: E402
+from sdmpi.analysis.reduce import (TABLE_COMPONENTS, ReduceError, medium_viscosity,  # noqa: E402
                                    open_run, read_stress, steady_quantities)
 from sdmpi.analysis.report import write_all  # noqa: E402
 from sdmpi.analysis.trajectories import pair_counts, read  # noqa: E402
@@ -169,8 +169,8 @@ def task_windows(summary, f, task, width):
     per = max(int(round(width / (task.dt * job.shear.rate))), 1)
     stress = read_stress(f, job, task, end, columns=slice(None))       # (C, end, 6)
     eta = steady_quantities(stress, job.shear.rate)[:, 0]             # (C, end)
-    hydro = COMPONENTS.index("hydrodynamic") - 1
-    inter = COMPONENTS.index("interparticle") - 1
+    hydro = TABLE_COMPONENTS.index("hydrodynamic") - 1
+    inter = TABLE_COMPONENTS.index("interparticle") - 1
     out = {}
     for k in range(end // per):
         part = eta[:, k * per:(k + 1) * per].mean(axis=1)
