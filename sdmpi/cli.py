@@ -195,6 +195,14 @@ def hydrodynamics_line(job) -> str:
     return hyd.model
 
 
+def integrator_line(job) -> str:
+    """The time integrator (integration.scheme) and, where the far field is held between
+    refreshes (hydrodynamics.far_field_refresh > 0), its interval."""
+    refresh = job.hydrodynamics.far_field_refresh
+    held = f"; far-field mobility held {refresh:g} [{job.time_unit}] between refreshes" if refresh > 0 else ""
+    return job.integration.scheme + held
+
+
 def summary(job) -> str:
     """A few lines describing a resolved job: physics, task groups, tasks and cost."""
     s, unit, tasks = job.shear, job.time_unit, enumerate_tasks(job)
@@ -217,6 +225,7 @@ def summary(job) -> str:
         f"  shear {shear}; Brownian {'on' if job.brownian.enabled else 'off'}; "
         f"time unit {unit}",
         f"  hydrodynamics: {hydrodynamics_line(job)}",
+        f"  integrator: {integrator_line(job)}",
     ]
     from .config.units import scales
 

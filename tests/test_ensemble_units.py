@@ -140,7 +140,8 @@ def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):
 
 def test_validate_summary_names_the_hydrodynamics_run_uses(capsys):
     """hydrodynamics.lubrication = false turns the stokesian model into its far field
-    alone: `sdmpi validate` says so rather than printing the model's name only."""
+    alone: `sdmpi validate` says so rather than printing the model's name only; the
+    integrator and a held far field are named too."""
     from sdmpi.cli import main
 
     demo = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
@@ -149,3 +150,8 @@ def test_validate_summary_names_the_hydrodynamics_run_uses(capsys):
     assert main(["validate", demo, "--set", "hydrodynamics.lubrication=false"]) == 0
     out = capsys.readouterr().out
     assert "stokesian without lubrication" in out and 'as hydrodynamics.model = "far-field"' in out
+    monolayer = str(Path(__file__).parents[1] / "jobs" / "dratler1996_hydro.toml")
+    assert main(["validate", monolayer, "--set", 'integration.scheme="adams-bashforth-4"',
+                 "--set", "hydrodynamics.far_field_refresh=0.1"]) == 0
+    assert ("  integrator: adams-bashforth-4; far-field mobility held 0.1 [1/gamma_dot] between "
+            "refreshes\n") in capsys.readouterr().out
