@@ -475,7 +475,8 @@ def _add_reduce(subparsers) -> None:
     parser.add_argument(
         "--gk-lag0", default=None, metavar="RULE",
         help="runs at rest: the short-time rule, how the first lags of G(t) are treated "
-             "(default contact, validated for free draining; the rules and when each "
+             "(default: contact without lubrication, validated for free draining; lag1 "
+             "with it; the rules and when each "
              "applies: docs/reduce.md)")
     parser.set_defaults(handler=_reduce)
 

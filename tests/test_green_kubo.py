@@ -483,3 +483,18 @@ def test_dilute_free_draining_at_rest_gives_the_exact_dilute_relaxation_and_modu
         r = red.value(g.phi, w, "collision", col) / phi2 / ex
         s = red.value(g.phi, w, "collision", col + "_err") / phi2 / ex
         assert s < 0.5 and lo - 3 * s < r < hi + 3 * s, (w, col, r, s)
+
+
+def test_default_short_time_rule_follows_the_lubrication():
+    """Without lubrication G(t) rises as t^-1/2 at short times (rule "contact"); with it
+    G(t) is finite at t = 0 (rule "lag1", docs/reduce.md)."""
+    from sdmpi.analysis.at_rest import default_lag0
+    from sdmpi.config import parse_job
+
+    def rule(text):
+        return default_lag0(parse_job("[shear]\nprotocol = \"none\"\n" + text))
+
+    assert rule('[hydrodynamics]\nmodel = "free-draining"\n') == "contact"
+    assert rule('[hydrodynamics]\nmodel = "far-field"\n') == "contact"
+    assert rule('[hydrodynamics]\nmodel = "stokesian"\n') == "lag1"
+    assert rule('[hydrodynamics]\nmodel = "stokesian"\nlubrication = false\n') == "contact"

@@ -58,6 +58,7 @@ import numpy as np
 
 from ..config.stresses import CONTRIBUTIONS
 from ..ensemble.h5 import open_read
+from ..registry import HYDRODYNAMIC_MODELS
 from . import green_kubo as gk
 from .reduce import (MODULI_COLUMNS, TABLE_COMPONENTS, PartialRunWarning, ReduceError,
                      medium_moduli, open_runs, read_stress)
@@ -247,6 +248,15 @@ def quiescent(path) -> bool:
         return False
 
 
+def default_lag0(job) -> str:
+    """The short-time rule a run at rest gets by default: "contact" without lubrication
+    (a G(t) rising as t^-1/2 at short times, validated for free draining), "lag1" with it
+    (a G(t) finite at t = 0, where "contact" over-reads G'' at high frequency:
+    docs/validation/green_kubo/README.md)."""
+    hyd = job.hydrodynamics
+    return "lag1" if HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication else "contact"
+
+
 def reduce_at_rest(paths, *, window=None, lag0=None, medium=None, omega=None) -> RestReduction:
     """Green-Kubo reduction of one or several run files at rest of the same system.
 
@@ -266,7 +276,7 @@ def reduce_at_rest(paths, *, window=None, lag0=None, medium=None, omega=None) ->
         raise ReduceError(f"{paths[0]}: Green-Kubo needs an isotropic bulk suspension; "
                           f"system.geometry = {job.system.geometry!r} is not reduced at rest")
     model = job.hydrodynamics.model
-    rule = lag0 or "contact"
+    rule = lag0 or default_lag0(job)
     if rule not in gk.LAG0_RULES:
         raise ReduceError(f"lag0 = {rule!r}; allowed: {', '.join(gk.LAG0_RULES)}")
     if window is not None and not (window > 0 and math.isfinite(window)):

@@ -69,11 +69,11 @@ and lags 5-32 lie on a plateau of 1.13-1.20 (the O(phi^3) excess). (2) The sampl
 Brownian stress of a run with hydrodynamic interactions is an unbiased estimate of
 -kT div(R_SU R_FU^-1) plus zero-mean noise drawn with the step's own random displacement
 (Banchio & Brady, J. Chem. Phys. 118, 10323 (2003)); the noise adds its variance to lag 0.
-So ``lag0 = "contact"`` (the reducer's choice) replaces lags 0-4 (:data:`CONTACT_REPLACED`)
-by the step means of c t^-1/2 + b fitted (least squares) to lags 5-20
+So ``lag0 = "contact"`` (the reducer's default without lubrication,
+`sdmpi.analysis.at_rest.default_lag0`) replaces lags 0-4 (:data:`CONTACT_REPLACED`) by the step means of c t^-1/2 + b fitted (least squares) to lags 5-20
 (:data:`CONTACT_FIT_LAGS`): the short-time form of hard spheres, whose contact boundary
 layer gives G ~ t^-1/2 (Brady 1993; the dilute limit,
-:func:`.models.dilute_hard_sphere_relaxation`), and a constant for stresses that are smooth
+:func:`.analytic.dilute_hard_sphere_relaxation`), and a constant for stresses that are smooth
 over a few steps. ``lag0 = "keep"`` uses the sampled lags as they are; ``"lag1"`` replaces
 lag 0 alone by lag 1 (it removes white estimator noise, but not the collision stream's
 lag-1 deficit); ``"linear"`` replaces lags 0-4 by the straight line a + b t fitted (least
@@ -108,7 +108,7 @@ WINDOW_FRACTION = 0.125
 MAX_OMEGA_DT = 0.2
 #: the omega grid: 2 pi 2^(j/POINTS_PER_OCTAVE), j integer
 POINTS_PER_OCTAVE = 4
-#: the short-time rules (module docstring; "contact" is the reducer's)
+#: the short-time rules (module docstring; the reducer's default: at_rest.default_lag0)
 LAG0_RULES = ("keep", "lag1", "contact", "linear")
 #: the lags fitted by the "contact" and "linear" rules, and the lags they replace
 CONTACT_FIT_LAGS = tuple(range(5, 21))

@@ -258,7 +258,7 @@ def medium_moduli(job: Job, omega):
     """(G'_m, G''_m) of the suspending medium alone, in eta_m/t_D (Schaink et al. eq. 36, 19).
 
     Newtonian: sigma_xy = eta_m gamma_dot, so G' = 0 and G'' = eta_m w = w (eta_m = 1).
-    Maxwell, modes (eta_k, lambda_k): :func:`.models.maxwell_moduli`,
+    Maxwell, modes (eta_k, lambda_k): :func:`.analytic.maxwell_moduli`,
     G' = sum_k eta_k lambda_k w^2/(1 + (lambda_k w)^2), G'' = sum_k eta_k w/(1 + (lambda_k w)^2).
     Exact: the reducer reports them with zero error."""
     if job.medium.kind == "maxwell":
