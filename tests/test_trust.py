@@ -139,3 +139,16 @@ def test_group_labels_name_the_control_variable():
     assert group_labels(SimpleNamespace(columns=("phi", "omega")), rows) == ["φ = 0.45, ω = 25.13"]
     rows = [{"phi": 0.3, "rate": 2.0}]
     assert group_labels(SimpleNamespace(columns=("phi", "rate")), rows) == ["φ = 0.3, γ̇ = 2"]
+
+
+def test_monolayer_overlaps_are_reported_as_kept():
+    """Monolayers keep and count their overlaps (Dratler & Schowalter 1996): the warning
+    says so instead of "corrected"."""
+    from types import SimpleNamespace
+
+    row = {"phi": 0.6, "rate": 1.0, "overlaps_per_step": 2.0, "midpoint_overlaps_per_step": 0.0,
+           "min_gap_min": 0.0}
+    for geometry, word in (("monolayer", "kept"), ("bulk", "corrected")):
+        red = SimpleNamespace(columns=("phi", "rate"),
+                              job=SimpleNamespace(system=SimpleNamespace(geometry=geometry)))
+        assert f"2 overlapping pairs {word} per step at the start" in warnings_of(red, [row])[0]

@@ -148,12 +148,14 @@ def trust_rows(red) -> list[dict]:
 def warnings_of(red, rows) -> list[str]:
     """The threshold warnings of the trust report (module docstring)."""
     out = []
+    # monolayers keep and count their overlaps (Dratler & Schowalter 1996), others correct them
+    handled = "kept" if red.job.system.geometry == "monolayer" else "corrected"
     for row in rows:
         where = f"phi = {row['phi']:g}, {red.columns[1]} = {row[red.columns[1]]:.6g}"
         for key, name in (("overlaps_per_step", "start"),
                           ("midpoint_overlaps_per_step", "Brownian midpoint")):
             if row[key] > OVERLAPS_PER_STEP_WARN:
-                out.append(f"{where}: {row[key]:.3g} overlapping pairs corrected per step at "
+                out.append(f"{where}: {row[key]:.3g} overlapping pairs {handled} per step at "
                            f"the {name} (above {OVERLAPS_PER_STEP_WARN:g}): the time step is "
                            f"large for the closest pairs; if the moduli matter at this "
                            f"level, check them at a smaller dt (docs/reduce.md#trust-report)")
