@@ -80,3 +80,14 @@ def test_far_field_refresh_refused_where_it_does_not_apply(sets, why):
     res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=120)
     assert res.returncode == 2 and "hydrodynamics.far_field_refresh = 0.1" in res.stderr and why in res.stderr, \
         res.stderr
+
+
+def test_far_field_refresh_with_auto_follows_what_auto_resolves_to():
+    """solver.backend = "auto" holds the far field where it resolves to a direct backend
+    (N = 8: dense) and is refused where it resolves to petsc-krylov (N >= 300)."""
+    from sdmpi.config import JobError
+
+    sets = [*STEADY[:2], "hydrodynamics.far_field_refresh=0.1", 'solver.backend="auto"']
+    assert sdmpi.load_job("jobs/demo.toml", sets).hydrodynamics.far_field_refresh == 0.1  # N = 8: dense
+    with pytest.raises(JobError, match="held only by the backends that form it"):
+        sdmpi.load_job("jobs/demo.toml", [*sets, "system.n_particles=400"])

@@ -13,8 +13,8 @@ import dataclasses
 import math
 from collections.abc import Callable
 
-from ..registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, drift_schemes_for,
-                        several_rank_choices)
+from ..registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, backend_for,
+                        drift_schemes_for, several_rank_choices)
 from .problems import Problem
 from .schema import START_PHI_LIMIT, TWO_PI, Job, quoted
 
@@ -326,7 +326,7 @@ def scheme_problems(job, backend: str) -> list[Problem]:
 
 def _far_field_refresh(job):
     """A far field held between refreshes needs a model with one on a backend that forms
-    it, and no Brownian motion (whose drift is the divergence of the configuration's own
+    it (solver.backend, or what "auto" resolves to), and no Brownian motion (whose drift is the divergence of the configuration's own
     mobility)."""
     hyd = job.hydrodynamics
     if hyd.far_field_refresh == 0.0:
@@ -337,8 +337,9 @@ def _far_field_refresh(job):
              "0, or brownian.enabled = false"),
             (not HYDRODYNAMIC_MODELS[hyd.model].solves, f"the {hyd.model} model has no far field",
              f"0 with hydrodynamics.model = \"{hyd.model}\""),
-            (job.solver.backend not in direct, "the far field is held only by the backends that form it",
-             f"0, or solver.backend = {quoted(direct)}")):
+            (backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task) not in direct,
+             "the far field is held only by the backends that form it",
+             f"0, or solver.backend = {quoted(direct)} (or \"auto\" where it resolves to one)")):
         if broken:
             return [Problem("hydrodynamics.far_field_refresh", why, hyd.far_field_refresh, allowed=allowed)]
     return []

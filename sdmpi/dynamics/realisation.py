@@ -76,11 +76,11 @@ class RealisationFailed(RuntimeError):
 #: kT in sdmpi's reduced units (a = 1, eta_m = 1, D0 = 1)
 KT_REDUCED = 6 * math.pi
 #: stress component order of the 6-vectors
-COMPONENTS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+SIX_VECTOR_INDICES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
-#: the 6-vector components (COMPONENTS) of the basis tensors: (6, 5), BASIS[m][a, b]
-_SIX_OF_FIVE = np.array([[BASIS[m, a, b] for m in range(5)] for a, b in COMPONENTS])
+#: the 6-vector components (SIX_VECTOR_INDICES) of the basis tensors: (6, 5), BASIS[m][a, b]
+_SIX_OF_FIVE = np.array([[BASIS[m, a, b] for m in range(5)] for a, b in SIX_VECTOR_INDICES])
 
 
 def bulk_stress(tensors, volume):
@@ -91,7 +91,7 @@ def bulk_stress(tensors, volume):
 def symmetric_six(matrix):
     """The symmetric part of a 3x3 matrix as a 6-vector xx yy zz xy xz yz."""
     sym = 0.5 * (matrix + matrix.T)
-    return np.array([sym[a, b] for a, b in COMPONENTS])
+    return np.array([sym[a, b] for a, b in SIX_VECTOR_INDICES])
 
 
 def protocol_of(job, task):
