@@ -8,6 +8,8 @@ mobility/resistance that couple two such tensors are symmetric 5x5 matrices:
     B^3 = (xy + yx)/sqrt2,  B^4 = (xz + zx)/sqrt2,  B^5 = (yz + zy)/sqrt2.
 """
 
+from __future__ import annotations
+
 import numpy as np
 
 _S2 = np.sqrt(2.0)
@@ -22,11 +24,25 @@ BASIS[3, 0, 2] = BASIS[3, 2, 0] = 1 / _S2
 BASIS[4, 1, 2] = BASIS[4, 2, 1] = 1 / _S2
 
 
-def to_five(tensor):
-    """(..., 3, 3) symmetric traceless tensors -> (..., 5) components in BASIS."""
+def to_five(tensor: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) symmetric traceless tensors -> (..., 5) components in BASIS.
+
+    Args:
+        tensor: (..., 3, 3) symmetric traceless tensors (any unit).
+
+    Returns:
+        (..., 5) components t_m = T : B^m, in the unit of tensor.
+    """
     return np.einsum("...ij,mij->...m", tensor, BASIS)
 
 
-def from_five(vector):
-    """(..., 5) components -> (..., 3, 3) symmetric traceless tensors."""
+def from_five(vector: np.ndarray) -> np.ndarray:
+    """(..., 5) components -> (..., 3, 3) symmetric traceless tensors.
+
+    Args:
+        vector: (..., 5) components in BASIS (any unit).
+
+    Returns:
+        (..., 3, 3) symmetric traceless tensors sum_m v_m B^m, in the unit of vector.
+    """
     return np.einsum("...m,mij->...ij", vector, BASIS)
