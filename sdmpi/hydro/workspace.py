@@ -6,6 +6,8 @@ fills it. `work_array` hands out views of one growing buffer per name and thread
 caller must be done with a view before asking for the same name again.
 """
 
+from __future__ import annotations
+
 import threading
 
 import numpy as np
@@ -13,9 +15,17 @@ import numpy as np
 _LOCAL = threading.local()
 
 
-def work_array(name, shape):
+def work_array(name: str, shape: tuple[int, ...]) -> np.ndarray:
     """An uninitialised float64 C-contiguous array of `shape`, a view of this thread's
-    buffer `name` (valid until the next call with that name)."""
+    buffer `name` (valid until the next call with that name).
+
+    Args:
+        name: key of the per-thread buffer.
+        shape: shape of the array wanted.
+
+    Returns:
+        Uninitialised float64 array of `shape` (a view into the buffer `name`).
+    """
     size = 1
     for s in shape:
         size *= s
