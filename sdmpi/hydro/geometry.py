@@ -7,6 +7,8 @@ gamma -> gamma + Lx/Ly, so the strain is reduced to |gamma| <= Lx/(2 Ly) before 
 this keeps the lattice vectors short and makes every result periodic in the strain.
 """
 
+from __future__ import annotations
+
 import functools
 import math
 
@@ -14,8 +16,18 @@ import numba
 import numpy as np
 
 
-def check_box(box):
-    """Validate a box argument: None, or three finite positive lengths."""
+def check_box(box: np.ndarray | None) -> np.ndarray | None:
+    """Validate a box argument: None, or three finite positive lengths.
+
+    Args:
+        box: (3,) sides (Lx, Ly, Lz) (length unit of the radii), or None (unbounded fluid).
+
+    Returns:
+        The sides as a (3,) float array, or None.
+
+    Raises:
+        ValueError: wrong shape, or a side not finite and > 0.
+    """
     if box is None:
         return None
     box = np.asarray(box, dtype=float)
@@ -29,7 +41,7 @@ def check_box(box):
 class Lattice:
     """The periodic lattice of a box (Lx, Ly, Lz) sheared by Lees-Edwards strain."""
 
-    def __init__(self, box, strain=0.0):
+    def __init__(self, box: np.ndarray, strain: float = 0.0) -> None:
         box = check_box(box)
         strain = float(strain)
         if not math.isfinite(strain):
@@ -45,34 +57,57 @@ class Lattice:
         self.volume = float(lx * ly * lz)
 
     @functools.cached_property
-    def plane_density(self):
-        """|b_i| (3,): the inverse spacings of the lattice planes."""
+    def plane_density(self) -> np.ndarray:
+        """|b_i| (3,): the inverse spacings of the lattice planes (1/length)."""
         return np.linalg.norm(self.reciprocal, axis=1)
 
-    def wrap(self, positions):
-        """Map positions into the primary (sheared) cell, fractional coords in [0, 1)."""
+    def wrap(self, positions: np.ndarray) -> np.ndarray:
+        """Map positions into the primary (sheared) cell, fractional coords in [0, 1).
+
+        Args:
+            positions: (..., 3) positions (length unit of the box).
+
+        Returns:
+            (..., 3) the lattice images of the positions in the primary cell.
+        """
         frac = positions @ self.reciprocal.T
         frac -= np.floor(frac)
         return frac @ self.vectors
 
-    def nearest_image(self, displacements):
+    def nearest_image(self, displacements: np.ndarray) -> np.ndarray:
         """The lattice image of each displacement (..., 3) with fractional coordinates in
         [-1/2, 1/2]: the displacement itself whenever |d . b_i| < 1/2 for every reciprocal
         vector b_i, i.e. when it is shorter than half the distance between each pair of
-        opposite cell faces (used to unwrap positions between nearby times)."""
+        opposite cell faces (used to unwrap positions between nearby times).
+
+        Args:
+            displacements: (..., 3) displacements (length unit of the box).
+
+        Returns:
+            (..., 3) the nearest lattice images of the displacements.
+        """
         frac = displacements @ self.reciprocal.T
         frac -= np.round(frac)
         return frac @ self.vectors
 
     @property
-    def wave_basis(self):
-        """The rows 2 pi b_i (3, 3): the reciprocal lattice is k = n . wave_basis, n integer."""
+    def wave_basis(self) -> np.ndarray:
+        """The rows 2 pi b_i (3, 3) (1/length): the reciprocal lattice is
+        k = n . wave_basis, n integer."""
         return 2 * np.pi * self.reciprocal
 
-    def wave_vectors(self, kmax):
+    def wave_vectors(self, kmax: float) -> tuple[np.ndarray, np.ndarray]:
         """Reciprocal lattice vectors k = 2 pi n . b with 0 < |k| <= kmax, one of each
         +-k pair (the sums below use that the terms at -k are complex conjugates), and
-        their integer coordinates n: (k (nk, 3), n (nk, 3) int)."""
+        their integer coordinates n: (k (nk, 3), n (nk, 3) int).
+
+        Args:
+            kmax: largest wave number |k| (1/length).
+
+        Returns:
+            k: (nk, 3) wave vectors (1/length), in lexicographic order of n.
+            n: (nk, 3) int64 integer coordinates of k.
+        """
         counts = np.ceil(kmax * np.linalg.norm(self.vectors, axis=1) / (2 * np.pi)).astype(np.int64)
         size = int(np.prod(2 * counts + 1)) // 2
         out, index = np.empty((size, 3)), np.empty((size, 3), dtype=np.int64)
@@ -235,19 +270,48 @@ def _expected_pairs(n, lattice, reach):
     return int(1.1 * mean) + 16 * n
 
 
-def pairs_in_reach(positions, radii, lattice, reach_abs, reach_rel, candidates=None):
+def pairs_in_reach(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None, reach_abs: float,
+                   reach_rel: float, candidates: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], float] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`find_pairs`, or, when candidates = (images, reach) holds a `find_pairs` list of
     these positions and lattice to an absolute reach covering this one, that list filtered
-    (`pairs_within`): one search serves several reaches."""
+    (`pairs_within`): one search serves several reaches.
+
+    Args:
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii.
+        lattice: the periodic lattice, or None (unbounded fluid).
+        reach_abs: absolute part of the reach (length).
+        reach_rel: part of the reach per sum of radii a_i + a_j (dimensionless).
+        candidates: (images, reach) of an earlier `find_pairs` at absolute reach `reach`
+            (length), or None.
+
+    Returns:
+        i: (P,) int64 first sphere of each pair image.
+        j: (P,) int64 second sphere (i <= j).
+        shift: (P, 3) lattice translations (length): the separation is x_j + shift - x_i.
+    """
     if candidates is not None and candidates[1] >= reach_abs + 2.0 * reach_rel * float(np.max(radii)):
         return pairs_within(candidates[0], positions, radii, reach_abs, reach_rel)
     return find_pairs(positions, radii, lattice, reach_abs, reach_rel)
 
 
-def pairs_within(images, positions, radii, reach_abs, reach_rel):
+def pairs_within(images: tuple[np.ndarray, np.ndarray, np.ndarray], positions: np.ndarray, radii: np.ndarray,
+                 reach_abs: float, reach_rel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The images (i, j, shift) of a `find_pairs` list of a larger reach (same positions and
     lattice) that lie within reach_abs + reach_rel (a_i + a_j), in their order: a second
-    pair search at a shorter reach without scanning again."""
+    pair search at a shorter reach without scanning again.
+
+    Args:
+        images: (i (P,), j (P,), shift (P, 3)) of a `find_pairs` list.
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii.
+        reach_abs: absolute part of the reach (length).
+        reach_rel: part of the reach per sum of radii a_i + a_j (dimensionless).
+
+    Returns:
+        (i (Q,), j (Q,), shift (Q, 3)): the images within reach, in their order.
+    """
     return _within(np.ascontiguousarray(positions, dtype=float), np.ascontiguousarray(radii, dtype=float),
                    *images, float(reach_abs), float(reach_rel))
 
@@ -277,12 +341,26 @@ def _within(pos, radii, pi, pj, shift, reach_abs, reach_rel):
     return out_i, out_j, out_s
 
 
-def find_pairs(positions, radii, lattice, reach_abs, reach_rel):
+def find_pairs(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None, reach_abs: float,
+               reach_rel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs (i <= j) and lattice images within reach_abs + reach_rel (a_i + a_j):
     arrays i, j and shift vectors (so that the separation is x_j + shift - x_i), ordered
     by i, then j. With lattice None (unbounded fluid) only the zero shift is used.
     Self-images appear once per +-n pair. Large periodic boxes (>= 3 cells of the largest
-    reach per axis) are scanned with a cell list, O(N), others pair by pair, O(N^2)."""
+    reach per axis) are scanned with a cell list, O(N), others pair by pair, O(N^2).
+
+    Args:
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii.
+        lattice: the periodic lattice, or None (unbounded fluid).
+        reach_abs: absolute part of the reach (length).
+        reach_rel: part of the reach per sum of radii a_i + a_j (dimensionless).
+
+    Returns:
+        i: (P,) int64 first sphere of each pair image.
+        j: (P,) int64 second sphere (i <= j).
+        shift: (P, 3) lattice translations (length): the separation is x_j + shift - x_i.
+    """
     pos = np.ascontiguousarray(positions, dtype=float)
     radii = np.ascontiguousarray(radii, dtype=float)
     reach = float(reach_abs) + 2.0 * float(reach_rel) * (float(radii.max()) if len(radii) else 0.0)
