@@ -11,13 +11,17 @@ iterations. A backend is imported only when asked for. `auto` is not a backend b
 (`resolve_backend`).
 """
 
+from __future__ import annotations
+
+from typing import Any
+
 import numpy as np
 from scipy.linalg import lapack
 
 from ..registry import SOLVER_BACKENDS, backend_for
 from .backend import SolverBackend
 from .krylov import DEFAULT_TOL
-from .resistance import grand_resistance, split_resistance
+from .resistance import GrandResistance, SplitResistance, grand_resistance, split_resistance
 
 
 class DenseSolver(SolverBackend):
@@ -25,7 +29,7 @@ class DenseSolver(SolverBackend):
     resistance's freshly formed R_FU, finite by construction); R_FE, R_SU, R_SE act through the
     resistance's block form (`resistance.GrandResistance`)."""
 
-    def __init__(self, resistance, comm=None):  # comm: ignored (one rank)
+    def __init__(self, resistance: GrandResistance, comm: Any = None) -> None:  # comm: ignored (one rank)
         self.resistance = resistance
         self.n = resistance.n_particles
         self.noise_shape = (self.n, 6)
@@ -36,8 +40,16 @@ class DenseSolver(SolverBackend):
             raise np.linalg.LinAlgError(f"R_FU is not positive definite (potrf info {info})")
         self._upper = upper
 
-    def velocities(self, forces, einf):
-        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
+
+        Args:
+            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 6) velocities and angular velocities relative to the imposed flow.
+        """
         rhs = forces.ravel()
         if einf.any():
             rhs = rhs + self.resistance.strain_forces(einf)
@@ -46,49 +58,112 @@ class DenseSolver(SolverBackend):
             raise ValueError(f"potrs: illegal argument {-info}")
         return sol.reshape(self.n, 6)
 
-    def stresslets(self, velocities, einf):
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5).
+
+        Args:
+            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 5) stresslets (`basis` components, Stokes units).
+        """
         return self.resistance.stresslets(velocities, einf)
 
-    def brownian_forces(self, noise):
-        """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
+    def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
+        """C z for z (N, 6): a force sample with covariance R_FU (times z's variance).
+
+        Args:
+            noise: (N, 6) standard normal noise z.
+
+        Returns:
+            (N, 6) forces and torques C z.
+        """
         return (self._upper.T @ noise.ravel()).reshape(self.n, 6)
 
-    def brownian_velocities(self, noise):
-        """R_FU^-1 C z (N, 6) for z (N, 6) (C = U^T): U^-1 z, one triangular solve."""
+    def brownian_velocities(self, noise: np.ndarray) -> np.ndarray:
+        """R_FU^-1 C z (N, 6) for z (N, 6) (C = U^T): U^-1 z, one triangular solve.
+
+        Args:
+            noise: (N, 6) standard normal noise z.
+
+        Returns:
+            (N, 6) velocities and angular velocities R_FU^-1 C z.
+        """
         sol, info = lapack.dtrtrs(self._upper, noise.ravel(), lower=0)
         if info != 0:
             raise ValueError(f"trtrs: illegal argument {-info}")
         return sol.reshape(self.n, 6)
 
-    def mobility_forms(self, forces):
+    def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
         """f.R_FU^-1.f for each of the force sets forces (P, N, 6): |U^-T f|^2 with R_FU =
-        U^T U, one triangular solve for all P."""
+        U^T U, one triangular solve for all P.
+
+        Args:
+            forces: (P, N, 6) force/torque sets.
+
+        Returns:
+            (P,) the quadratic forms f.R_FU^-1.f.
+        """
         y, info = lapack.dtrtrs(self._upper, forces.reshape(len(forces), -1).T, lower=0, trans=1)
         if info != 0:
             raise ValueError(f"trtrs: illegal argument {-info}")
         return np.einsum("kp,kp->p", y, y)
 
 
-def resolve_backend(name, n_particles, comm=None):
+def resolve_backend(name: str, n_particles: int, comm: Any = None) -> str:
     """The backend `name` (a choice of solver.backend) stands for on the communicator comm
-    (None: one rank): itself, or what "auto" picks (`sdmpi.registry.backend_for`)."""
+    (None: one rank): itself, or what "auto" picks (`sdmpi.registry.backend_for`).
+
+    Args:
+        name: a choice of solver.backend (a registered backend or "auto").
+        n_particles: the number of spheres N.
+        comm: the MPI communicator, or None (one rank).
+
+    Returns:
+        The name of a registered backend.
+
+    Raises:
+        ValueError: name is not a choice of solver.backend.
+    """
     if name not in SOLVER_BACKENDS.choices():
         raise ValueError(f"solver must be one of {list(SOLVER_BACKENDS.choices())}, got {name!r}")
     return backend_for(name, n_particles, 1 if comm is None else comm.size)
 
 
-def assemble(name, *args, comm=None, **kwargs):
+def assemble(name: str, *args: Any, comm: Any = None, **kwargs: Any) -> GrandResistance | SplitResistance:
     """The resistance backend `name` needs: `grand_resistance(*args, **kwargs)`, or for
-    the matrix-free backends `split_resistance(*args, comm=comm, **kwargs)`."""
+    the matrix-free backends `split_resistance(*args, comm=comm, **kwargs)`.
+
+    Args:
+        name: a registered backend.
+        *args: positional arguments of `grand_resistance` / `split_resistance`.
+        comm: the MPI communicator of a matrix-free backend, or None (one rank).
+        **kwargs: keyword arguments of `grand_resistance` / `split_resistance`.
+
+    Returns:
+        The resistance of the configuration in the form the backend takes.
+    """
     if SOLVER_BACKENDS[name].matrix_free:
         return split_resistance(*args, comm=comm, **kwargs)
     return grand_resistance(*args, **kwargs)
 
 
-def make_solver(name, resistance, comm=None, tolerance=DEFAULT_TOL, lanczos_tolerance=None) -> SolverBackend:
+def make_solver(name: str, resistance: GrandResistance | SplitResistance, comm: Any = None,
+                tolerance: float = DEFAULT_TOL, lanczos_tolerance: float | None = None) -> SolverBackend:
     """The backend `name` for a resistance from `assemble(name, ...)`, solving on the MPI
     communicator `comm` (None: this rank alone; collective over comm for the PETSc
     backends); tolerance: relative residual of the iterative backends, lanczos_tolerance:
-    accuracy of their Brownian square roots (None: tolerance)."""
+    accuracy of their Brownian square roots (None: tolerance).
+
+    Args:
+        name: a registered backend.
+        resistance: the resistance from `assemble(name, ...)`.
+        comm: the MPI communicator, or None (this rank alone).
+        tolerance: relative residual of iterative solves (dimensionless).
+        lanczos_tolerance: relative accuracy of the Brownian square roots, or None.
+
+    Returns:
+        The backend, factorised or ready to iterate.
+    """
     return SOLVER_BACKENDS[name].load().build(resistance, comm, tolerance, lanczos_tolerance)
