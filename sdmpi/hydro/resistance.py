@@ -21,7 +21,11 @@ list within the lubrication cut-off of 2 radii holds about as many entries as th
 partitions up to N ~ 50, and the dense products stream them several times faster).
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -67,26 +71,43 @@ class GrandResistance:
     lubrication_setup: tuple | None = None
 
     @property
-    def n_particles(self):
+    def n_particles(self) -> int:
+        """The number of spheres N."""
         return self.positions.shape[0]
 
-    def r_fu_rows(self, start=0, stop=None):
+    def r_fu_rows(self, start: int = 0, stop: int | None = None) -> np.ndarray:
         """Rows start:stop of R_FU = S^-1 + L_FU (a fresh C-ordered array; all 6N rows by
-        default)."""
+        default).
+
+        Args:
+            start: first row (of 6N).
+            stop: end of the rows (exclusive), None: 6N.
+
+        Returns:
+            (stop - start, 6N) rows of R_FU (Stokes units, viscosity 1).
+        """
         rows = slice(start, stop)
         if self.lubrication_dense is None:
             return self.s_inverse[rows].copy()
         return self.s_inverse[rows] + self.lubrication_dense[0][rows]
 
     @property
-    def r_fu(self):
+    def r_fu(self) -> np.ndarray:
         """R_FU = S^-1 + L_FU (6N x 6N, a fresh array)."""
         return self.r_fu_rows()
 
-    def far_inverse_product(self, v, rows=None):
+    def far_inverse_product(self, v: np.ndarray, rows: str | None = None) -> np.ndarray:
         """M_inf^-1 v (N, 11) for v (N, 11): with z = U_b^-T v_b, y_a = S^-1 (v_a - X z)
         and y_b = U_b^-1 (z - X^T y_a) (= M_bb^-1 v_b - M_bb^-1 M_ba y_a). rows "rigid":
-        y_a alone (N, 6); "strain": y_b alone (N, 5); None: both (N, 11)."""
+        y_a alone (N, 6); "strain": y_b alone (N, 5); None: both (N, 11).
+
+        Args:
+            v: (N, 11) generalized velocities (U, Omega, E) per sphere.
+            rows: "rigid", "strain" or None (which rows of the product).
+
+        Returns:
+            (N, 6), (N, 5) or (N, 11): M_inf^-1 v (generalized forces, Stokes units).
+        """
         n = self.n_particles
         v_a, v_b = np.ascontiguousarray(v[:, :6]).ravel(), np.ascontiguousarray(v[:, 6:]).ravel()
         z = _triangular_solve(self.chol_bb, v_b, 1) if v_b.any() else None  # none for rigid-body v
@@ -104,9 +125,18 @@ class GrandResistance:
         out[:, 6:] = y_b.reshape(n, 5)
         return out
 
-    def lubrication_product(self, v, rows=None, strain_only=False):
+    def lubrication_product(self, v: np.ndarray, rows: str | None = None, strain_only: bool = False) -> np.ndarray:
         """L v (N, 11) for v (N, 11) by the dense partitions; rows "rigid" (N, 6) or "strain"
-        (N, 5): those rows alone; strain_only: v is zero on the rigid-body dofs (skipped)."""
+        (N, 5): those rows alone; strain_only: v is zero on the rigid-body dofs (skipped).
+
+        Args:
+            v: (N, 11) generalized velocities (U, Omega, E) per sphere.
+            rows: "rigid", "strain" or None (all 11).
+            strain_only: v vanishes on the rigid-body dofs.
+
+        Returns:
+            (N, 6), (N, 5) or (N, 11): L v (generalized forces, Stokes units).
+        """
         n = self.n_particles
         if self.lubrication_dense is None:
             return np.zeros((n, {None: NDOF, "rigid": 6, "strain": 5}[rows]))
@@ -125,36 +155,72 @@ class GrandResistance:
             parts.append(strain.reshape(n, 5))
         return parts[0] if len(parts) == 1 else np.hstack(parts)
 
-    def product(self, v, rows=None, strain_only=False):
+    def product(self, v: np.ndarray, rows: str | None = None, strain_only: bool = False) -> np.ndarray:
         """R v (N, 11) for v (N, 11); rows "rigid" (N, 6) or "strain" (N, 5): those rows alone;
-        strain_only: v is zero on the rigid-body dofs."""
+        strain_only: v is zero on the rigid-body dofs.
+
+        Args:
+            v: (N, 11) generalized velocities (U, Omega, E) per sphere.
+            rows: "rigid", "strain" or None (all 11).
+            strain_only: v vanishes on the rigid-body dofs.
+
+        Returns:
+            (N, 6), (N, 5) or (N, 11): R v (generalized forces (F, L, S), Stokes units).
+        """
         return self.far_inverse_product(v, rows) + self.lubrication_product(v, rows, strain_only)
 
-    def apply(self, rigid, strain):
+    def apply(self, rigid: np.ndarray, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rigid (N, 6) and strain (N, 5) rows of R (rigid, strain): R_FU u + R_FE e and
-        R_SU u + R_SE e for u = rigid, e = strain."""
+        R_SU u + R_SE e for u = rigid, e = strain.
+
+        Args:
+            rigid: (N, 6) velocities and angular velocities u.
+            strain: (N, 5) rates of strain e (`basis` components).
+
+        Returns:
+            (N, 6) forces/torques and (N, 5) stresslets (Stokes units).
+        """
         out = self.product(np.hstack([rigid, strain]))
         return out[:, :6], out[:, 6:]
 
-    def strain_forces(self, einf):
-        """R_FE e_inf (6N,) for einf (N, 5) (zero without a strain)."""
+    def strain_forces(self, einf: np.ndarray) -> np.ndarray:
+        """R_FE e_inf (6N,) for einf (N, 5) (zero without a strain).
+
+        Args:
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (6N,) forces and torques, sphere by sphere (Stokes units).
+        """
         if not np.any(einf):
             return np.zeros(6 * self.n_particles)
         v = np.zeros((self.n_particles, NDOF))
         v[:, 6:] = einf
         return self.product(v, "rigid", strain_only=True).ravel()
 
-    def stresslets(self, velocities, einf):
-        """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5)."""
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5).
+
+        Args:
+            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 5) stresslets (`basis` components, Stokes units).
+        """
         v = np.empty((self.n_particles, NDOF))
         np.negative(velocities, out=v[:, :6])
         v[:, 6:] = einf
         return self.product(v, "strain")
 
-    def blocks(self):
+    def blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(R_FU, R_FE, R_SU, R_SE) as fresh dense matrices (dofs particle by particle within
         each; R_SU = R_FE^T): formed explicitly from the block form, for reference and
-        tests (a step uses `apply`)."""
+        tests (a step uses `apply`).
+
+        Returns:
+            R_FU (6N, 6N), R_FE (6N, 5N), R_SU (5N, 6N), R_SE (5N, 5N).
+        """
         n = self.n_particles
         x = _triangular_solve(self.chol_bb, np.asfortranarray(self.x_ab.T), 0)  # M_bb^-1 M_ba (5N x 6N)
         inv_ab = -self.s_inverse @ x.T
@@ -166,7 +232,7 @@ class GrandResistance:
         return self.r_fu, r_fe, r_fe.T, inv_bb + l_se
 
     @property
-    def matrix(self):
+    def matrix(self) -> np.ndarray:
         """The whole R (11N x 11N, dofs particle by particle), formed from `blocks` (for
         reference and tests)."""
         n = self.n_particles
@@ -238,8 +304,17 @@ def _mirror_upper(a):
             a[i, j] = a[j, i]
 
 
-def check_overlaps(pairs, radii, max_overlap):
-    """ValueError if a pair overlaps by more than max_overlap of its mean radius."""
+def check_overlaps(pairs: PairList, radii: np.ndarray, max_overlap: float) -> None:
+    """ValueError if a pair overlaps by more than max_overlap of its mean radius.
+
+    Args:
+        pairs: the close pairs (`lubrication.close_pairs`).
+        radii: (N,) sphere radii.
+        max_overlap: largest allowed overlap depth, in mean radii of the pair.
+
+    Raises:
+        ValueError: a deeper overlap, naming the pair.
+    """
     if len(pairs.gap) == 0:
         return
     depth = -pairs.gap / (0.5 * (radii[pairs.i] + radii[pairs.j]))
@@ -275,15 +350,33 @@ def _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff, min_gap,
     return lattice, pos, pairs, plan
 
 
-def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
-                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
-                     max_overlap=None, plan=None, far=None):
+def grand_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
+                     lubrication: bool = True, ewald_tol: float = DEFAULT_EWALD_TOL, cutoff: float = DEFAULT_CUTOFF,
+                     min_gap: float = DEFAULT_MIN_GAP, max_overlap: float | None = None, plan: HydroPlan | None = None,
+                     far: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> GrandResistance:
     """Assemble R (`GrandResistance`). Positions are wrapped into the sheared cell, unless a
     plan from an earlier call is given: then they are used as given with the plan's pair
     sets (for displaced configurations about that one). max_overlap (mean radii): raise
     ValueError for deeper overlaps before the expensive work. far: the far-field blocks
     (S^-1, X, U_b) of another configuration to use instead of those at these positions
-    (the far field held fixed between refreshes; None: computed here)."""
+    (the far field held fixed between refreshes; None: computed here).
+
+    Args:
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii a.
+        box: (3,) sides of the periodic Lees-Edwards box, or None (unbounded fluid).
+        strain: Lees-Edwards strain of the box.
+        lubrication: add the pairwise lubrication.
+        ewald_tol: relative accuracy of the Ewald sums.
+        cutoff: lubrication cut-off (`lubrication.DEFAULT_CUTOFF`).
+        min_gap: smallest gap of a close pair (`lubrication.close_pairs`).
+        max_overlap: largest allowed overlap (mean radii), None: not checked.
+        plan: the pair sets of an earlier call, or None.
+        far: far-field blocks (S^-1, X, U_b) from `far_field_blocks`, or None.
+
+    Returns:
+        The resistance R in block form (Stokes units, viscosity 1).
+    """
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan, far_field=True, ewald_tol=ewald_tol)
@@ -295,17 +388,40 @@ def grand_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
     return from_blocks(far, lub, pairs, plan, pos, radii)
 
 
-def from_blocks(far, lub, pairs, plan, positions, radii):
+def from_blocks(far: tuple[np.ndarray, np.ndarray, np.ndarray], lub: tuple | None, pairs: PairList,
+                plan: HydroPlan, positions: np.ndarray, radii: np.ndarray) -> GrandResistance:
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
     lubrication lub: (dense partitions, setup) from `lubrication.lubrication_partitions`
-    (None: none)."""
+    (None: none).
+
+    Args:
+        far: (S^-1 (6N, 6N), X (6N, 5N), U_b (5N, 5N)).
+        lub: (dense partitions, setup), or None.
+        pairs: the close pairs.
+        plan: the pair sets of the configuration.
+        positions: (N, 3) sphere centres (wrapped).
+        radii: (N,) sphere radii.
+
+    Returns:
+        The resistance R in block form.
+    """
     s_inverse, x_ab, chol_bb = far
     dense, setup = (None, None) if lub is None else lub
     return GrandResistance(s_inverse, x_ab, chol_bb, dense, pairs, plan, positions, radii, setup)
 
 
-def far_field_blocks(mob):
-    """(S^-1, X = M_ab U_b^-1, U_b) of the far-field mobility mob (11N x 11N) (module docstring)."""
+def far_field_blocks(mob: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S^-1, X = M_ab U_b^-1, U_b) of the far-field mobility mob (11N x 11N) (module docstring).
+
+    Args:
+        mob: (11N, 11N) far-field mobility M_inf (Stokes units, viscosity 1).
+
+    Returns:
+        S^-1 (6N, 6N), X (6N, 5N, Fortran-ordered), U_b (5N, 5N) upper Cholesky factor of M_bb.
+
+    Raises:
+        FarFieldIndefinite: M_inf is not positive definite.
+    """
     n = mob.shape[0] // NDOF
     m_aa, m_ab, m_bb = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
     _partition(mob, m_aa, m_ab, m_bb)
@@ -319,7 +435,7 @@ def far_field_blocks(mob):
     return _spd_inverse_of_upper(schur).T, x, chol_bb
 
 
-def resistance_change(base, moved, vector, min_gap):
+def resistance_change(base: GrandResistance, moved: np.ndarray, vector: np.ndarray, min_gap: float) -> np.ndarray:
     """[R(moved) - R(base)] v (N, 11) for one vector v (N, 11), to first order in the
     displacement moved - base.positions (small, e.g. a random finite difference), with the
     pair sets of base (its plan) and without assembling or inverting anything at moved:
@@ -334,7 +450,17 @@ def resistance_change(base, moved, vector, min_gap):
     separations floored at min_gap as in `close_pairs`) and L(base) v by base's dense
     partitions. The lubrication difference carries a round-off of ~eps max|L v| (eps =
     2.2e-16), as the entries of L do (tests/test_resistance_change.py). The dropped term,
-    M^-1 Delta M M^-1 Delta M M^-1 v, is second order in the displacement."""
+    M^-1 Delta M M^-1 Delta M M^-1 v, is second order in the displacement.
+
+    Args:
+        base: the resistance at the base configuration.
+        moved: (N, 3) displaced sphere centres (length unit of the radii).
+        vector: (N, 11) generalized velocities v.
+        min_gap: smallest gap of a close pair (as in `close_pairs`).
+
+    Returns:
+        (N, 11) the change [R(moved) - R(base)] v (generalized forces, Stokes units).
+    """
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
     out = -base.far_inverse_product(far_field_product(moved, base.radii, base.plan.far, far_v) - vector)
@@ -345,12 +471,22 @@ def resistance_change(base, moved, vector, min_gap):
     return out
 
 
-def mobility_divergence(resistance_at, base, h=1e-5):
+def mobility_divergence(resistance_at: Callable[[np.ndarray, HydroPlan], GrandResistance], base: GrandResistance,
+                        h: float = 1e-5) -> tuple[np.ndarray, np.ndarray]:
     """The divergences (div M (6N,), div A (5N,)), (div X)_i = sum_j dX_ij/dx_j over the
     3N translations, of M = R_FU^-1 and A = R_SU R_FU^-1 at the configuration of the
     GrandResistance base, by centred finite differences of step h with base's pair sets
     (its plan): kT div M is the Brownian drift, -kT div A the mean Brownian stresslets.
-    resistance_at(positions, plan) assembles R (as `grand_resistance` with a plan)."""
+    resistance_at(positions, plan) assembles R (as `grand_resistance` with a plan).
+
+    Args:
+        resistance_at: assembles R at (positions (N, 3), plan).
+        base: the resistance at the configuration.
+        h: finite-difference step (length unit of the radii).
+
+    Returns:
+        div M (6N,) and div A (5N,), in units of M and A per length.
+    """
     n = base.n_particles
     div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
     for p in range(n):
@@ -388,7 +524,8 @@ class SplitResistance:
     lattice: Lattice | None  # the periodic box (None: unbounded fluid)
 
     @property
-    def n_particles(self):
+    def n_particles(self) -> int:
+        """The number of spheres N."""
         return self.positions.shape[0]
 
 
@@ -414,13 +551,24 @@ def _shared_lubrication(positions, radii, pairs, comm):
     return scipy.sparse.bsr_matrix((data, indices, indptr), shape=(n, n)), pi, pj, chol
 
 
-def split_resistance(positions, radii, box=None, strain=0.0, lubrication=True,
-                     ewald_tol=DEFAULT_EWALD_TOL, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP,
-                     max_overlap=None, plan=None, far_field=None, comm=None):
+def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
+                     lubrication: bool = True, ewald_tol: float = DEFAULT_EWALD_TOL, cutoff: float = DEFAULT_CUTOFF,
+                     min_gap: float = DEFAULT_MIN_GAP, max_overlap: float | None = None,
+                     plan: HydroPlan | None = None, far_field: str | None = None, comm: Any = None) -> SplitResistance:
     """The matrix-free form of `grand_resistance` (same arguments and pair sets): the
     far field by the operator `far_field` (`krylov.far_field_operator`: "spectral",
     "dense", None: by N; built on the MPI communicator comm), the
-    lubrication sparse (`lubrication.lubrication_sparse`, computed by comm's rank 0)."""
+    lubrication sparse (`lubrication.lubrication_sparse`, computed by comm's rank 0).
+
+    Args:
+        positions, radii, box, strain, lubrication, ewald_tol, cutoff, min_gap,
+            max_overlap, plan: as for `grand_resistance`.
+        far_field: "spectral", "dense" or None (chosen by N).
+        comm: the MPI communicator (collective over it), or None (this rank alone).
+
+    Returns:
+        The matrix-free resistance (Stokes units, viscosity 1).
+    """
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan)
