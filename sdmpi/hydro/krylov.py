@@ -64,14 +64,23 @@ a periodic box from DENSE_FAR_FIELD_MAX_N particles on) or "dense" (the Ewald ma
 `farfield`: small N, unbounded fluid).
 """
 
+from __future__ import annotations
+
 import atexit
 import weakref
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse
 
 from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
+
+if TYPE_CHECKING:
+    from .farfield import FarFieldPlan
+    from .geometry import Lattice
+    from .resistance import SplitResistance
 
 #: default relative residual of the saddle-point solves and the Lanczos square roots
 DEFAULT_TOL = 1e-8
@@ -138,24 +147,35 @@ def _near_blocks(pairs, rows, cols, n):
     return np.isin(rows * n + cols, np.concatenate([i * n + j, j * n + i]))
 
 
-def self_resistance_scale(phi):
+def self_resistance_scale(phi: float) -> float:
     """Factor on the isolated-sphere far-field resistance D^-1 in the preconditioner,
     (1 - phi)^-SELF_RESISTANCE_EXPONENT at volume fraction phi: the far-field resistance
     of a sphere among others exceeds the isolated one (hindered mobility), and a larger
     D^-1 approximates M^-1 better. Empirical (N = 1000, solver tolerance 1e-6, GMRES
     iterations of a shear-flow / a random-force solve, D^-1 scale 1 -> best): phi = 0.1
     17/17 -> 17/17 (scale 1-2); 0.3 27/27 -> 23/24 (3); 0.45 42/42 -> 31/33 (5-6);
-    0.55 59/57 -> 38/40 (8); the rule gives 1.3, 2.4, 4.5 and 7.4."""
+    0.55 59/57 -> 38/40 (8); the rule gives 1.3, 2.4, 4.5 and 7.4.
+
+    Args:
+        phi: volume fraction of the spheres (capped at 0.7).
+
+    Returns:
+        The dimensionless factor (1 - phi)^-SELF_RESISTANCE_EXPONENT.
+    """
     return (1.0 - min(phi, 0.7)) ** -SELF_RESISTANCE_EXPONENT
 
 
-def self_resistance_weights():
+def self_resistance_weights() -> np.ndarray:
     """(11,) weights w on the scaled self resistance, applied as W^1/2 D^-1 W^1/2: the
     SELF_RESISTANCE_WEIGHTS of translation, rotation and stresslet. Empirical (N = 1000,
     solver tolerance 1e-5, flow / force solve iterations, weights (1, 1, 1) -> (1.5, 1,
     0.6)): phi = 0.1 14/14 -> 13/12; 0.3 20/21 -> 17/18; 0.45 27/29 -> 24/25; 0.55 34/37
     -> 31/33 (at phi = 0.45: (2, 1, 0.5) 26/26, (1, 1, 0.5) 24/24 at N = 343, the
-    rotational weight 0.5-2 makes no difference)."""
+    rotational weight 0.5-2 makes no difference).
+
+    Returns:
+        (11,) dimensionless weights, 3 translational, 3 rotational, 5 stresslet.
+    """
     return np.repeat(SELF_RESISTANCE_WEIGHTS, [3, 3, 5])
 
 
@@ -168,12 +188,19 @@ def _rank_sum(comm, local):
     return total
 
 
-def long_waves(lattice):
+def long_waves(lattice: Lattice) -> np.ndarray:
     """Wave vectors k = 2 pi n.b (m, 3) of the lattice with 0 < |n|^2 <= LONG_WAVES, one of
     each pair +-k (the first nonzero component of n positive). By |n|, not |k|: in a tall
     monolayer cell the waves along z are uniform over the layer and do not help; choosing
     the same number of modes by |k| V^(1/3) instead took 19-24 Lanczos iterations against
-    17-21 (N = 400 and 1024, areal fraction 0.4, Lz = 2 L and 5 L; 27-31 without any)."""
+    17-21 (N = 400 and 1024, areal fraction 0.4, Lz = 2 L and 5 L; 27-31 without any).
+
+    Args:
+        lattice: the periodic lattice.
+
+    Returns:
+        (m, 3) wave vectors (1/length).
+    """
     reach = int(np.sqrt(LONG_WAVES))
     n = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
     norm2 = np.einsum("ij,ij->i", n, n)
@@ -210,7 +237,8 @@ class LongWaveFactor:
     #: with fewer rows than columns; P^T C P = I to 2e-15 measured also then, N = 5-90)
     GRAM_CUTOFF = 1e-13
 
-    def __init__(self, positions, radii, lattice, p0, p1, comm=None):
+    def __init__(self, positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None, p0: int, p1: int,
+                 comm: Any = None) -> None:
         self.comm = comm
         unique, which = np.unique(radii[p0:p1], return_inverse=True)
         self.d_root = (1.0 / np.sqrt([np.diag(self_mobility(a)) for a in unique]))[which].ravel()
@@ -255,12 +283,26 @@ class LongWaveFactor:
         trans += (self.u @ (self.c * t)).reshape(-1, 3)
         return y
 
-    def right(self, x):
-        """P x for this rank's rows x; collective over comm."""
+    def right(self, x: np.ndarray) -> np.ndarray:
+        """P x for this rank's rows x; collective over comm.
+
+        Args:
+            x: (11 (p1 - p0),) this rank's rows.
+
+        Returns:
+            (11 (p1 - p0),) this rank's rows of P x.
+        """
         return self.d_root * self._x_root(x)
 
-    def left(self, x):
-        """P^T x for this rank's rows x; collective over comm."""
+    def left(self, x: np.ndarray) -> np.ndarray:
+        """P^T x for this rank's rows x; collective over comm.
+
+        Args:
+            x: (11 (p1 - p0),) this rank's rows.
+
+        Returns:
+            (11 (p1 - p0),) this rank's rows of P^T x.
+        """
         return self._x_root(self.d_root * x)
 
 
@@ -283,27 +325,62 @@ class DenseFarField:
     """M_inf as a dense Ewald matrix (`farfield.far_field_mobility`) applied by products;
     every rank holds all of it (tests and small N)."""
 
-    def __init__(self, positions, radii, lattice, tol, plan=None):
+    def __init__(self, positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None, tol: float,
+                 plan: FarFieldPlan | None = None) -> None:
         # plan: a `farfield.FarFieldPlan` to reuse (small displacements), else made here
         self.plan = plan_far_field(positions, radii, lattice, tol) if plan is None else plan
         self.matrix = far_field_mobility(positions, radii, plan=self.plan)
 
-    def matvec(self, x):
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """M_inf x.
+
+        Args:
+            x: (11N,) generalized forces (F, L, S), sphere by sphere.
+
+        Returns:
+            (11N,) generalized velocities (U, Omega, E) (Stokes units, viscosity 1).
+        """
         return self.matrix @ x
 
 
-def far_field_kind(kind, n_particles, periodic=True):
+def far_field_kind(kind: str | None, n_particles: int, periodic: bool = True) -> str:
     """The far field `far_field_operator` builds for `kind` (None: spectral in a periodic
-    box from DENSE_FAR_FIELD_MAX_N particles on, else dense)."""
+    box from DENSE_FAR_FIELD_MAX_N particles on, else dense).
+
+    Args:
+        kind: "dense", "spectral" or None.
+        n_particles: the number of spheres N.
+        periodic: the box is periodic.
+
+    Returns:
+        kind, or the one chosen for None.
+    """
     if kind is not None:
         return kind
     return "spectral" if periodic and n_particles >= DENSE_FAR_FIELD_MAX_N else "dense"
 
 
-def far_field_operator(kind, positions, radii, lattice, tol, comm=None, plan=None):
+def far_field_operator(kind: str | None, positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None,
+                       tol: float, comm: Any = None, plan: FarFieldPlan | None = None) -> Any:
     """The far-field mobility operator `kind` ("dense" or "spectral"; FAR_FIELDS; None:
     by `far_field_kind`) at the given positions; "spectral" needs a periodic lattice.
-    plan: a `farfield.FarFieldPlan` for "dense"."""
+    plan: a `farfield.FarFieldPlan` for "dense".
+
+    Args:
+        kind: "dense", "spectral" or None.
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii a.
+        lattice: the periodic lattice, or None (unbounded fluid).
+        tol: relative accuracy of the Ewald sums.
+        comm: the MPI communicator of "spectral", or None (this rank alone).
+        plan: a far-field plan to reuse ("dense"), or None.
+
+    Returns:
+        A `DenseFarField` or `spectral.SpectralFarField` (matvec: (11N,) -> (11N,)).
+
+    Raises:
+        ValueError: an unknown kind, or "spectral" without a periodic lattice.
+    """
     kind = far_field_kind(kind, len(positions), lattice is not None)
     if kind == "dense":
         return DenseFarField(positions, radii, lattice, tol, plan)
@@ -316,14 +393,31 @@ def far_field_operator(kind, positions, radii, lattice, tol, comm=None, plan=Non
     raise ValueError(f"far_field must be one of {FAR_FIELDS}, got {kind!r}")
 
 
-def lanczos_inverse_sqrt(apply, z, dot, tol=DEFAULT_TOL, max_iterations=LANCZOS_MAX_ITERATIONS):
+def lanczos_inverse_sqrt(apply: Callable[[np.ndarray], np.ndarray], z: np.ndarray,
+                         dot: Callable[[np.ndarray, np.ndarray], Any], tol: float = DEFAULT_TOL,
+                         max_iterations: int = LANCZOS_MAX_ITERATIONS) -> tuple[np.ndarray, int]:
     """A^-1/2 z for a symmetric positive definite A by the Lanczos method (with full
     reorthogonalisation): after k steps, A^-1/2 z ~ |z| V_k T_k^-1/2 e_1 (V_k the
     orthonormal Krylov basis, T_k the tridiagonal Lanczos matrix). Stops when the
     estimate changes by less than tol (relative) between steps. apply and dot act on
     this rank's part of distributed vectors (dot sums over ranks).
     Returns (A^-1/2 z, iterations); FarFieldIndefinite when T_k shows that A (the far-field
-    mobility) is not positive definite."""
+    mobility) is not positive definite.
+
+    Args:
+        apply: x -> A x on this rank's part of a vector.
+        z: (m,) this rank's part of the vector z.
+        dot: (a, b) -> a @ b summed over the ranks (a a vector or rows of vectors).
+        tol: relative change of the estimate at which to stop.
+        max_iterations: largest number of Lanczos steps.
+
+    Returns:
+        (m,) this rank's part of A^-1/2 z, and the number of iterations.
+
+    Raises:
+        FarFieldIndefinite: A is not positive definite.
+        KrylovError: not converged within max_iterations.
+    """
     beta0 = np.sqrt(dot(z, z))
     if beta0 == 0.0:
         return np.zeros_like(z), 0
@@ -422,10 +516,25 @@ class KrylovSolver(SolverBackend):
     counts its iterations (`stats`)."""
 
     @classmethod
-    def build(cls, resistance, comm, tolerance, lanczos_tolerance):
+    def build(cls, resistance: SplitResistance, comm: Any, tolerance: float,
+              lanczos_tolerance: float | None) -> KrylovSolver:
+        """The solver of ``resistance`` on ``comm`` with the relative residual
+        ``tolerance`` and Lanczos accuracy ``lanczos_tolerance`` (None: tolerance);
+        collective over comm.
+
+        Args:
+            resistance: the matrix-free resistance.
+            comm: the MPI communicator, or None (this rank alone).
+            tolerance: relative residual of every solve.
+            lanczos_tolerance: relative accuracy of the Lanczos square roots, or None.
+
+        Returns:
+            The solver.
+        """
         return cls(resistance, comm, tolerance, lanczos_tolerance)
 
-    def __init__(self, resistance, comm=None, tol=DEFAULT_TOL, lanczos_tol=None):
+    def __init__(self, resistance: SplitResistance, comm: Any = None, tol: float = DEFAULT_TOL,
+                 lanczos_tol: float | None = None) -> None:
         from .petsc_dense import _keepalive, _mpi_comm, load_petsc
 
         PETSc = load_petsc()
@@ -488,7 +597,7 @@ class KrylovSolver(SolverBackend):
         self._mobility_ksp = None
         self._last = None  # (velocities, einf, lambda rows) of the last solve
 
-    def destroy(self):
+    def destroy(self) -> None:
         """Frees the PETSc objects now (otherwise when the solver is garbage collected)."""
         for obj in (self.ksp, self._mobility_ksp, self.inner, self.saddle, self.l_uu, self.schur,
                     self.u_in, self.u_out, self._g_in, self._g_out):
@@ -498,18 +607,27 @@ class KrylovSolver(SolverBackend):
 
     # ------------------------------------------------------------------ helpers
 
-    def schur_blocks(self):
+    def schur_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """G (6N x 6N) in blocked CSR (`_block_csr`): its kept blocks (_g_keep) of L_uu +
         D_uu^-1, block rows in order, columns sorted within each (as lubrication_sparse
-        stores them)."""
+        stores them).
+
+        Returns:
+            Block row pointers (N + 1,) int32, block columns (nb,) int32, and the
+            blocks (36 nb,) row-major.
+        """
         _, cols, rows = self._g_pattern
         keep = self._g_keep
         indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=self.n))])
         return _block_csr(indptr, cols[keep], self._g_blocks[keep])
 
-    def schur_solver(self):
+    def schur_solver(self) -> Any:
         """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
-        rank alone, built on first use."""
+        rank alone, built on first use.
+
+        Returns:
+            The PETSc KSP (sequential) of G.
+        """
         if self.inner is None:
             PETSc = self._PETSc
             self.schur = self._baij(self.schur_blocks(), PETSc.COMM_SELF)
@@ -524,8 +642,18 @@ class KrylovSolver(SolverBackend):
             self._g_in, self._g_out = self.schur.createVecs()
         return self.inner
 
-    def schur_solve(self, local):
-        """This rank's rows of G^-1 g (incomplete factor) from this rank's rows of g."""
+    def schur_solve(self, local: np.ndarray) -> np.ndarray:
+        """This rank's rows of G^-1 g (incomplete factor) from this rank's rows of g.
+
+        Args:
+            local: (6 (p1 - p0),) this rank's rows of g.
+
+        Returns:
+            (6 (p1 - p0),) this rank's rows of G^-1 g.
+
+        Raises:
+            KrylovError: the incomplete factorisation failed.
+        """
         inner = self.schur_solver()
         self._g_in.setArray(self._gather(local, self.counts6))
         inner.solve(self._g_in, self._g_out)
@@ -534,7 +662,7 @@ class KrylovSolver(SolverBackend):
                               f"failed (PETSc reason {inner.getConvergedReason()})")
         return self._g_out.getArray(readonly=True)[6 * self.p0:6 * self.p1].copy()
 
-    def take_preconditioner(self, other):
+    def take_preconditioner(self, other: KrylovSolver) -> None:
         """Take over other's G matrix and factor when the lubrication has the same block
         pattern here (the Brownian midpoint: the pair sets of the step's start): G keeps
         other's blocks, with this configuration's values, so the factorisation keeps its
@@ -586,8 +714,15 @@ class KrylovSolver(SolverBackend):
         self.comm.Allgatherv(np.ascontiguousarray(local, dtype=float), [full, counts])
         return full
 
-    def far_rows(self, lam_local):
-        """This rank's rows of M lambda, from this rank's rows of lambda."""
+    def far_rows(self, lam_local: np.ndarray) -> np.ndarray:
+        """This rank's rows of M lambda, from this rank's rows of lambda.
+
+        Args:
+            lam_local: (11 (p1 - p0),) this rank's rows of lambda.
+
+        Returns:
+            (11 (p1 - p0),) this rank's rows of M lambda.
+        """
         full = self.far.matvec(self._gather(lam_local, self.counts11))
         return full[NDOF * self.p0:NDOF * self.p1].copy()
 
@@ -620,8 +755,19 @@ class KrylovSolver(SolverBackend):
 
     # ------------------------------------------------------------------ interface
 
-    def velocities(self, forces, einf):
-        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
+
+        Args:
+            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 6) velocities and angular velocities relative to the imposed flow.
+
+        Raises:
+            KrylovError: GMRES did not converge.
+        """
         p0, p1 = self.p0, self.p1
         v_e = self._generalized(np.zeros((self.n, 6)), einf)
         l_v = (self.lub @ v_e).reshape(-1, NDOF)[:, :6]
@@ -631,8 +777,16 @@ class KrylovSolver(SolverBackend):
         self._last = (u.copy(), np.array(einf, dtype=float), sol[:self.nl11])
         return u
 
-    def stresslets(self, velocities, einf):
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5).
+
+        Args:
+            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 5) stresslets (`basis` components, Stokes units).
+        """
         v = self._generalized(velocities, einf)
         last = self._last
         if last is not None and np.array_equal(last[0], velocities) and np.array_equal(last[1], einf):
@@ -648,10 +802,17 @@ class KrylovSolver(SolverBackend):
         minus_s = (lam.reshape(-1, NDOF) + (self.lub @ v).reshape(-1, NDOF))[:, 6:].ravel()
         return -self._gather(minus_s, 5 * (self.counts11 // NDOF)).reshape(self.n, 5)
 
-    def brownian_forces(self, noise):
+    def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
         """F (N, 6) with covariance R_FU over the noise (flat, noise_shape, standard
         normal): P_u P (P^T M P)^-1/2 z_1 + sum_p Q_p^T C_p z_p (module docstring; P:
-        `LongWaveFactor`)."""
+        `LongWaveFactor`).
+
+        Args:
+            noise: (`noise_shape`,) standard normal noise (z_1 (11N), then 12 per pair).
+
+        Returns:
+            (N, 6) Brownian forces and torques (per unit variance of the noise).
+        """
         n = self.n
         z1 = noise[:NDOF * n]
         z2 = noise[NDOF * n:].reshape(-1, 12)
