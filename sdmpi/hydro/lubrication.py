@@ -39,8 +39,11 @@ pair set and on tables already built (never evicted), so displaced configuration
 the same plan (random finite differences) use the same path.
 """
 
+from __future__ import annotations
+
 import math
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numba
@@ -49,7 +52,7 @@ import scipy.sparse
 
 from .basis import BASIS
 from .farfield import NDOF, _pair_block, _power_bounds, radial_table, self_mobility
-from .geometry import find_pairs
+from .geometry import Lattice, find_pairs
 from .two_sphere import FILL_SCRATCH, _fill_pair_columns, pair_resistance
 from .workspace import work_array
 
@@ -74,27 +77,49 @@ class PairList:
     radii_sum: np.ndarray
 
     @property
-    def distance(self):
-        """True centre distances (before regularisation)."""
+    def distance(self) -> np.ndarray:
+        """True centre distances (before regularisation), (npairs,), length unit of the radii."""
         return self.gap + self.radii_sum
 
     @property
-    def min_gap(self):
-        """Smallest surface gap (negative for an overlap), inf without pairs."""
+    def min_gap(self) -> float:
+        """Smallest surface gap (negative for an overlap), inf without pairs (length unit of
+        the radii)."""
         return float(self.gap.min()) if len(self.gap) else np.inf
 
 
-def lubrication_reach(cutoff):
+def lubrication_reach(cutoff: float) -> float:
     """The pair search's relative reach for a gap cut-off (mean radii): centres closer than
-    (1 + cutoff/2) (a_i + a_j)."""
+    (1 + cutoff/2) (a_i + a_j).
+
+    Args:
+        cutoff: gap cut-off, in mean radii of the pair.
+
+    Returns:
+        The reach per sum of radii a_i + a_j (dimensionless).
+    """
     return 1.0 + 0.5 * cutoff
 
 
-def close_pairs(positions, radii, lattice=None, cutoff=DEFAULT_CUTOFF, min_gap=DEFAULT_MIN_GAP, images=None):
+def close_pairs(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None = None,
+                cutoff: float = DEFAULT_CUTOFF, min_gap: float = DEFAULT_MIN_GAP,
+                images: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> PairList:
     """All pairs (with periodic images when a lattice is given) within the cut-off, or
     the given images (i, j, shift) re-evaluated at these positions (so that a slightly
     displaced configuration keeps the same pair set). Separations are regularised to the
-    minimum gap and counted."""
+    minimum gap and counted.
+
+    Args:
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii a.
+        lattice: the periodic lattice, or None (unbounded fluid).
+        cutoff: gap cut-off, in mean radii of the pair.
+        min_gap: smallest gap the separations are regularised to, in mean radii.
+        images: (i (P,), j (P,), shift (P, 3)) pair images to re-evaluate, or None (search).
+
+    Returns:
+        The close pairs.
+    """
     if images is None:
         images = find_pairs(positions, radii, lattice, 0.0, lubrication_reach(cutoff))
     i, j, shift = images
@@ -152,10 +177,20 @@ def _subtract_far_field(dx, a1, a2, self1, self2, table, basis, res):
         res[p] -= np.linalg.inv(mob)
 
 
-def pair_corrections_exact(dx, a1, a2):
+def pair_corrections_exact(dx: np.ndarray, a1: np.ndarray | float, a2: np.ndarray | float) -> np.ndarray:
     """R_2B - R_2B,inf per pair, shape (npairs, 22, 22), by the exact path:
     `two_sphere.pair_resistance` minus the inverse of the 22x22 unbounded far-field pair
-    mobility. dx = x2 - x1 (npairs, 3), radii a1, a2 (npairs,)."""
+    mobility. dx = x2 - x1 (npairs, 3), radii a1, a2 (npairs,).
+
+    Args:
+        dx: (npairs, 3) separations x2 - x1 (length unit of the radii).
+        a1: (npairs,) radii of the first spheres (or a scalar).
+        a2: (npairs,) radii of the second spheres (or a scalar).
+
+    Returns:
+        (npairs, 22, 22) corrections (Stokes units, viscosity 1), dofs (U, Omega, E) of
+        sphere 1 then sphere 2.
+    """
     dx = np.ascontiguousarray(dx, dtype=float).reshape(-1, 3)
     a1 = np.broadcast_to(np.asarray(a1, dtype=float), (dx.shape[0],)).copy()
     a2 = np.broadcast_to(np.asarray(a2, dtype=float), (dx.shape[0],)).copy()
@@ -169,8 +204,17 @@ def pair_corrections_exact(dx, a1, a2):
     return res
 
 
-def lubrication_matrix_exact(positions, radii, pairs):
-    """`lubrication_matrix` by the exact path for every pair (reference; ~14 us/pair)."""
+def lubrication_matrix_exact(positions: np.ndarray, radii: np.ndarray, pairs: PairList) -> np.ndarray:
+    """`lubrication_matrix` by the exact path for every pair (reference; ~14 us/pair).
+
+    Args:
+        positions: (N, 3) sphere centres.
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+
+    Returns:
+        (11N, 11N) near-field correction (Stokes units, viscosity 1).
+    """
     n = positions.shape[0]
     out = np.zeros((NDOF * n, NDOF * n))
     if len(pairs.i) == 0:
@@ -180,11 +224,22 @@ def lubrication_matrix_exact(positions, radii, pairs):
     return out
 
 
-def lubrication_matrix(positions, radii, pairs, out=None):
+def lubrication_matrix(positions: np.ndarray, radii: np.ndarray, pairs: PairList,
+                       out: np.ndarray | None = None) -> np.ndarray:
     """The (11N, 11N) near-field correction: the sum over the close pairs (a PairList
     from `close_pairs`) of R_2B - R_2B,inf (tabulated, module docstring). With out (an
     (11N, 11N) float64 C-contiguous array, e.g. the inverted far field), the correction
-    is added into it in place and out is returned (no (11N)^2 temporary)."""
+    is added into it in place and out is returned (no (11N)^2 temporary).
+
+    Args:
+        positions: (N, 3) sphere centres.
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+        out: (11N, 11N) C-contiguous float64 array to add into, or None.
+
+    Returns:
+        (11N, 11N) near-field correction (Stokes units, viscosity 1), or out plus it.
+    """
     n = positions.shape[0]
     if out is None:
         out = np.zeros((NDOF * n, NDOF * n))
@@ -195,13 +250,24 @@ def lubrication_matrix(positions, radii, pairs, out=None):
     return out
 
 
-def lubrication_product(radii, pairs, vector, setup=None):
+def lubrication_product(radii: np.ndarray, pairs: PairList, vector: np.ndarray,
+                        setup: tuple | None = None) -> np.ndarray:
     """L v (N, 11) for v (N, 11): the near-field correction of `lubrication_matrix` applied
     to one vector pair by pair, each tabulated pair's block formed in scratch memory
     (`_tabulated_product`; only its rigid-body columns when v is zero on the strain dofs),
     without forming the matrix. setup: the one of `lubrication_partitions` for the same
     images (e.g. at a nearby configuration), which spares the pairs' ordering and table
-    look-up when the tables cover these separations (the same values)."""
+    look-up when the tables cover these separations (the same values).
+
+    Args:
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+        vector: (N, 11) generalized velocities v (U, Omega, E per sphere).
+        setup: the setup of `lubrication_partitions` for the same images, or None.
+
+    Returns:
+        (N, 11) L v (generalized forces, Stokes units).
+    """
     vector = np.ascontiguousarray(vector, dtype=float)
     out = np.zeros_like(vector)
     if len(pairs.i) == 0:
@@ -242,12 +308,28 @@ def pair_products(pi, pj, res, v, out):
                 out[idx[u], a] += acc
 
 
-def lubrication_sparse(positions, radii, pairs, factors=False):
+def lubrication_sparse(positions: np.ndarray, radii: np.ndarray, pairs: PairList, factors: bool = False
+                       ) -> scipy.sparse.bsr_matrix | tuple[scipy.sparse.bsr_matrix, np.ndarray, np.ndarray,
+                                                             np.ndarray]:
     """The near-field correction of `lubrication_matrix` as a scipy BSR matrix
     (11 x 11 blocks): the same pair blocks, summed into the blocks (i, i), (i, j),
     (j, i), (j, j) that the pairs touch. With factors, also the lower Cholesky factors
     C_p (npairs, 12, 12) of each pair's rigid-body (FU) part, C_p C_p^T = (R_2B - R_2B,inf)_FU,
-    in the pair order of `pair_blocks` with its (i, j), for Brownian forces."""
+    in the pair order of `pair_blocks` with its (i, j), for Brownian forces.
+
+    Args:
+        positions: (N, 3) sphere centres.
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+        factors: also return the pairs' rigid-body Cholesky factors.
+
+    Returns:
+        The (11N, 11N) BSR matrix (Stokes units, viscosity 1); with factors also pair_i
+        (npairs,), pair_j (npairs,) and C_p (npairs, 12, 12).
+
+    Raises:
+        numpy.linalg.LinAlgError: a pair's rigid-body block is not positive definite.
+    """
     n = positions.shape[0]
     pi, pj = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
     # block slots: diagonal blocks first (one per particle), then the distinct (i, j), i != j
@@ -339,11 +421,19 @@ def _pair_setup(radii, pairs):
     return (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0)
 
 
-def pair_blocks(radii, pairs):
+def pair_blocks(radii: np.ndarray, pairs: PairList) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
     columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
     exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
-    `workspace.work_array`, valid until the next chunk is asked for."""
+    `workspace.work_array`, valid until the next chunk is asked for.
+
+    Args:
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+
+    Returns:
+        An iterator of chunks (pi (m,), pj (m,), res (m, 22, 22), Stokes units).
+    """
     if len(pairs.i) == 0:
         return
     (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
@@ -356,7 +446,8 @@ def pair_blocks(radii, pairs):
         yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
 
 
-def lubrication_partitions(radii, pairs, n):
+def lubrication_partitions(radii: np.ndarray, pairs: PairList, n: int
+                           ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple | None] | None:
     """The near-field correction of `lubrication_matrix` for n particles as dense partitions
     (L_FU (6N x 6N), L_FE (6N x 5N), L_SE (5N x 5N), dofs particle by particle within each:
     rows and columns of the rigid-body dofs U, Omega (6 per particle) and of the strain dofs
@@ -364,7 +455,16 @@ def lubrication_partitions(radii, pairs, n):
     orientation, radii and tables for `lubrication_product` at displaced separations (None
     when some pair takes the exact path). The tabulated pairs' 22x22 blocks are formed one
     at a time in scratch memory and added into the partitions (`_tabulated_partitions`).
-    None without pairs."""
+    None without pairs.
+
+    Args:
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+        n: the number of spheres N.
+
+    Returns:
+        ((L_FU, L_FE, L_SE), setup) (Stokes units, viscosity 1), or None without pairs.
+    """
     if len(pairs.i) == 0:
         return None
     (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
@@ -398,9 +498,18 @@ def _tables_cover(dx, a1, a2, tab, k_lo, n_rows):
     return True
 
 
-def pair_corrections(dx, a1, a2):
+def pair_corrections(dx: np.ndarray, a1: np.ndarray | float, a2: np.ndarray | float) -> np.ndarray:
     """R_2B - R_2B,inf per pair, (npairs, 22, 22), by the tabulated path where
-    `lubrication_matrix` would use it (else exact): for tests and diagnostics."""
+    `lubrication_matrix` would use it (else exact): for tests and diagnostics.
+
+    Args:
+        dx: (npairs, 3) separations x2 - x1 (length unit of the radii).
+        a1: (npairs,) radii of the first spheres (or a scalar).
+        a2: (npairs,) radii of the second spheres (or a scalar).
+
+    Returns:
+        (npairs, 22, 22) corrections (Stokes units, viscosity 1).
+    """
     dx = np.ascontiguousarray(dx, dtype=float).reshape(-1, 3)
     npairs = dx.shape[0]
     a1 = np.broadcast_to(np.asarray(a1, dtype=float), (npairs,))
@@ -458,11 +567,20 @@ def _tensor_patterns(lam):
     return pat.reshape(4 * NDOF, -1)
 
 
-def canonical_scalars(xi, lam):
+def canonical_scalars(xi: np.ndarray | float, lam: float) -> tuple[np.ndarray, float]:
     """The 44 scalars (npts, 4, 11) of R_2B - R_2B,inf (JO normalisation, `two_sphere`
     layout) at scaled gaps xi and size ratio lam, from the exact path at d = e_z, and the
     largest deviation of that matrix from the tensor form relative to its largest entry
-    (round-off: the projection is exact for an invariant matrix)."""
+    (round-off: the projection is exact for an invariant matrix).
+
+    Args:
+        xi: (npts,) scaled gaps 2 (r - a1 - a2)/(a1 + a2) (or a scalar).
+        lam: size ratio a2/a1.
+
+    Returns:
+        (npts, 4, 11) scalars (dimensionless, JO normalisation) and the relative
+        deviation from the tensor form.
+    """
     xi = np.atleast_1d(np.asarray(xi, dtype=float))
     n = xi.shape[0]
     dx = np.zeros((n, 3))
