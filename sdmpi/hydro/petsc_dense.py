@@ -38,13 +38,20 @@ directory itself. PETSc is initialised with -no_signal_handler so that the ensem
 runner keeps its own SIGTERM/SIGINT/SIGUSR1 handlers.
 """
 
+from __future__ import annotations
+
 import glob
 import os
 import sys
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .backend import SolverBackend
+
+if TYPE_CHECKING:
+    from .resistance import GrandResistance
 
 
 #: options PETSc is initialised with (when sdmpi is the first to import it)
@@ -63,9 +70,16 @@ def _petsc_dir_candidates():
                                       reverse=True)]
 
 
-def import_petsc4py():
+def import_petsc4py() -> ModuleType:
     """The petsc4py package, imported without initialising PETSc (setting PETSC_DIR if
-    unset); PetscUnavailable if it cannot be imported. Safe on one rank alone."""
+    unset); PetscUnavailable if it cannot be imported. Safe on one rank alone.
+
+    Returns:
+        The petsc4py package.
+
+    Raises:
+        PetscUnavailable: petsc4py cannot be imported.
+    """
     if not os.environ.get("PETSC_DIR"):
         for cand in _petsc_dir_candidates():
             if os.path.isdir(os.path.join(cand, "lib", "python3", "dist-packages", "petsc4py")):
@@ -86,9 +100,16 @@ def import_petsc4py():
     return petsc4py
 
 
-def load_petsc():
+def load_petsc() -> ModuleType:
     """Import petsc4py, initialise PETSc (collective over MPI_COMM_WORLD) and return the
-    PETSc module."""
+    PETSc module.
+
+    Returns:
+        The petsc4py.PETSc module.
+
+    Raises:
+        PetscUnavailable: petsc4py cannot be imported.
+    """
     global _PETSC
     if _PETSC is not None:
         return _PETSC
@@ -102,8 +123,12 @@ def load_petsc():
     return PETSc
 
 
-def petsc_info():
-    """Version and the direct-solver packages this PETSc was built with."""
+def petsc_info() -> dict[str, Any]:
+    """Version and the direct-solver packages this PETSc was built with.
+
+    Returns:
+        {"version": "major.minor.patch", "packages": {name: available}}.
+    """
     PETSc = load_petsc()
     packages = ("scalapack", "elemental", "mumps", "superlu_dist", "strumpack", "mkl_cpardiso")
     return {"version": ".".join(map(str, PETSc.Sys.getVersion())),
@@ -164,7 +189,7 @@ class PetscDenseSolver(SolverBackend):
     """ScaLAPACK Cholesky of R_FU over `comm` (an mpi4py communicator; None: COMM_SELF), a
     `backend.SolverBackend`. Collective over comm; see the module docstring."""
 
-    def __init__(self, resistance, comm=None):
+    def __init__(self, resistance: GrandResistance, comm: Any = None) -> None:
         PETSc = load_petsc()
         if not PETSc.Sys.hasExternalPackage("scalapack"):
             info = petsc_info()
@@ -246,17 +271,40 @@ class PetscDenseSolver(SolverBackend):
         self._factor.solve(self._b, self._x)
         return self._gathered(self._x)
 
-    def velocities(self, forces, einf):
-        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
+
+        Args:
+            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 6) velocities and angular velocities relative to the imposed flow.
+        """
         rhs = forces.ravel() + self.resistance.strain_forces(einf)
         return self._solve(rhs).reshape(self.n, 6)
 
-    def stresslets(self, velocities, einf):
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5).
+
+        Args:
+            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 5) stresslets (`basis` components, Stokes units).
+        """
         return self.resistance.stresslets(velocities, einf)
 
-    def brownian_forces(self, noise):
-        """L z for z (N, 6), R_FU = L L^T: a force sample with covariance R_FU."""
+    def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
+        """L z for z (N, 6), R_FU = L L^T: a force sample with covariance R_FU.
+
+        Args:
+            noise: (N, 6) standard normal noise z.
+
+        Returns:
+            (N, 6) forces and torques L z.
+        """
         z, y = self._chol_vecs
         r0, r1 = self._chol_range
         z.setArray(noise.ravel()[r0:r1])
