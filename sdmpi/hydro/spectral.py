@@ -43,8 +43,12 @@ x only on the lines that hold modes with |k| <= kmax (`_kept_modes`: 10-15% less
 at N = 1000 and 4096). bench/bench_spectral.py measures the parts.
 """
 
+from __future__ import annotations
+
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -73,7 +77,8 @@ class SpectralParameters:
     grid: tuple
 
     @classmethod
-    def choose(cls, lattice, radii, tol=1e-4, xi=None):
+    def choose(cls, lattice: Lattice, radii: np.ndarray, tol: float = 1e-4,
+               xi: float | None = None) -> SpectralParameters:
         """Parameters for relative accuracy tol (radii: (N,) sphere radii). Each error
         source is kept below tol/(2 kappa), kappa = max(1, largest ratio of the Ewald
         wave-space self field to the isolated-sphere value (`self_mobility`, largest
@@ -84,7 +89,18 @@ class SpectralParameters:
         exp(-alpha w^2); aliasing by the grid's shortest reciprocal translation K,
         exp(-eta (2 - eta) (K/4xi)^2) (its worst case, at |k| = eta K/2, weighted by the
         kernel). xi (by default set by the number density) balances real- and wave-space
-        work; the window support in grid points does not depend on it."""
+        work; the window support in grid points does not depend on it.
+
+        Args:
+            lattice: the periodic lattice.
+            radii: (N,) sphere radii a.
+            tol: relative accuracy of M_inf x.
+            xi: Ewald splitting parameter (1/length), or None (by the number density).
+
+        Returns:
+            The parameters (xi, rcut, kmax, alpha, window in units of length and
+            1/length, grid points per lattice axis).
+        """
         if xi is None:
             xi = _XI_DENSITY * (len(radii) / lattice.volume) ** (1 / 3)
         isolated = np.diag(self_mobility(radii.max()))
@@ -192,9 +208,22 @@ class Stencils:
     ez: np.ndarray
 
     @classmethod
-    def build(cls, frac, grid, steps, half, alpha, reach):
+    def build(cls, frac: np.ndarray, grid: tuple[int, int, int], steps: np.ndarray, half: np.ndarray,
+              alpha: float, reach: float) -> Stencils:
         """Stencils of the particles at fractional coordinates frac (n, 3) on a grid of
-        shape `grid`, window half-width half (grid steps per axis)."""
+        shape `grid`, window half-width half (grid steps per axis).
+
+        Args:
+            frac: (n, 3) fractional coordinates of the particles.
+            grid: grid points (M1, M2, M3) per lattice axis.
+            steps: (3, 3) rows e_i = L_i/M_i (length).
+            half: (3,) window half-width in grid steps per axis.
+            alpha: Gaussian window exponent (1/length^2).
+            reach: window truncation radius (length).
+
+        Returns:
+            The stencils.
+        """
         n, p = len(frac), int(2 * half.max()) + 1
         st = cls(steps, np.empty((n, 2, p), dtype=np.int64), np.empty(n, dtype=np.int64), np.empty((n, 3)),
                  np.zeros((n, p, p)), np.zeros((n, p, p, 2), dtype=np.int32), np.empty((n, 4, p)))
@@ -202,12 +231,16 @@ class Stencils:
         return st
 
     @property
-    def pad(self):
+    def pad(self) -> int:
         """Points per axis of the largest stencil: the z pad of the grids."""
         return self.idx.shape[2]
 
-    def arrays(self):
-        """The arrays, in the order the kernels take them."""
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays, in the order the kernels take them.
+
+        Returns:
+            (steps, idx, zb, s0, e12, zr, ez).
+        """
         return self.steps, self.idx, self.zb, self.s0, self.e12, self.zr, self.ez
 
 
@@ -467,12 +500,21 @@ def _kept_modes(scale):
 _FFT_COST_PER_GRID_POINT = 0.4
 
 
-def real_space_shares(n_pairs, grid, size):
+def real_space_shares(n_pairs: int, grid: tuple[int, int, int], size: int) -> np.ndarray:
     """Pair images per rank (size ranks) such that rank 0's share plus its FFTs (cost
     _FFT_COST_PER_GRID_POINT per grid point) equals every other rank's share: with R the
     pair images and F the FFTs in pair units, r_k = (R + F)/size for k >= 1 and
     r_0 = r_k - F (none if negative). A fixed cost model, not a timing: the split, and so
-    the rounding of the result, depends only on the configuration and the rank count."""
+    the rounding of the result, depends only on the configuration and the rank count.
+
+    Args:
+        n_pairs: the number of real-space pair images R.
+        grid: grid points (M1, M2, M3).
+        size: the number of ranks.
+
+    Returns:
+        (size,) int64 pair images per rank, summing to n_pairs.
+    """
     fft = _FFT_COST_PER_GRID_POINT * float(np.prod(grid))
     first = int(round(min(n_pairs, max(0.0, (n_pairs + fft) / size - fft))))
     rest = np.diff(np.linspace(0, n_pairs - first, size).round().astype(np.int64))
@@ -508,7 +550,8 @@ class SpectralFarField:
     collective and returns the full result on every rank. xi overrides the Ewald
     splitting parameter (by default set by the number density)."""
 
-    def __init__(self, positions, radii, lattice, tol=1e-4, comm=None, *, xi=None):
+    def __init__(self, positions: np.ndarray, radii: np.ndarray, lattice: Lattice, tol: float = 1e-4,
+                 comm: Any = None, *, xi: float | None = None) -> None:
         pos, rad = _check_inputs(positions, radii, lattice, tol, xi)
         self.n_particles = pos.shape[0]
         self.tol = float(tol)
@@ -550,14 +593,25 @@ class SpectralFarField:
         _pair_blocks(pos, rad, pi, pj, np.ascontiguousarray(shift), _cached_radial_table(par.xi),
                      par.xi, BASIS, self._blocks)
 
-    def real_space(self, x, y):
-        """y += this rank's share of the real-space product."""
+    def real_space(self, x: np.ndarray, y: np.ndarray) -> None:
+        """y += this rank's share of the real-space product.
+
+        Args:
+            x: (11N,) generalized forces (F, L, S per sphere).
+            y: (11N,) generalized velocities (U, Omega, E), added to in place.
+        """
         _pairs_product(self._pi, self._pj, self._blocks, x, y)
 
-    def wave_space(self, x, y, meanwhile=None):
+    def wave_space(self, x: np.ndarray, y: np.ndarray, meanwhile: Callable[[], Any] | None = None) -> None:
         """y += the wave-space product at this rank's particles (collective over comm).
         meanwhile: local work (a callable, this rank's real-space share) that ranks 1.. do
-        while rank 0 does the FFTs, and rank 0 after them."""
+        while rank 0 does the FFTs, and rank 0 after them.
+
+        Args:
+            x: (11N,) generalized forces (F, L, S per sphere).
+            y: (11N,) generalized velocities (U, Omega, E), added to in place.
+            meanwhile: local work to overlap with the FFTs, or None.
+        """
         par, st = self.params, self._stencils
         parallel = self.comm is not None and self.comm.size > 1
         # work arrays kept between products (fresh pages, also of the FFT outputs, cost more
@@ -608,8 +662,18 @@ class SpectralFarField:
         pypocketfft.c2c(lines, axes=(1,), forward=False, out=lines)
         pypocketfft.c2r(fk, axes=(2,), lastsize=grid.shape[2], forward=False, out=grid)
 
-    def matvec(self, x):
-        """M_inf x for x of shape (11N,); collective over comm."""
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """M_inf x for x of shape (11N,); collective over comm.
+
+        Args:
+            x: (11N,) generalized forces (F, L, S per sphere; viscosity 1).
+
+        Returns:
+            (11N,) generalized velocities (U, Omega, E), on every rank.
+
+        Raises:
+            ValueError: x has the wrong shape.
+        """
         x = np.asarray(x, dtype=float)
         if x.shape != (NDOF * self.n_particles,):
             raise ValueError(f"x must have shape ({NDOF * self.n_particles},) (11 per particle), "
