@@ -28,6 +28,8 @@ minus the k-space field at r = 0. Truncation errors fall like exp(-(xi r_c)^2) a
 exp(-(k_c/2xi)^2); `EwaldParameters.choose` picks xi, r_c, k_c for a requested accuracy.
 """
 
+from __future__ import annotations
+
 import functools
 import math
 from dataclasses import dataclass
@@ -58,12 +60,20 @@ class RadialFunction:
 
     xi = 0 gives plain Laurent polynomials (the unbounded-fluid kernels)."""
 
-    def __init__(self, xi, erfc_coeffs, exp_coeffs):
+    def __init__(self, xi: float, erfc_coeffs: np.ndarray, exp_coeffs: np.ndarray) -> None:
         self.xi = xi
         self.c = np.asarray(erfc_coeffs, dtype=float)
         self.d = np.asarray(exp_coeffs, dtype=float)
 
-    def derivative(self):
+    def derivative(self) -> RadialFunction:
+        """f'(r), of the same form.
+
+        Returns:
+            The derivative d f/dr.
+
+        Raises:
+            ArithmeticError: a power leaves the range r^-12 .. r^15.
+        """
         xi = self.xi
         n = np.arange(_NPOW) - _P0
         c, d = np.zeros(_NPOW), np.zeros(_NPOW)
@@ -75,8 +85,12 @@ class RadialFunction:
             raise ArithmeticError("radial function powers out of range")
         return RadialFunction(xi, c, d)
 
-    def laplacian(self):
-        """f'' + 2 f'/r (the Laplacian of a radial function, r > 0)."""
+    def laplacian(self) -> RadialFunction:
+        """f'' + 2 f'/r (the Laplacian of a radial function, r > 0).
+
+        Returns:
+            The Laplacian, of the same form.
+        """
         first = self.derivative()
         second = first.derivative()
         c, d = second.c.copy(), second.d.copy()
@@ -84,17 +98,24 @@ class RadialFunction:
         d[:-1] += 2 * first.d[1:]
         return RadialFunction(self.xi, c, d)
 
-    def __call__(self, r):
+    def __call__(self, r: np.ndarray | float) -> np.ndarray:
         r = np.asarray(r, dtype=float)
         powers = r[..., None] ** (np.arange(_NPOW) - _P0)
         erfc = np.vectorize(math.erfc)(self.xi * r)
         return erfc * (powers @ self.c) + np.exp(-((self.xi * r) ** 2)) * (powers @ self.d)
 
 
-def radial_table(xi):
+def radial_table(xi: float) -> np.ndarray:
     """T[p, m] = coefficients (2, NPOW) of d^m/dr^m of phi_p = lap^p chi_r,
     p = 0..3, m = 0..5, with chi_r = r erfc(xi r)/(8 pi). The kernels use m <= 4;
-    m = 5 is the slope of m = 4 for the interpolation grid."""
+    m = 5 is the slope of m = 4 for the interpolation grid.
+
+    Args:
+        xi: Ewald splitting parameter (1/length; 0: unbounded fluid).
+
+    Returns:
+        (4, 6, 2, NPOW) coefficients of the erfc and exp parts, powers r^-12 .. r^15.
+    """
     c = np.zeros(_NPOW)
     c[_P0 + 1] = 1.0 / (8 * math.pi)
     phi = RadialFunction(xi, c, np.zeros(_NPOW))
@@ -579,7 +600,7 @@ def _real_space_product(pos, radii, pi, pj, shift, table, grid, grid_r0, grid_h,
             out[k, 6 + m] += acc
 
 
-def far_field_product(positions, radii, plan, w):
+def far_field_product(positions: np.ndarray, radii: np.ndarray, plan: FarFieldPlan, w: np.ndarray) -> np.ndarray:
     """M_inf w (N, 11) for w (N, 11) at the positions (used as given), with the pair images
     and wave vectors of the plan (`plan_far_field`, made at these or nearby positions),
     without forming M_inf: the real-space images in tensor form (`_real_space_product`),
@@ -587,7 +608,17 @@ def far_field_product(positions, radii, plan, w):
     `far_field_mobility(positions, radii, plan=plan) @ w` up to rounding; at positions
     displaced from the plan's by a small step it carries the same truncation, so that its
     difference to M_inf w at the plan's positions is the change of M_inf to ~tol of the
-    change (the random finite difference of `resistance.resistance_change`)."""
+    change (the random finite difference of `resistance.resistance_change`).
+
+    Args:
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii a.
+        plan: the far-field plan.
+        w: (N, 11) generalized forces (F, L, S per sphere).
+
+    Returns:
+        (N, 11) generalized velocities (U, Omega, E), Stokes units (viscosity 1).
+    """
     pos = np.ascontiguousarray(positions, dtype=float)
     radii = np.ascontiguousarray(radii, dtype=float)
     w = np.ascontiguousarray(w, dtype=float)
@@ -822,8 +853,16 @@ def _scatter_pairs(pi, pj, cos_ab, cos_ba, sin_ab, sin_ba, cos_entries, sin_entr
                         mob[rj + a, ri + b] += v_ba[p, e]
 
 
-def wave_amplitudes(kvec, xi):
-    """b(k) (nk, 11, 2) of every wave vector (`_wave_amplitudes`)."""
+def wave_amplitudes(kvec: np.ndarray, xi: float) -> np.ndarray:
+    """b(k) (nk, 11, 2) of every wave vector (`_wave_amplitudes`).
+
+    Args:
+        kvec: (nk, 3) wave vectors (1/length).
+        xi: Ewald splitting parameter (1/length).
+
+    Returns:
+        (nk, 11, 2) amplitudes b(k) for unit radius factors.
+    """
     b = np.empty((len(kvec), NDOF, 2))
     _wave_amplitudes(kvec, xi, BASIS, b)
     return b
@@ -853,8 +892,16 @@ def _phases(pos, index, basis, cos_out, sin_out):
             sin_out[j, k] = xr * im[2, c] + xim * re[2, c]
 
 
-def wave_phases(positions, plan):
-    """(cos, sin) of k.x (N, nk each) for the positions (N, 3) and the plan's wave vectors."""
+def wave_phases(positions: np.ndarray, plan: FarFieldPlan) -> tuple[np.ndarray, np.ndarray]:
+    """(cos, sin) of k.x (N, nk each) for the positions (N, 3) and the plan's wave vectors.
+
+    Args:
+        positions: (N, 3) sphere centres.
+        plan: the far-field plan (its wave vectors).
+
+    Returns:
+        cos (N, nk) and sin (N, nk) of k.x.
+    """
     shape = (len(positions), len(plan.kvec))
     cos, sin = np.empty(shape), np.empty(shape)
     if shape[1]:
@@ -962,11 +1009,19 @@ def _h_integral(poly, xi):
     return sum(c * _gauss_moment(p, xi) for p, c in enumerate(total))
 
 
-def self_mobility(radius, xi=None):
+def self_mobility(radius: float, xi: float | None = None) -> np.ndarray:
     """Diagonal 11x11 self block: the isolated sphere, U = F/(6 pi a),
     Omega = L/(8 pi a^3), -E = -S 3/(20 pi a^3), minus (for xi given) the k-space
     Ewald field at r = 0, obtained from int d^3k/(2pi)^3 R(k) J^(k) R(k)^H with the
-    angular averages <I - kk> = 2/3, and 1/5 for the strain block (a fresh array)."""
+    angular averages <I - kk> = 2/3, and 1/5 for the strain block (a fresh array).
+
+    Args:
+        radius: sphere radius a.
+        xi: Ewald splitting parameter (1/length), or None (isolated sphere alone).
+
+    Returns:
+        (11, 11) diagonal self block (Stokes units, viscosity 1).
+    """
     return np.diag(_self_diagonal(float(radius), None if xi is None else float(xi)))
 
 
@@ -1013,14 +1068,25 @@ class EwaldParameters:
     kcut: float
 
     @classmethod
-    def choose(cls, lattice, tol=DEFAULT_EWALD_TOL, xi=None, cost_ratio=45.0):
+    def choose(cls, lattice: Lattice, tol: float = DEFAULT_EWALD_TOL, xi: float | None = None,
+               cost_ratio: float = 45.0) -> EwaldParameters:
         """Parameters for relative accuracy tol. Unless given, xi balances the
         real-space cost (pairs within r_c ~ N^2 r_c^3 / V, each a numba kernel) against
         the reciprocal cost (N^2 k_c^3 V, each a BLAS rank update); cost_ratio is the
         ratio of the two per term, measured on a Brownian step, where the real-space
         images serve the assembly and a matrix-free product (`far_field_product`): at
         N = 27 and 64 a step is ~7% faster at 45 than at 25 (the optimum of the assembly
-        alone, which is flat over 25-45)."""
+        alone, which is flat over 25-45).
+
+        Args:
+            lattice: the periodic lattice.
+            tol: relative accuracy of the Ewald sums.
+            xi: splitting parameter (1/length), or None (chosen by cost).
+            cost_ratio: real-space over reciprocal cost per term.
+
+        Returns:
+            The parameters (xi, kcut in 1/length; rcut in length).
+        """
         s = _truncation_parameter(tol)
         if xi is None:
             xi = (2 * math.pi ** 3 * cost_ratio) ** (1 / 6) / lattice.volume ** (1 / 3)
@@ -1048,14 +1114,14 @@ class FarFieldPlan:
     wave_terms: tuple | None = None  # (radii, their `_wave_terms`), built on first use
 
     @functools.cached_property
-    def amplitudes(self):
+    def amplitudes(self) -> tuple[np.ndarray, np.ndarray]:
         """(b (nk, 11, 2), |k|^2 (nk,)): the wave vectors' unit-radius amplitudes
         (`_wave_amplitudes`) and squared lengths, computed once per plan (the assembly and
         the products of a step share them)."""
         return wave_amplitudes(self.kvec, self.params.xi), np.einsum("ij,ij->i", self.kvec, self.kvec)
 
     @property
-    def real_space_reach(self):
+    def real_space_reach(self) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], float] | None:
         """(images, r_c) of a periodic plan, for `geometry.pairs_in_reach` (None: unbounded)."""
         return None if self.params is None else (self.images, self.params.rcut)
 
@@ -1082,9 +1148,18 @@ class RadialGrid:
 
     @classmethod
     @functools.lru_cache(maxsize=16)
-    def build(cls, xi, r_max, tol):
+    def build(cls, xi: float, r_max: float, tol: float) -> RadialGrid:
         """A grid on [START, r_max] for splitting parameter xi and Ewald accuracy tol;
-        xi = 0 (unbounded fluid, no cut-off): an empty grid, all values exact."""
+        xi = 0 (unbounded fluid, no cut-off): an empty grid, all values exact.
+
+        Args:
+            xi: Ewald splitting parameter (1/length).
+            r_max: end of the grid (length).
+            tol: relative accuracy of the Ewald sums.
+
+        Returns:
+            The grid (cached per arguments).
+        """
         h = min(0.02, 0.01 * (2.5e5 * tol) ** 0.25)
         if xi == 0 or h < 0.002:
             return cls(cls.START, 1.0, np.zeros((0, 4, 6)))
@@ -1094,11 +1169,25 @@ class RadialGrid:
         return cls(cls.START, h, values)
 
 
-def plan_far_field(positions, radii, lattice=None, tol=DEFAULT_EWALD_TOL, xi=None, candidates=None):
+def plan_far_field(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None = None,
+                   tol: float = DEFAULT_EWALD_TOL, xi: float | None = None,
+                   candidates: FarFieldPlan | None = None) -> FarFieldPlan:
     """A FarFieldPlan for (wrapped) positions in the lattice (None: unbounded fluid).
     candidates: a periodic plan for the same positions and lattice; where its real-space
     cut-off covers this plan's, its images are filtered (`geometry.pairs_in_reach`) instead
-    of searched again."""
+    of searched again.
+
+    Args:
+        positions: (N, 3) sphere centres, wrapped into the cell (length unit of the radii).
+        radii: (N,) sphere radii a.
+        lattice: the periodic lattice, or None (unbounded fluid).
+        tol: relative accuracy of the Ewald sums.
+        xi: Ewald splitting parameter (1/length), or None (chosen).
+        candidates: a periodic plan of the same positions and lattice, or None.
+
+    Returns:
+        The plan.
+    """
     if lattice is None:
         images = find_pairs(positions, radii, None, np.inf, 0.0)
         return FarFieldPlan(None, images, np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros((3, 3)),
@@ -1120,14 +1209,29 @@ class FarFieldIndefinite(np.linalg.LinAlgError):
     eigenvalue), or spheres overlapping deeply."""
 
 
-def far_field_mobility(positions, radii, box=None, strain=0.0, tol=DEFAULT_EWALD_TOL, xi=None, plan=None):
+def far_field_mobility(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
+                       tol: float = DEFAULT_EWALD_TOL, xi: float | None = None,
+                       plan: FarFieldPlan | None = None) -> np.ndarray:
     """The (11N, 11N) far-field grand mobility M_inf, symmetric positive definite for
     non-overlapping spheres.
 
     positions (N, 3), radii (N,); box (3,) for a periodic Lees-Edwards box at the given
     strain, or None for unbounded fluid (DBB 1987). Periodic sums are converged to
     relative accuracy ~tol; xi overrides the Ewald splitting parameter. With a plan
-    (from `plan_far_field`), positions are used as given (not wrapped) with its pairs."""
+    (from `plan_far_field`), positions are used as given (not wrapped) with its pairs.
+
+    Args:
+        positions: (N, 3) sphere centres (length unit of the radii).
+        radii: (N,) sphere radii a.
+        box: (3,) sides of the periodic Lees-Edwards box, or None (unbounded fluid).
+        strain: Lees-Edwards strain of the box.
+        tol: relative accuracy of the Ewald sums.
+        xi: Ewald splitting parameter (1/length), or None (chosen).
+        plan: a far-field plan to use, or None (made here).
+
+    Returns:
+        (11N, 11N) M_inf, dofs (U, Omega, E) sphere by sphere (Stokes units, viscosity 1).
+    """
     pos = np.ascontiguousarray(positions, dtype=float)
     radii = np.ascontiguousarray(radii, dtype=float)
     if plan is None:
