@@ -359,8 +359,17 @@ def _compute_polynomials(m_max):
     return out
 
 
-def f_coefficients(name, lam, m_max=SERIES_ORDER):
-    """The JO84/J92 f_k(lam), k = 0..m_max, of a series function (for checks/tables)."""
+def f_coefficients(name: str, lam: float, m_max: int = SERIES_ORDER) -> np.ndarray:
+    """The JO84/J92 f_k(lam), k = 0..m_max, of a series function (for checks/tables).
+
+    Args:
+        name: a function of `FUNCTIONS`.
+        lam: size ratio a2/a1.
+        m_max: highest order k.
+
+    Returns:
+        (m_max + 1,) the dimensionless coefficients f_k(lam).
+    """
     c = _lambda_polynomials(m_max)[name]
     k = np.arange(m_max + 1)
     j = np.arange(m_max + 2)
@@ -434,7 +443,7 @@ def _singular_coefficients(name, lam):
     raise KeyError(name)
 
 
-def squeeze_slope(gap, a1, a2):
+def squeeze_slope(gap: np.ndarray | float, a1: np.ndarray | float, a2: np.ndarray | float) -> np.ndarray:
     """h |d/dh (f.R f)| of two spheres at surface gap h (dimensional, viscosity 1), where
     f.R f is their resistance to relative motion along the line of centres for the unit
     pair force f (e on sphere 2, -e on sphere 1; |f|^2 = 2):
@@ -444,7 +453,16 @@ def squeeze_slope(gap, a1, a2):
     lam Gk(1/lam) = Gk(lam) (Jeffrey & Onishi, J. Fluid Mech. 139, 261 (1984); Townsend
     2018), f.R f ~ 24 pi a1 X^A_11, whose -xi d/dxi is G1/xi + G2 + G3 xi (1 - log(1/xi));
     the regular remainder of X^A changes the result by O(h) relative. gap, a1, a2
-    broadcast."""
+    broadcast.
+
+    Args:
+        gap: surface gaps h (length unit of the radii).
+        a1: radii of the first spheres.
+        a2: radii of the second spheres.
+
+    Returns:
+        h |d/dh (f.R f)| (a resistance, viscosity 1 x length), broadcast shape.
+    """
     gap, a1, a2 = (np.asarray(v, dtype=float) for v in (gap, a1, a2))
     xi = 2.0 * gap / (a1 + a2)
     lam = a2 / a1
@@ -798,24 +816,48 @@ def _prepare(r, a1, a2):
     return r, a1, a2, ulam, lidx.astype(np.int64)
 
 
-def resistance_scalars(r, a1, a2):
+def resistance_scalars(r: np.ndarray | float, a1: np.ndarray | float, a2: np.ndarray | float) -> np.ndarray:
     """Non-dimensional two-sphere resistance functions, shape (npairs, 4, 11).
 
     Axis 1: blocks 11, 12, 21, 22; axis 2: XA, YA, YB, XC, YC, XG, YG, YH, XM, YM, ZM
     (`FUNCTIONS`), in the Jeffrey & Onishi (1984) / Jeffrey (1992) normalisation (module
     docstring).  ``r``, ``a1``, ``a2`` broadcast to (npairs,); requires ``r > a1 + a2``.
+
+    Args:
+        r: (npairs,) centre distances (length unit of the radii).
+        a1: (npairs,) radii of the first spheres (or a scalar).
+        a2: (npairs,) radii of the second spheres (or a scalar).
+
+    Returns:
+        (npairs, 4, 11) dimensionless resistance functions.
+
+    Raises:
+        ValueError: touching or overlapping spheres (r <= a1 + a2), r not finite or a
+            radius not > 0.
     """
     r, a1, a2, ulam, lidx = _prepare(r, a1, a2)
     rem, gg, par, pref = _tables_for(ulam)
     return _scalars_kernel(r, a1, a2, lidx, rem, gg, par, pref)
 
 
-def pair_resistance(dx, a1, a2):
+def pair_resistance(dx: np.ndarray, a1: np.ndarray | float, a2: np.ndarray | float) -> np.ndarray:
     """Dimensional pair resistance matrices, shape (npairs, 22, 22).
 
     ``dx`` (npairs, 3) = x2 - x1; ``a1``, ``a2`` radii (scalars or (npairs,)).  Viscosity
     1, sdmpi sign convention: ``(F, L, -S) = R (U - U_inf, Omega - Omega_inf, -E_inf)``
     with F, L exerted on the fluid (module docstring).  Symmetric positive definite.
+
+    Args:
+        dx: (npairs, 3) or (3,) separations x2 - x1 (length unit of the radii).
+        a1: (npairs,) radii of the first spheres (or a scalar).
+        a2: (npairs,) radii of the second spheres (or a scalar).
+
+    Returns:
+        (npairs, 22, 22) resistance matrices, dofs (U, Omega, E) of sphere 1 then sphere 2.
+
+    Raises:
+        ValueError: dx of the wrong shape, touching or overlapping spheres (r <= a1 + a2),
+            or a radius not > 0.
     """
     dx = np.asarray(dx, dtype=float)
     if dx.ndim == 1:
