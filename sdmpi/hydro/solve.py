@@ -25,9 +25,24 @@ def _array(name, value, shape, n):
     return arr
 
 
-def check_inputs(positions, box, radii, strain, forces, torques, rate_of_strain):
+def check_inputs(positions: ArrayLike, box: ArrayLike | None, radii: ArrayLike | None, strain: float,
+                 forces: ArrayLike | None, torques: ArrayLike | None, rate_of_strain: ArrayLike | None
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
     """Validate and normalise the arguments of `solve_mobility` (ValueError naming the
-    argument on any problem)."""
+    argument on any problem).
+
+    Args:
+        positions, box, radii, strain, forces, torques, rate_of_strain: as for
+            `solve_mobility`.
+
+    Returns:
+        positions (N, 3), box (3,) or None, radii (N,), strain, forces (N, 3), torques
+        (N, 3), rate of strain (3, 3), as float arrays with the defaults filled in.
+
+    Raises:
+        ValueError: an argument of the wrong shape, not finite, radii not > 0, or a rate of
+            strain not symmetric and traceless.
+    """
     pos = np.asarray(positions, dtype=float)
     if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] == 0:
         raise ValueError(f"positions must have shape (N, 3) with N >= 1, got {pos.shape}")
