@@ -672,7 +672,11 @@ class KrylovSolver(SolverBackend):
         two solutions, the Brownian stresslets S_mid - S_start; started from other's
         solution instead, the midpoint needs ~20% fewer iterations, but its error is
         independent of other's and the difference is ~100 x less accurate:
-        tests/test_krylov.py::test_midpoint_difference_is_accurate.)"""
+        tests/test_krylov.py::test_midpoint_difference_is_accurate.)
+
+        Args:
+            other: a solver of this backend at a nearby configuration.
+        """
         mine, theirs = self._g_pattern, other._g_pattern
         if (self.inner is not None or other.inner is None
                 or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -69,7 +71,7 @@ def check_inputs(positions: ArrayLike, box: ArrayLike | None, radii: ArrayLike |
 def solve_mobility(positions: ArrayLike, box: ArrayLike | None, *, radii: ArrayLike | None = None,
                    strain: float = 0.0, forces: ArrayLike | None = None, torques: ArrayLike | None = None,
                    rate_of_strain: ArrayLike | None = None, lubrication: bool = True,
-                   solver: str = "dense", ewald_tol: float = DEFAULT_EWALD_TOL, comm=None,
+                   solver: str = "dense", ewald_tol: float = DEFAULT_EWALD_TOL, comm: Any = None,
                    tolerance: float = DEFAULT_TOL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Velocities and stresslets of N rigid spheres in Stokes flow (the FTS problem of
     Stokesian dynamics: far field by Ewald sums, Durlofsky, Brady & Bossis 1987,
