@@ -88,8 +88,9 @@ Lengths are in particle radii a, times in t_D, forces in eta_m a^2/t_D, mobiliti
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
