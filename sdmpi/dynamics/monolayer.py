@@ -52,7 +52,8 @@ e^(-tau h)), gamma* = 6 pi eta_m a^2 gamma_dot / (2 F0). In the job's force unit
 6 pi eta_m a^2 gamma_dot, ``interparticle.f0`` = 1/(2 gamma*) (Dratler & Schowalter's gamma* = 1 is
 f0 = 0.5).
 
-Units: lengths in a, times in the job's time unit (1/gamma_dot for these non-Brownian jobs).
+Units: lengths in a, times in the job's time unit (1/gamma_dot under steady shear, as
+these jobs are non-Brownian).
 """
 
 from __future__ import annotations
