@@ -81,14 +81,25 @@ With lubrication the pair's relative mobility vanishes at contact, and the stres
 contact force induces cancels its r f e term as the gap closes; Sigma_C then measures the
 floor min_gap and the time step: as dt -> 0 it tends to a limit that falls with min_gap
 (measured: docs/physics.md, bench/collision_convergence.py).
+
+Lengths are in particle radii a, times in t_D, forces in eta_m a^2/t_D, mobilities in
+1/(eta_m a).
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..hydro.lubrication import close_pairs
 from ..registry import HYDRODYNAMIC_MODELS
+
+if TYPE_CHECKING:
+    from ..hydro.geometry import Lattice
+    from ..hydro.lubrication import PairList
 
 #: separated pairs are left at this many times hydrodynamics.min_gap
 SEPARATION = 2.0
@@ -96,10 +107,17 @@ SEPARATION = 2.0
 RULES = ("separate", "reflect")
 
 
-def default_rule(model):
+def default_rule(model: str) -> str:
     """The collision rule of the hydrodynamic model named ``model`` when
     hydrodynamics.collisions is absent (module docstring): separate for a model with
-    lubrication (`sdmpi.registry.ModelSpec`), reflect without."""
+    lubrication (`sdmpi.registry.ModelSpec`), reflect without.
+
+    Args:
+        model: a registered hydrodynamic model name (hydrodynamics.model).
+
+    Returns:
+        "separate" or "reflect" (one of RULES).
+    """
     return "separate" if HYDRODYNAMIC_MODELS[model].lubrication else "reflect"
 
 
@@ -125,24 +143,56 @@ class Collisions:
             self.impulse = np.full(len(self.i), np.nan)
 
     @classmethod
-    def joined(cls, first, second):
+    def joined(cls, first: Collisions, second: Collisions) -> Collisions:
         """The pairs of two corrections of one step, their contacts counted together and
-        the deeper of their smallest gaps."""
+        the deeper of their smallest gaps.
+
+        Args:
+            first: the first correction's pairs.
+            second: the second correction's pairs.
+
+        Returns:
+            A new `Collisions` holding the pairs of both, first's before second's.
+        """
         arrays = [np.concatenate([getattr(first, k), getattr(second, k)]) for k in "ijers"]
         return cls(*arrays, first.n_overlaps + second.n_overlaps, min(first.deepest, second.deepest),
                    np.concatenate([first.impulse, second.impulse]))
 
     @classmethod
-    def none(cls, n_overlaps=0, deepest=np.inf):
-        """No corrected pair (overlaps counted but kept, or none found)."""
+    def none(cls, n_overlaps: int = 0, deepest: float = np.inf) -> Collisions:
+        """No corrected pair (overlaps counted but kept, or none found).
+
+        Args:
+            n_overlaps: number of pairs found in contact.
+            deepest: smallest gap found (mean radii), inf for none.
+
+        Returns:
+            A `Collisions` with zero pairs.
+        """
         empty = np.zeros(0)
         return cls(empty.astype(np.int64), empty.astype(np.int64), np.zeros((0, 3)), empty, empty,
                    n_overlaps, deepest)
 
-    def forces(self, mobility, dt, n):
+    def forces(
+        self,
+        mobility: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+        dt: float,
+        n: int,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Collision forces (N, 6) on the particles and their virial sum r f e e^T (3, 3):
         f = lambda/dt, or s/(G dt) where no impulse was recorded; mobility(i, j, e) -> each
-        pair's relative mobility G."""
+        pair's relative mobility G.
+
+        Args:
+            mobility: mobility(i (P,), j (P,), e (P, 3)) -> G (P,), relative mobilities
+                along the lines of centres (1/(eta_m a)).
+            dt: the step's duration (t_D).
+            n: number of particles N.
+
+        Returns:
+            (forces, virial): forces (N, 6) in eta_m a^2/t_D (columns 0-2; the torque
+            columns zero), virial (3, 3) in eta_m a^3/t_D.
+        """
         forces, virial = np.zeros((n, 6)), np.zeros((3, 3))
         if len(self.i) == 0:
             return forces, virial
@@ -171,12 +221,31 @@ def _contacts(pos, radii, pairs, min_gap, reflect):
     return dx, dist, surface, target
 
 
-def remove_overlaps(positions, radii, pairs, min_gap, reflect=False, sweeps=100):
+def remove_overlaps(
+    positions: np.ndarray,
+    radii: np.ndarray,
+    pairs: PairList,
+    min_gap: float,
+    reflect: bool = False,
+    sweeps: int = 100,
+) -> tuple[np.ndarray, np.ndarray]:
     """Potential-free correction (module docstring) of the pairs in contact of one pair
     list, placed at SEPARATION x min_gap (reflect: reflected at the gap min_gap), repeated
     (up to `sweeps` times) while a correction creates new contacts within the list.
     Returns the corrected positions and each listed pair's total separation change along
-    its line of centres (0 for the pairs never moved)."""
+    its line of centres (0 for the pairs never moved).
+
+    Args:
+        positions: particle centres, shape (N, 3), in a (not modified).
+        radii: particle radii, shape (N,), in a.
+        pairs: the pair list to correct (`close_pairs`), P pairs.
+        min_gap: the hard-sphere surface gap, in mean radii.
+        reflect: reflect at the surface instead of placing at SEPARATION x min_gap.
+        sweeps: maximum number of correction sweeps.
+
+    Returns:
+        (positions (N, 3) in a, separation changes (P,) in a).
+    """
     pos = positions.copy()
     moved = np.zeros(len(pairs.i))
     for _ in range(sweeps):
@@ -191,7 +260,15 @@ def remove_overlaps(positions, radii, pairs, min_gap, reflect=False, sweeps=100)
     return pos, moved
 
 
-def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False, sweeps=100):
+def through_mobility(
+    positions: np.ndarray,
+    radii: np.ndarray,
+    pairs: PairList,
+    min_gap: float,
+    mobility: Callable[[np.ndarray], np.ndarray],
+    reflect: bool = False,
+    sweeps: int = 100,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Correction (module docstring) of the pairs in contact of one pair list through the
     mobility: each is moved apart by s_p along its line of centres, to SEPARATION x min_gap
     (mean radii), or reflected at the gap min_gap (reflect: s_p twice its depth below it),
@@ -201,7 +278,21 @@ def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False, 
     list are in contact, as `remove_overlaps` does for the symmetric move (which it equals
     for free draining of equal spheres). mobility(forces (N, 6)) -> velocities (N, 6),
     M = R_FU^-1 of the step. Returns the new positions and each listed pair's total
-    separation change and impulse (0 for the pairs never moved)."""
+    separation change and impulse (0 for the pairs never moved).
+
+    Args:
+        positions: particle centres, shape (N, 3), in a (not modified).
+        radii: particle radii, shape (N,), in a.
+        pairs: the pair list to correct (`close_pairs`), P pairs.
+        min_gap: the hard-sphere surface gap, in mean radii.
+        mobility: forces (N, 6) -> velocities (N, 6), M of the step.
+        reflect: reflect at the surface instead of placing at SEPARATION x min_gap.
+        sweeps: maximum number of correction sweeps.
+
+    Returns:
+        (positions (N, 3) in a, separation changes (P,) in a, impulses (P,) in
+        eta_m a^2).
+    """
     n = len(positions)
     pos = positions.copy()
     moved, impulse = np.zeros(len(pairs.i)), np.zeros(len(pairs.i))
@@ -225,13 +316,34 @@ def through_mobility(positions, radii, pairs, min_gap, mobility, reflect=False, 
     return pos, moved, impulse
 
 
-def separate(positions, radii, lattice, min_gap, reflect=False, rounds=10, mobility=None):
+def separate(
+    positions: np.ndarray,
+    radii: np.ndarray,
+    lattice: Lattice,
+    min_gap: float,
+    reflect: bool = False,
+    rounds: int = 10,
+    mobility: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[np.ndarray, Collisions]:
     """Pairs in contact (closer than min_gap mean radii; periodic images included) found
     and corrected (placed, or reflected), with a new pair search after each correction
     while it creates new contacts; mobility(forces (N, 6)) -> velocities (N, 6): the
     correction acts through it (`through_mobility`), else the two spheres of a pair are
     moved symmetrically (`remove_overlaps`). Returns the corrected positions and their
-    `Collisions`."""
+    `Collisions`.
+
+    Args:
+        positions: particle centres, shape (N, 3), in a.
+        radii: particle radii, shape (N,), in a.
+        lattice: the periodic (Lees-Edwards) lattice of the current strain.
+        min_gap: the hard-sphere surface gap, in mean radii.
+        reflect: reflect at the surface instead of placing at SEPARATION x min_gap.
+        rounds: maximum number of pair searches.
+        mobility: forces (N, 6) -> velocities (N, 6), or None for the symmetric move.
+
+    Returns:
+        (positions (N, 3) in a, the corrected pairs' `Collisions`).
+    """
     parts, found, deepest = [], 0, np.inf
     for _ in range(rounds):
         pairs = close_pairs(positions, radii, lattice, cutoff=min_gap)

@@ -49,26 +49,43 @@ of the smaller index (partner -1 = empty slot), with their stretch as seen from 
 particle (the larger index's contact point relative to the smaller's): fixed-shape
 arrays for the checkpointed state. A contact's stretch is updated at the end of each step
 (after the velocities are known) and turned tangent at the start of the next.
+
+Units: lengths in a, times in t_D, forces in eta_m a^2/t_D (Stokes units; kT/a is
+FORCE_UNIT of them), velocities in a/t_D.
 """
+
+from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 
 from .forces import FORCE_UNIT, CriticalLoadRepulsion  # noqa: F401 (the repulsion of this model)
 
+if TYPE_CHECKING:
+    from ..config.schema import Job
+    from ..hydro.lubrication import PairList
+
 #: the normal relative mobility of touching unit spheres at minimum gap h_min is about
 #: SQUEEZE x h_min (job units; leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units)
 SQUEEZE = 4.0
 
 
-def sliding_mobility(min_gap):
+def sliding_mobility(min_gap: float) -> float:
     """Sliding velocity of the contact points of two touching unit spheres at gap min_gap
     per unit tangential force pair with its torques (job units): 1/(0.245 + 0.165
     ln(1/min_gap)), a fit to `solve_mobility` (0.568, 0.726, 1.002 at 1e-4, 1e-3, 1e-2;
-    within 1% for 1e-4..3e-2, 3% at 0.1)."""
+    within 1% for 1e-4..3e-2, 3% at 0.1).
+
+    Args:
+        min_gap: the lubrication's minimum gap h_min, in a.
+
+    Returns:
+        The sliding mobility, in 1/(eta_m a).
+    """
     return 1.0 / (0.245 + 0.165 * math.log(1.0 / min_gap))
 
 
@@ -80,10 +97,21 @@ class ContactLaw:
     k_n: float
     k_t: float
 
-    def springs(self, n, gap, stretch):
+    def springs(
+        self, n: np.ndarray, gap: np.ndarray, stretch: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Contact forces on j (P, 3) for contacting pairs with unit vectors n (P, 3) from
         i to j, gaps < 0 (P,) and tangential stretches (P, 3) already tangent. Returns
-        (forces on j, the Coulomb-limited stretch, sliding (P,) bool)."""
+        (forces on j, the Coulomb-limited stretch, sliding (P,) bool).
+
+        Args:
+            n: unit vectors from i to j, shape (P, 3).
+            gap: surface gaps, shape (P,), negative, in a.
+            stretch: tangential stretches, shape (P, 3), in a.
+
+        Returns:
+            (forces on j (P, 3) in eta_m a^2/t_D, stretches (P, 3) in a, sliding (P,) bool).
+        """
         normal = self.k_n * -gap
         length = np.linalg.norm(stretch, axis=1)
         limit = self.mu * normal / self.k_t
@@ -93,16 +121,37 @@ class ContactLaw:
         return normal[:, None] * n - self.k_t * stretch, stretch, sliding
 
 
-def tangent(stretch, n):
-    """Stretches (P, 3) turned into the planes normal to n (P, 3), lengths kept."""
+def tangent(stretch: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Stretches (P, 3) turned into the planes normal to n (P, 3), lengths kept.
+
+    Args:
+        stretch: stretches, shape (P, 3), in a.
+        n: unit normals, shape (P, 3).
+
+    Returns:
+        Tangent stretches, shape (P, 3), in a (zero where the stretch is along n).
+    """
     t = stretch - np.sum(stretch * n, axis=1)[:, None] * n
     old, new = np.linalg.norm(stretch, axis=1), np.linalg.norm(t, axis=1)
     return t * np.where(new > 0, old / np.where(new > 0, new, 1.0), 0.0)[:, None]
 
 
-def sliding_velocity(n, arm_i, arm_j, v_i, v_j):
+def sliding_velocity(
+    n: np.ndarray, arm_i: np.ndarray, arm_j: np.ndarray, v_i: np.ndarray, v_j: np.ndarray
+) -> np.ndarray:
     """u_s (P, 3) of j's contact point relative to i's, tangential part: lever arms l_i,
-    l_j (P,), v_i, v_j (P, 6) total (U, Omega) of i and of j's image."""
+    l_j (P,), v_i, v_j (P, 6) total (U, Omega) of i and of j's image.
+
+    Args:
+        n: unit vectors from i to j, shape (P, 3).
+        arm_i: lever arms of i, shape (P,), in a.
+        arm_j: lever arms of j, shape (P,), in a.
+        v_i: (U, Omega) of i, shape (P, 6), in a/t_D and 1/t_D.
+        v_j: (U, Omega) of j's image, shape (P, 6), same units.
+
+    Returns:
+        Tangential sliding velocities, shape (P, 3), in a/t_D.
+    """
     rel = v_j[:, :3] - v_i[:, :3] - np.cross(arm_i[:, None] * v_i[:, 3:] + arm_j[:, None] * v_j[:, 3:], n)
     return rel - np.sum(rel * n, axis=1)[:, None] * n
 
@@ -157,9 +206,18 @@ class FrictionalContacts:
         self.stretch = np.zeros((n_particles, max_contacts, 3))
         self._contacts = None
 
-    def forces(self, pairs, radii):
+    def forces(self, pairs: PairList, radii: np.ndarray) -> ContactForces:
         """Contact forces of the pairs with gap < 0 (a PairList: true gaps, dx = x_j +
-        shift - x_i, possibly stretched to the minimum gap; only its direction is used)."""
+        shift - x_i, possibly stretched to the minimum gap; only its direction is used).
+
+        Args:
+            pairs: the step's lubrication pair list.
+            radii: particle radii, shape (N,), in a.
+
+        Returns:
+            The `ContactForces`: forces and torques (N, 3) in eta_m a^2/t_D and
+            eta_m a^3/t_D, virial (3, 3) in eta_m a^3/t_D, contact and sliding counts.
+        """
         n_particles = len(self.partners)
         touching = np.flatnonzero(pairs.gap < 0)
         i, j = pairs.i[touching], pairs.j[touching]
@@ -184,10 +242,21 @@ class FrictionalContacts:
         self._contacts = (i, j, lo, hi, n, dx, arm_i, arm_j, xi)
         return ContactForces(forces, torques, dx.T @ f_on_j, len(touching), int(sliding.sum()))
 
-    def advance(self, velocities, rate, dt):
+    def advance(self, velocities: np.ndarray, rate: float, dt: float) -> None:
         """Integrate the stretches of the contacts found by ``forces`` over dt with the
         step's velocities (N, 6) relative to the imposed simple shear u = rate y e_x
-        (Omega_inf = -rate/2 e_z), and store them as the history."""
+        (Omega_inf = -rate/2 e_z), and store them as the history.
+
+        Args:
+            velocities: (U, Omega) relative to the imposed flow, shape (N, 6), in a/t_D
+                and 1/t_D.
+            rate: the step's shear rate (1/t_D).
+            dt: the step's duration (t_D).
+
+        Raises:
+            RuntimeError: a particle has more than max_contacts contacts, or a pair
+                touches through two periodic images.
+        """
         i, j, lo, hi, n, dx, arm_i, arm_j, xi = self._contacts
         spin = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -0.5 * rate])
         v_i, v_j = velocities[i] + spin, velocities[j] + spin
@@ -206,9 +275,16 @@ class FrictionalContacts:
                                "images: the box is too small for contact history")
 
 
-def contact_model(job):
+def contact_model(job: Job) -> FrictionalContacts | None:
     """The contact springs of a job with interparticle.kind = "frictional" (a fresh
-    history for one realisation), else None. The repulsion is `forces.force_law`'s."""
+    history for one realisation), else None. The repulsion is `forces.force_law`'s.
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        A fresh `FrictionalContacts`, or None for other interparticle kinds.
+    """
     inter = job.interparticle
     if inter.kind != "frictional":
         return None

@@ -52,10 +52,19 @@ require |F(h_c)| <= ``TAIL`` |F(contact)| (contact: the cap for van der Waals, h
 double layer) so that the shift is negligible.
 """
 
+from __future__ import annotations
+
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Union
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..config.schema import Job
+    from ..hydro.lubrication import PairList
+
+    PairLaw = Union["Repulsion", "CriticalLoadRepulsion", "VanDerWaals", "DoubleLayer", "Combined"]
 
 #: the job's force unit, 6 pi eta_m a^2 / (time unit), in Stokes units (eta_m = a = 1)
 FORCE_UNIT = 6 * math.pi
@@ -72,16 +81,44 @@ class Repulsion:
     f0: float
     tau: float
 
-    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+    def magnitude(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Force magnitude F(h), positive when repulsive.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+        """
         e = np.exp(-self.tau * np.maximum(gap, 0.0))
         return self.f0 * self.tau * e / (1.0 + e)
 
-    def potential(self, gap, a_i=1.0, a_j=1.0):
+    def potential(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Pair potential U(h), with F = -dU/dh.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            U(h), shaped like gap, in the law's force unit x a.
+        """
         return self.f0 * np.log1p(np.exp(-self.tau * np.maximum(gap, 0.0)))
 
     @property
-    def reach(self):
-        """Gap beyond which F < 1e-12 F0 tau."""
+    def reach(self) -> float:
+        """Gap beyond which F < 1e-12 F0 tau.
+
+        Returns:
+            The gap, in a.
+        """
         return 12 * math.log(10) / self.tau
 
 
@@ -93,17 +130,45 @@ class CriticalLoadRepulsion:
     f0: float
     length: float
 
-    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+    def magnitude(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Force magnitude F(h), positive when repulsive.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+        """
         return self.f0 * np.exp(-np.maximum(gap, 0.0) / self.length)
 
-    def potential(self, gap, a_i=1.0, a_j=1.0):
+    def potential(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Pair potential U(h), with F = -dU/dh.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            U(h), shaped like gap, in the law's force unit x a.
+        """
         gap = np.asarray(gap, float)
         return self.f0 * (self.length * np.exp(-np.maximum(gap, 0.0) / self.length)
                           - np.minimum(gap, 0.0))
 
     @property
-    def reach(self):
-        """Gap beyond which F < 1e-12 F0."""
+    def reach(self) -> float:
+        """Gap beyond which F < 1e-12 F0.
+
+        Returns:
+            The gap, in a.
+        """
         return 12 * math.log(10) * self.length
 
 
@@ -114,14 +179,38 @@ class _Truncated:
     def _h_cut(self, a_i, a_j):
         return self.cutoff * 0.5 * (np.asarray(a_i, float) + a_j)
 
-    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+    def magnitude(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Force magnitude F(h), positive when repulsive.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+        """
         gap = np.asarray(gap, float)
         if math.isinf(self.cutoff):
             return self._force(gap, a_i, a_j)
         hc = self._h_cut(a_i, a_j)
         return np.where(gap < hc, self._force(gap, a_i, a_j) - self._force(hc, a_i, a_j), 0.0)
 
-    def potential(self, gap, a_i=1.0, a_j=1.0):
+    def potential(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Pair potential U(h), with F = -dU/dh.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            U(h), shaped like gap, in the law's force unit x a.
+        """
         gap = np.asarray(gap, float)
         if math.isinf(self.cutoff):
             return self._energy(gap, a_i, a_j)
@@ -192,17 +281,51 @@ class Combined:
 
     parts: tuple
 
-    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+    def magnitude(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Force magnitude F(h), positive when repulsive.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+        """
         return sum(p.magnitude(gap, a_i, a_j) for p in self.parts)
 
-    def potential(self, gap, a_i=1.0, a_j=1.0):
+    def potential(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Pair potential U(h), with F = -dU/dh.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            U(h), shaped like gap, in the law's force unit x a.
+        """
         return sum(p.potential(gap, a_i, a_j) for p in self.parts)
 
 
-def force_law(job):
+def force_law(job: Job) -> PairLaw | None:
     """The pair force law of a job's [interparticle] section in Stokes units (strengths
     times ``FORCE_UNIT``), truncated at the lubrication cut-off where it is algebraic or
-    shifted; None for hard spheres (kind "none")."""
+    shifted; None for hard spheres (kind "none").
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        The law (forces in eta_m a^2/t_D, gaps in a), or None.
+
+    Raises:
+        ValueError: an unknown interparticle.kind.
+    """
     inter = job.interparticle
     cutoff = job.hydrodynamics.lubrication_cutoff
     if inter.kind == "none":
@@ -220,11 +343,19 @@ def force_law(job):
     raise ValueError(f"unknown interparticle.kind {inter.kind!r}")
 
 
-def tail_ratios(job):
+def tail_ratios(job: Job) -> dict[str, tuple[float, tuple[float, float]]]:
     """|F(cut-off)| / |F(contact)| of each truncated part of the job's law, for the pair
     of size classes where it is largest (the cut-off gap is cut-off x the pair's mean
     radius, the van der Waals cap a fixed gap, so the ratio depends on both radii):
-    {"interparticle.<key>": (ratio, (a_i, a_j))} for the job check against TAIL (`checks`)."""
+    {"interparticle.<key>": (ratio, (a_i, a_j))} for the job check against TAIL (`checks`).
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        Per truncated part, its largest ratio (dimensionless) and the radii (a) where it
+        occurs; empty for laws without truncation.
+    """
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
     radii = job.system.class_radii
     pairs = [(a, b) for k, a in enumerate(radii) for b in radii[k:]]
@@ -241,11 +372,23 @@ def tail_ratios(job):
     return out
 
 
-def pair_forces(force_law, pairs, n, radii=None):
+def pair_forces(
+    force_law: PairLaw | None, pairs: PairList, n: int, radii: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Forces (N, 3) on the particles and the virial sum_pairs dx F_ij (3, 3) for the
     close pairs (a PairList: dx = x_j - x_i, true gaps). The force on i is
     -F(h) dx/|dx| (repulsion pushes i away from j), and +F(h) dx/|dx| on j. radii (N,)
-    give each pair's a_i, a_j; None: each pair's mean radius (radii_sum / 2) for both."""
+    give each pair's a_i, a_j; None: each pair's mean radius (radii_sum / 2) for both.
+
+    Args:
+        force_law: the pair law (`force_law`), or None for no forces.
+        pairs: the close pairs, P of them.
+        n: number of particles N.
+        radii: particle radii, shape (N,), in a, or None.
+
+    Returns:
+        (forces (N, 3), virial (3, 3)) in the law's force unit and force unit x a.
+    """
     forces = np.zeros((n, 3))
     virial = np.zeros((3, 3))
     if force_law is None or len(pairs.i) == 0:

@@ -19,8 +19,10 @@ shrinks limited by the closest pair, a slow Lubachevsky-Stillinger-like compress
 lattice cannot hold: lattice + MC at LATTICE_FILL of the lattice limit, compression to
 phi, then MC at phi (phi < ``START_PHI_LIMIT``). Equal radii given as an array take
 exactly the arithmetic and random stream of a common radius, so a job's positions depend
-only on its seed, N and phi.
+only on its seed, N and phi. Lengths are in particle radii a.
 """
+
+from __future__ import annotations
 
 import math
 
@@ -40,14 +42,31 @@ class Jammed(RuntimeError):
     """A compression (:func:`compress`) that stopped below its target volume fraction."""
 
 
-def cubic_box(n_particles, phi, radius=1.0):
-    """Side L of the cube holding n spheres of the given radius at volume fraction phi."""
+def cubic_box(n_particles: int, phi: float, radius: float = 1.0) -> float:
+    """Side L of the cube holding n spheres of the given radius at volume fraction phi.
+
+    Args:
+        n_particles: number of spheres N.
+        phi: volume fraction, > 0.
+        radius: sphere radius, in a.
+
+    Returns:
+        L, in a.
+    """
     return (n_particles * 4.0 / 3.0 * math.pi * radius ** 3 / phi) ** (1.0 / 3.0)
 
 
-def box_side(radii, phi):
+def box_side(radii: np.ndarray, phi: float) -> float:
     """Side L of the cube holding spheres of these radii (N,) at volume fraction phi
-    (equal radii: exactly :func:`cubic_box`)."""
+    (equal radii: exactly :func:`cubic_box`).
+
+    Args:
+        radii: sphere radii, shape (N,), in a (any array-like).
+        phi: volume fraction, > 0.
+
+    Returns:
+        L, in a.
+    """
     radii = np.asarray(radii, float)
     if np.all(radii == radii[0]):
         return cubic_box(len(radii), phi, float(radii[0]))
@@ -194,7 +213,15 @@ def _neighbours(cell, cells, head, nxt, out):
     return count
 
 
-def hard_sphere_fluid(n_particles, phi, rng, sweeps=START_SWEEPS, radius=1.0, strain=0.0, radii=None):
+def hard_sphere_fluid(
+    n_particles: int,
+    phi: float,
+    rng: np.random.Generator,
+    sweeps: int = START_SWEEPS,
+    radius: float = 1.0,
+    strain: float = 0.0,
+    radii: np.ndarray | None = None,
+) -> tuple[np.ndarray, float]:
     """Equilibrium hard-sphere configuration in a cube of side L with Lees-Edwards
     images at the given strain: positions (N, 3) (not wrapped) and L.
 
@@ -208,7 +235,24 @@ def hard_sphere_fluid(n_particles, phi, rng, sweeps=START_SWEEPS, radius=1.0, st
     moves each) follow, the step tuned to ~40% acceptance. At or above the
     lattice limit (phi < START_PHI_LIMIT) the lattice is filled to LATTICE_FILL x the
     limit, equilibrated, compressed (:func:`compress`) and equilibrated again at phi by
-    ``sweeps`` more sweeps; :class:`Jammed` if the compression jams COMPRESS_ATTEMPTS times."""
+    ``sweeps`` more sweeps; :class:`Jammed` if the compression jams COMPRESS_ATTEMPTS times.
+
+    Args:
+        n_particles: number of spheres N.
+        phi: volume fraction, in (0, START_PHI_LIMIT).
+        rng: the random stream of the start.
+        sweeps: MC sweeps at each equilibration.
+        radius: common sphere radius, in a (used when radii is None).
+        strain: Lees-Edwards strain of the images, dimensionless.
+        radii: per-particle radii, shape (N,), in a, or None.
+
+    Returns:
+        (positions (N, 3) in a, not wrapped; side L in a).
+
+    Raises:
+        ValueError: phi outside (0, START_PHI_LIMIT).
+        Jammed: the compression jammed COMPRESS_ATTEMPTS times.
+    """
     m = lattice_sites_per_axis(n_particles)
     radii = _radii(n_particles, radius, radii)
     a_max = float(radii.max())
@@ -250,12 +294,27 @@ def _equilibrate(pos, side, radii, step, sweeps, rng, strain, dims=3):
         step *= min(max(rate / 0.4, 0.5), 2.0)
 
 
-def square_side(n_particles, phi_a):
-    """Side L of the square cell holding n unit disks at areal fraction phi_a."""
+def square_side(n_particles: int, phi_a: float) -> float:
+    """Side L of the square cell holding n unit disks at areal fraction phi_a.
+
+    Args:
+        n_particles: number of disks N.
+        phi_a: areal fraction, > 0.
+
+    Returns:
+        L, in a.
+    """
     return math.sqrt(n_particles * math.pi / phi_a)
 
 
-def hard_disk_monolayer(n_particles, phi_a, rng, z=0.0, sweeps=200, strain=0.0):
+def hard_disk_monolayer(
+    n_particles: int,
+    phi_a: float,
+    rng: np.random.Generator,
+    z: float = 0.0,
+    sweeps: int = 200,
+    strain: float = 0.0,
+) -> tuple[np.ndarray, float]:
     """Random non-overlapping monolayer of unit spheres, centres in the plane z, in a square
     cell of side L = :func:`square_side` (periodic in x and y): positions (N, 3) and L.
 
@@ -264,7 +323,22 @@ def hard_disk_monolayer(n_particles, phi_a, rng, z=0.0, sweeps=200, strain=0.0):
     then hard-disk Metropolis MC in the plane (as :func:`hard_sphere_fluid`, 2D moves),
     which samples the equilibrium hard-disk fluid at phi_a (Dratler & Schowalter 1996: random
     starts), with Lees-Edwards images at the given strain (rows L/m > 2 apart in y: no overlap
-    at any strain at the start)."""
+    at any strain at the start).
+
+    Args:
+        n_particles: number of spheres N.
+        phi_a: areal fraction, below pi N / (4 m^2).
+        rng: the random stream of the start.
+        z: height of the plane of centres, in a.
+        sweeps: MC sweeps.
+        strain: Lees-Edwards strain of the images, dimensionless.
+
+    Returns:
+        (positions (N, 3) in a, side L in a).
+
+    Raises:
+        ValueError: phi_a too large for the lattice start.
+    """
     m = math.isqrt(n_particles - 1) + 1
     side = square_side(n_particles, phi_a)
     if side / m <= 2.0:
@@ -327,16 +401,53 @@ def _closest_ratio(pos, side, strain, radii):
     return _pairs_ratio(pos, side, strain, radii, i[off], j[off])
 
 
-def min_gap_ratio(pos, side, radii, strain=0.0):
-    """Smallest |x_i - x_j| / (a_i + a_j) over pairs (>= 1: no overlap)."""
+def min_gap_ratio(pos: np.ndarray, side: float, radii: np.ndarray, strain: float = 0.0) -> float:
+    """Smallest |x_i - x_j| / (a_i + a_j) over pairs (>= 1: no overlap).
+
+    Args:
+        pos: positions, shape (N, 3), in a.
+        side: side of the cubic box, in a.
+        radii: radii, shape (N,), in a.
+        strain: Lees-Edwards strain, dimensionless.
+
+    Returns:
+        The ratio, dimensionless.
+    """
     return _contact_ratio(pos, side, strain, np.ascontiguousarray(radii, dtype=float))
 
 
-def compress(pos, side, phi_target, rng, sweeps_per_shrink=5, radius=1.0, max_shrinks=20000, strain=0.0,
-             radii=None):
+def compress(
+    pos: np.ndarray,
+    side: float,
+    phi_target: float,
+    rng: np.random.Generator,
+    sweeps_per_shrink: int = 5,
+    radius: float = 1.0,
+    max_shrinks: int = 20000,
+    strain: float = 0.0,
+    radii: np.ndarray | None = None,
+) -> tuple[np.ndarray, float]:
     """Compress a hard-sphere configuration (N, 3) in a cube of the given side (Lees-Edwards
     strain fixed) to volume fraction phi_target; spheres of the common ``radius`` or of the
-    per-particle ``radii``. Returns (positions, side). Raises :class:`Jammed` if it jams."""
+    per-particle ``radii``. Returns (positions, side). Raises :class:`Jammed` if it jams.
+
+    Args:
+        pos: positions, shape (N, 3), in a (not modified).
+        side: side of the cubic box, in a.
+        phi_target: the volume fraction to reach.
+        rng: the random stream of the MC sweeps.
+        sweeps_per_shrink: MC sweeps after each shrink.
+        radius: common sphere radius, in a (used when radii is None).
+        max_shrinks: most shrinks tried.
+        strain: Lees-Edwards strain, dimensionless.
+        radii: per-particle radii, shape (N,), in a, or None.
+
+    Returns:
+        (positions (N, 3) in a, side L in a).
+
+    Raises:
+        Jammed: max_shrinks were not enough.
+    """
     pos = pos.copy()
     n = len(pos)
     radii = _radii(n, radius, radii)

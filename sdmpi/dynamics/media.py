@@ -16,6 +16,8 @@ The medium's own stress obeys the same law with 2 eta_m E_inf as source; its mod
 analytic (Schaink et al. eq. 36) and are added by the reducer, not computed here.
 """
 
+from __future__ import annotations
+
 import math
 from dataclasses import dataclass
 
@@ -30,9 +32,13 @@ class MaxwellFilter:
     lam: tuple
     dt: float
 
-    def coefficients(self):
+    def coefficients(self) -> np.ndarray:
         """Per mode (decay, weight_old, weight_new) so that
-        S_k <- decay S_k + weight_old S_0(t0) + weight_new S_0(t0 + dt)."""
+        S_k <- decay S_k + weight_old S_0(t0) + weight_new S_0(t0 + dt).
+
+        Returns:
+            Array of shape (n_modes, 3), dimensionless (weights carry eta_k/eta_m).
+        """
         out = []
         for eta, lam in zip(self.eta, self.lam):
             h = self.dt / lam
@@ -41,8 +47,19 @@ class MaxwellFilter:
             out.append((decay, eta * (-math.expm1(-h) - ramp), eta * ramp))
         return np.array(out)
 
-    def update(self, modes, source_old, source_new):
-        """Advance the mode stresslets (n_modes, ...) over one step, in place."""
+    def update(
+        self, modes: np.ndarray, source_old: np.ndarray, source_new: np.ndarray
+    ) -> np.ndarray:
+        """Advance the mode stresslets (n_modes, ...) over one step, in place.
+
+        Args:
+            modes: mode stresslets S_k, shape (n_modes, ...), modified in place.
+            source_old: viscous-medium stresslets S_0(t0), shape of one mode (...).
+            source_new: viscous-medium stresslets S_0(t0 + dt), same shape.
+
+        Returns:
+            `modes`, the same array, advanced by dt (stresslet units of the sources).
+        """
         for k, (decay, w_old, w_new) in enumerate(self.coefficients()):
             modes[k] *= decay
             modes[k] += w_old * source_old + w_new * source_new

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -46,6 +46,9 @@ from ..hydro.resistance import resistance_change
 from ..hydro.solvers import assemble, make_solver, resolve_backend
 from ..registry import DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, backend_for, default_drift_scheme
 from .drift import BrownianTerms, near_contact_velocities, unit_pair_forces
+
+if TYPE_CHECKING:
+    from ..config.schema import Job
 
 
 class HydrodynamicEvaluation(Protocol):
@@ -64,25 +67,64 @@ class HydrodynamicEvaluation(Protocol):
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
         """U', Omega' (N, 6) relative to the imposed flow = R_FU^-1 (F + R_FE e_inf), for
-        forces/torques (N, 6) and E_inf (N, 5)."""
+        forces/torques (N, 6) and E_inf (N, 5).
+
+        Args:
+            forces: forces and torques (N, 6), in eta_m a^2/t_D and eta_m a^3/t_D.
+            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
+
+        Returns:
+            (U', Omega') (N, 6), in a/t_D and 1/t_D.
+        """
         raise NotImplementedError
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """S (N, 5) = R_SE e_inf - R_SU U' for rigid-body velocities (N, 6) and E_inf (N, 5)."""
+        """S (N, 5) = R_SE e_inf - R_SU U' for rigid-body velocities (N, 6) and E_inf (N, 5).
+
+        Args:
+            velocities: (U', Omega') (N, 6), in a/t_D and 1/t_D.
+            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
+
+        Returns:
+            S (N, 5) in the 5-basis, in eta_m a^3/t_D.
+        """
         raise NotImplementedError
 
     def relative_mobility(self, i: np.ndarray, j: np.ndarray, e: np.ndarray) -> np.ndarray:
         """(P,) mobility of relative motion e.(M_jj + M_ii - M_ij - M_ji).e of the pairs
-        (i, j) along their unit lines of centres e (P, 3), M = R_FU^-1."""
+        (i, j) along their unit lines of centres e (P, 3), M = R_FU^-1.
+
+        Args:
+            i: first particles of the pairs, shape (P,).
+            j: second particles, shape (P,).
+            e: unit lines of centres from i to j, shape (P, 3).
+
+        Returns:
+            Relative mobilities, shape (P,), in 1/(eta_m a).
+        """
         raise NotImplementedError
 
     def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
-        """The step's Brownian velocities (drift included) and stresslets, drawn from rng."""
+        """The step's Brownian velocities (drift included) and stresslets, drawn from rng.
+
+        Args:
+            rng: the realisation's random stream.
+            kT: thermal energy (6 pi in reduced units; 0 without Brownian motion).
+            dt: the step's duration (t_D).
+
+        Returns:
+            The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
+            (N, 5) in eta_m a^3/t_D.
+        """
         raise NotImplementedError
 
     def stats(self) -> dict[str, float]:
         """Solver statistics of the evaluation: solver_iterations, solver_residual,
-        lanczos_iterations (zero for the direct backends)."""
+        lanczos_iterations (zero for the direct backends).
+
+        Returns:
+            solver_iterations, solver_residual (relative), lanczos_iterations.
+        """
         raise NotImplementedError
 
 
@@ -93,11 +135,32 @@ class HydrodynamicModel(Protocol):
     @classmethod
     def from_job(cls, job: Any, radii: np.ndarray, box: np.ndarray, comm: Any = None,
                  separate: Callable | None = None, on_error: Callable | None = None) -> HydrodynamicModel:
-        """The model of ``job`` (`hydrodynamic_model`)."""
+        """The model of ``job`` (`hydrodynamic_model`).
+
+        Args:
+            job: the validated job.
+            radii: sphere radii, shape (N,), in a.
+            box: box sides (3,), in a.
+            comm: the MPI communicator of the ranks that solve together, or None.
+            separate: separate(positions, strain) -> (positions, overlaps), the midpoint
+                overlap correction, or None.
+            on_error: on_error(LinAlgError) -> the exception to raise, or None.
+
+        Returns:
+            The model.
+        """
         raise NotImplementedError
 
     def at(self, positions: np.ndarray, strain: float) -> HydrodynamicEvaluation:
-        """The model evaluated at ``positions`` (N, 3) with the box at Lees-Edwards ``strain``."""
+        """The model evaluated at ``positions`` (N, 3) with the box at Lees-Edwards ``strain``.
+
+        Args:
+            positions: centres, shape (N, 3), in a.
+            strain: Lees-Edwards strain of the box, dimensionless.
+
+        Returns:
+            The evaluation at that configuration.
+        """
         raise NotImplementedError
 
 
@@ -112,28 +175,75 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         self.n_particles = resistance.n_particles
         self._solvers = [solver]
 
-    def velocities(self, forces, einf):
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """U', Omega' = R_FU^-1 (F + R_FE e_inf) by the backend's solver.
+
+        Args:
+            forces: forces and torques (N, 6), in eta_m a^2/t_D and eta_m a^3/t_D.
+            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
+
+        Returns:
+            (U', Omega') (N, 6), in a/t_D and 1/t_D.
+        """
         return self.solver.velocities(forces, einf)
 
-    def stresslets(self, velocities, einf):
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """S = R_SE e_inf - R_SU U' by the backend's solver.
+
+        Args:
+            velocities: (U', Omega') (N, 6), in a/t_D and 1/t_D.
+            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
+
+        Returns:
+            S (N, 5) in the 5-basis, in eta_m a^3/t_D.
+        """
         return self.solver.stresslets(velocities, einf)
 
-    def relative_mobility(self, i, j, e):
+    def relative_mobility(self, i: np.ndarray, j: np.ndarray, e: np.ndarray) -> np.ndarray:
         """e.(M_jj + M_ii - M_ij - M_ji).e of the pairs (i, j) with unit lines of centres
-        e (M = R_FU^-1): f.M.f for unit and opposite forces f on j and i (`unit_pair_forces`)."""
+        e (M = R_FU^-1): f.M.f for unit and opposite forces f on j and i (`unit_pair_forces`).
+
+        Args:
+            i: first particles of the pairs, shape (P,).
+            j: second particles, shape (P,).
+            e: unit lines of centres from i to j, shape (P, 3).
+
+        Returns:
+            Relative mobilities, shape (P,), in 1/(eta_m a).
+        """
         return self.solver.mobility_forms(unit_pair_forces(i, j, e, self.n_particles))
 
     @property
     def radii(self) -> np.ndarray:
-        """(N,) sphere radii."""
+        """(N,) sphere radii.
+
+        Returns:
+            The radii, in a.
+        """
         return self.model.radii
 
     @property
     def min_gap(self) -> float:
-        """hydrodynamics.min_gap (mean radii)."""
+        """hydrodynamics.min_gap (mean radii).
+
+        Returns:
+            The minimum gap, in mean radii.
+        """
         return self.model.min_gap
 
-    def brownian(self, rng, kT, dt):
+    def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
+        """The step's Brownian terms (`brownian_terms`) for noise drawn from rng: z, then z'
+        of the near-contact correction where the model has one.
+
+        Args:
+            rng: the realisation's random stream.
+            kT: thermal energy (6 pi in reduced units; 0 without Brownian motion).
+            dt: the step's duration (t_D).
+
+        Returns:
+            The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
+            (N, 5) in eta_m a^3/t_D.
+        """
         shape = self.solver.noise_shape
         z = rng.standard_normal(shape)
         z_near = rng.standard_normal(shape) if self.model.near_contact else None
@@ -143,7 +253,18 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
     def brownian_terms(self, z: np.ndarray, kT: float, dt: float, z_near: np.ndarray | None = None) -> BrownianTerms:
         """The step's `BrownianTerms` by the model's drift scheme (`drift`) for the standard
         normal noise z (the solver's noise_shape); z_near: the independent noise z' of the
-        near-contact correction (`drift.near_contact_velocities`; None: no correction)."""
+        near-contact correction (`drift.near_contact_velocities`; None: no correction).
+
+        Args:
+            z: standard normal noise, shape solver.noise_shape.
+            kT: thermal energy (6 pi in reduced units).
+            dt: the step's duration (t_D).
+            z_near: standard normal noise of the near-contact correction, same shape, or None.
+
+        Returns:
+            The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
+            (N, 5) in eta_m a^3/t_D.
+        """
         def near(m):
             return 0.0 if z_near is None else near_contact_velocities(self, m, z_near, kT, dt)
 
@@ -151,18 +272,39 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
 
     def displaced(self, positions: np.ndarray) -> tuple[Any, int]:
         """The solver at ``positions`` with this evaluation's pair sets and strain, overlaps
-        first separated (counted); its solves join `stats`. Returns (solver, overlaps)."""
+        first separated (counted); its solves join `stats`. Returns (solver, overlaps).
+
+        Args:
+            positions: displaced centres, shape (N, 3), in a.
+
+        Returns:
+            (the backend's solver there, number of overlapping pairs separated first).
+        """
         solver, found = self.model.displaced(self, positions, separate=True)
         self._solvers.append(solver)
         return solver, found
 
     def resistance_change(self, positions: np.ndarray, vector: np.ndarray) -> np.ndarray:
         """[R(positions) - R] v (N, 11) about this configuration, to first order
-        (`hydro.resistance.resistance_change`)."""
+        (`hydro.resistance.resistance_change`).
+
+        Args:
+            positions: nearby centres, shape (N, 3), in a.
+            vector: the vector v, shape (N, 11): (U, Omega) in a/t_D and 1/t_D, then E in
+                the 5-basis in 1/t_D.
+
+        Returns:
+            The change, shape (N, 11): forces, torques, stresslets (eta_m a^2/t_D, eta_m
+            a^3/t_D, eta_m a^3/t_D).
+        """
         return resistance_change(self.resistance, positions, vector, self.min_gap)
 
-    def stats(self):
-        """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""
+    def stats(self) -> dict[str, float]:
+        """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves.
+
+        Returns:
+            solver_iterations, solver_residual (relative), lanczos_iterations.
+        """
         stats = [s.stats for s in self._solvers]
         return {"solver_iterations": sum(s["iterations"] for s in stats),
                 "solver_residual": max(s["residual"] for s in stats),
@@ -196,9 +338,23 @@ class ResistanceModel(HydrodynamicModel):
         self._held_blocks = None  # its far-field blocks, computed on first use
 
     @classmethod
-    def from_job(cls, job, radii, box, comm=None, separate=None, on_error=None):
+    def from_job(cls, job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+                 separate: Callable | None = None, on_error: Callable | None = None) -> ResistanceModel:
         """The model of job.hydrodynamics.model, with lubrication when the model has it
-        (`sdmpi.registry.ModelSpec`) and hydrodynamics.lubrication is on."""
+        (`sdmpi.registry.ModelSpec`) and hydrodynamics.lubrication is on.
+
+        Args:
+            job: the validated job.
+            radii: sphere radii, shape (N,), in a.
+            box: box sides (3,), in a.
+            comm: the MPI communicator of the ranks that solve together, or None.
+            separate: separate(positions, strain) -> (positions, overlaps), the midpoint
+                overlap correction, or None.
+            on_error: on_error(LinAlgError) -> the exception to raise, or None.
+
+        Returns:
+            The model.
+        """
         hyd = job.hydrodynamics
         return cls(radii, box, lubrication=HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication,
                    ewald_tol=job.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
@@ -225,7 +381,12 @@ class ResistanceModel(HydrodynamicModel):
         lubrication of each evaluation's own configuration (hydrodynamics.far_field_refresh;
         the direct backends, whose resistance holds the far field's blocks). The blocks are
         computed at the next evaluation, so that a state restored with the positions of the
-        last refresh evaluates as the run it was saved from."""
+        last refresh evaluates as the run it was saved from.
+
+        Args:
+            positions: centres of the refresh, shape (N, 3), in a (copied).
+            strain: Lees-Edwards strain at the refresh, dimensionless.
+        """
         self._held, self._held_blocks = (np.array(positions, dtype=float), strain), None
 
     def _far(self):
@@ -240,7 +401,16 @@ class ResistanceModel(HydrodynamicModel):
     def _solver(self, resistance):
         return self._guarded(make_solver, self.backend, resistance, self.comm, **self._solver_args)
 
-    def at(self, positions, strain):
+    def at(self, positions: np.ndarray, strain: float) -> ResistanceEvaluation:
+        """The resistance assembled and factorised at ``positions`` (N, 3), box at ``strain``.
+
+        Args:
+            positions: centres, shape (N, 3), in a.
+            strain: Lees-Edwards strain of the box, dimensionless.
+
+        Returns:
+            The evaluation at that configuration.
+        """
         res = self._assemble(positions, strain, **self._far())
         if self.lubrication:
             pairs = res.pairs  # the lubrication pairs are the force pairs (same cut-off)
@@ -248,9 +418,19 @@ class ResistanceModel(HydrodynamicModel):
             pairs = close_pairs(res.positions, self.radii, Lattice(self.box, strain), self.cutoff, self.min_gap)
         return ResistanceEvaluation(self, res, self._solver(res), pairs, strain)
 
-    def displaced(self, evaluation, positions, separate):
+    def displaced(self, evaluation: ResistanceEvaluation, positions: np.ndarray,
+                  separate: bool) -> tuple[Any, int]:
         """The solver at displaced positions with the pair sets of `evaluation` (and its
-        strain); separate: remove overlaps first (counted). Returns (solver, overlaps)."""
+        strain); separate: remove overlaps first (counted). Returns (solver, overlaps).
+
+        Args:
+            evaluation: the evaluation whose pair sets and strain are kept.
+            positions: displaced centres, shape (N, 3), in a.
+            separate: whether to separate overlapping pairs first.
+
+        Returns:
+            (the backend's solver there, number of overlapping pairs separated).
+        """
         found = 0
         if separate and self._separate is not None:
             positions, found = self._separate(positions, evaluation.strain)
@@ -268,23 +448,67 @@ class FreeDrainingEvaluation(HydrodynamicEvaluation):
                                     np.repeat(1 / (8 * np.pi * radii ** 3)[:, None], 3, axis=1)])
         self._stresslet = (20 / 3) * np.pi * radii ** 3  # R_SE per sphere
 
-    def velocities(self, forces, einf):
+    def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """Stokes' laws: U = F/(6 pi a), Omega = T/(8 pi a^3); E_inf moves no sphere.
+
+        Args:
+            forces: forces and torques (N, 6), in eta_m a^2/t_D and eta_m a^3/t_D.
+            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
+
+        Returns:
+            (U', Omega') (N, 6), in a/t_D and 1/t_D.
+        """
         return self._mobility * forces
 
-    def stresslets(self, velocities, einf):
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """S = (20/3) pi a^3 E_inf per sphere, independent of the velocities.
+
+        Args:
+            velocities: (U', Omega') (N, 6), in a/t_D and 1/t_D.
+            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
+
+        Returns:
+            S (N, 5) in the 5-basis, in eta_m a^3/t_D.
+        """
         return self._stresslet[:, None] * np.asarray(einf)
 
-    def relative_mobility(self, i, j, e):
-        """1/(6 pi a_i) + 1/(6 pi a_j) of the pairs (i, j)."""
+    def relative_mobility(self, i: np.ndarray, j: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """1/(6 pi a_i) + 1/(6 pi a_j) of the pairs (i, j).
+
+        Args:
+            i: first particles of the pairs, shape (P,).
+            j: second particles, shape (P,).
+            e: unit lines of centres from i to j, shape (P, 3).
+
+        Returns:
+            Relative mobilities, shape (P,), in 1/(eta_m a).
+        """
         inv = self._mobility[:, 0]
         return inv[i] + inv[j]
 
-    def brownian(self, rng, kT, dt):
+    def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
+        """Independent Brownian velocities (2 kT M / dt)^1/2 z per sphere, no drift, zero
+        Brownian stresslets.
+
+        Args:
+            rng: the realisation's random stream.
+            kT: thermal energy (6 pi in reduced units; 0 without Brownian motion).
+            dt: the step's duration (t_D).
+
+        Returns:
+            The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
+            (N, 5) in eta_m a^3/t_D.
+        """
         z = rng.standard_normal((self.n_particles, 6))
         return BrownianTerms(math.sqrt(2 * kT / dt) * np.sqrt(self._mobility) * z,
                              np.zeros((self.n_particles, 5)))
 
-    def stats(self):
+    def stats(self) -> dict[str, float]:
+        """Nothing is solved: all zero.
+
+        Returns:
+            solver_iterations, solver_residual (relative), lanczos_iterations.
+        """
         return {"solver_iterations": 0, "solver_residual": 0.0, "lanczos_iterations": 0}
 
 
@@ -296,29 +520,73 @@ class FreeDrainingModel(HydrodynamicModel):
         self.radii, self.box, self.cutoff, self.min_gap = radii, box, cutoff, min_gap
 
     @classmethod
-    def from_job(cls, job, radii, box, comm=None, separate=None, on_error=None):
+    def from_job(cls, job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+                 separate: Callable | None = None, on_error: Callable | None = None) -> FreeDrainingModel:
         """The model for the job's cut-off and minimum gap (it solves nothing: comm,
-        separate and on_error do not apply)."""
+        separate and on_error do not apply).
+
+        Args:
+            job: the validated job.
+            radii: sphere radii, shape (N,), in a.
+            box: box sides (3,), in a.
+            comm: the MPI communicator of the ranks that solve together, or None.
+            separate: separate(positions, strain) -> (positions, overlaps), the midpoint
+                overlap correction, or None.
+            on_error: on_error(LinAlgError) -> the exception to raise, or None.
+
+        Returns:
+            The model.
+        """
         return cls(radii, box, cutoff=job.hydrodynamics.lubrication_cutoff, min_gap=job.hydrodynamics.min_gap)
 
-    def at(self, positions, strain):
+    def at(self, positions: np.ndarray, strain: float) -> FreeDrainingEvaluation:
+        """The spheres at ``positions`` (N, 3), wrapped, with their force pairs, box at ``strain``.
+
+        Args:
+            positions: centres, shape (N, 3), in a.
+            strain: Lees-Edwards strain of the box, dimensionless.
+
+        Returns:
+            The evaluation at that configuration.
+        """
         lattice = Lattice(self.box, strain)
         pos = lattice.wrap(positions)
         return FreeDrainingEvaluation(self.radii, pos, close_pairs(pos, self.radii, lattice, self.cutoff,
                                                                    self.min_gap))
 
 
-def job_backend(job):
+def job_backend(job: Job) -> str:
     """The backend a job's tasks solve on: job.solver.backend, or what "auto" stands for at
-    its N on ensemble.ranks_per_task ranks (`sdmpi.registry.backend_for`)."""
+    its N on ensemble.ranks_per_task ranks (`sdmpi.registry.backend_for`).
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        A registered solver backend name (`sdmpi.registry.SOLVER_BACKENDS`).
+    """
     return backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
 
 
-def hydrodynamic_model(job, radii, box, comm=None, separate=None, on_error=None) -> HydrodynamicModel:
+def hydrodynamic_model(job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+                       separate: Callable | None = None, on_error: Callable | None = None) -> HydrodynamicModel:
     """The model of job.hydrodynamics.model (its `sdmpi.registry.HYDRODYNAMIC_MODELS` entry)
     for spheres of these radii in this box (comm: the ranks that solve together;
     separate(positions, strain) -> (positions, overlaps): the overlap correction the
     midpoint scheme applies at its half step; on_error(LinAlgError) -> the exception raised
-    when M_inf or R_FU is not positive definite)."""
+    when M_inf or R_FU is not positive definite).
+
+    Args:
+        job: the validated job.
+        radii: sphere radii, shape (N,), in a.
+        box: box sides (3,), in a.
+        comm: the MPI communicator of the ranks that solve together, or None.
+        separate: separate(positions, strain) -> (positions, overlaps), the midpoint
+            overlap correction, or None.
+        on_error: on_error(LinAlgError) -> the exception to raise, or None.
+
+    Returns:
+        The model.
+    """
     model = HYDRODYNAMIC_MODELS[job.hydrodynamics.model].load()
     return model.from_job(job, radii, box, comm=comm, separate=separate, on_error=on_error)

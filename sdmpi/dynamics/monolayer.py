@@ -51,15 +51,24 @@ Repulsion (Dratler & Schowalter's eq. 9, `forces.Repulsion`): F(h) = F0 tau e^(-
 e^(-tau h)), gamma* = 6 pi eta_m a^2 gamma_dot / (2 F0). In the job's force unit
 6 pi eta_m a^2 gamma_dot, ``interparticle.f0`` = 1/(2 gamma*) (Dratler & Schowalter's gamma* = 1 is
 f0 = 0.5).
+
+Units: lengths in a, times in the job's time unit (1/gamma_dot under steady shear, as
+these jobs are non-Brownian).
 """
+
+from __future__ import annotations
 
 import logging
 import math
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..hydro.lubrication import close_pairs
 from .initial import hard_disk_monolayer, square_side
+
+if TYPE_CHECKING:
+    from ..hydro.geometry import Lattice
 
 #: velocity components (of the 6 per sphere: U, Omega) that are odd under z -> -z
 MIRROR_ODD = (2, 3, 4)
@@ -82,25 +91,57 @@ class Monolayer:
         #: the step at which the run stopped on an overlap, -1 while running
         self.stopped_at = -1
 
-    def start(self, rng):
-        """Random non-overlapping start in the plane z = Lz/2, (N, 3)."""
+    def start(self, rng: np.random.Generator) -> np.ndarray:
+        """Random non-overlapping start in the plane z = Lz/2, (N, 3).
+
+        Args:
+            rng: the random stream of the start.
+
+        Returns:
+            Positions, shape (N, 3), in a.
+        """
         return hard_disk_monolayer(self.n_particles, self.phi_a, rng, z=0.5 * self.box[2])[0]
 
     @staticmethod
-    def in_plane(velocity):
-        """(N, 6) velocities with the mirror-odd components U_z, Omega_x, Omega_y set to 0."""
+    def in_plane(velocity: np.ndarray) -> np.ndarray:
+        """(N, 6) velocities with the mirror-odd components U_z, Omega_x, Omega_y set to 0.
+
+        Args:
+            velocity: (U, Omega), shape (N, 6), not modified.
+
+        Returns:
+            A copy, shape (N, 6), same units, columns MIRROR_ODD zero.
+        """
         out = velocity.copy()
         out[:, MIRROR_ODD] = 0.0
         return out
 
     @staticmethod
-    def overlaps(positions, radii, lattice):
-        """Overlapping pairs (count) and the smallest surface gap among them (inf: none)."""
+    def overlaps(positions: np.ndarray, radii: np.ndarray, lattice: Lattice) -> tuple[int, float]:
+        """Overlapping pairs (count) and the smallest surface gap among them (inf: none).
+
+        Args:
+            positions: centres, shape (N, 3), in a.
+            radii: radii, shape (N,), in a.
+            lattice: the periodic lattice of the current strain.
+
+        Returns:
+            (number of overlapping pairs, smallest gap in a).
+        """
         pairs = close_pairs(positions, radii, lattice, cutoff=0.0)
         return len(pairs.i), pairs.min_gap
 
-    def stops(self, step, min_gap, task_id):
-        """True once the run has stopped: now, if an overlap is deeper than overlap_stop."""
+    def stops(self, step: int, min_gap: float, task_id: int) -> bool:
+        """True once the run has stopped: now, if an overlap is deeper than overlap_stop.
+
+        Args:
+            step: the current step number.
+            min_gap: the step's smallest surface gap, in a (negative: overlap).
+            task_id: the task, for the warning.
+
+        Returns:
+            Whether the run has stopped (at this or an earlier step).
+        """
         if self.stopped_at < 0 and -min_gap > self.overlap_stop:
             self.stopped_at = step
             log.warning(f"task {task_id}: stopped at step {step}: two spheres overlap by "
@@ -109,9 +150,24 @@ class Monolayer:
         return self.stopped_at >= 0
 
     @staticmethod
-    def stopped_sample(fields, time, strain, rate):
+    def stopped_sample(
+        fields: dict[str, tuple[tuple[int, ...], str, str, str]],
+        time: float,
+        strain: float,
+        rate: float,
+    ) -> dict[str, Any]:
         """A sample after the stop: time, strain and rate, every other value NaN (-1 for
-        counts)."""
+        counts).
+
+        Args:
+            fields: the sample stream's fields (`realisation.sample_fields`).
+            time: sample time (time unit).
+            strain: strain at that time, dimensionless.
+            rate: shear rate at that time (1/time unit).
+
+        Returns:
+            name -> value, arrays shaped as in fields.
+        """
         sample = {k: np.full(shape, -1 if np.dtype(dt).kind == "i" else math.nan, dtype=dt)
                   for k, (shape, dt, _, _) in fields.items()}
         sample.update(time=time, strain=strain, rate=rate)

@@ -48,7 +48,10 @@ are contacts, not corrected; their spring forces and torques join F_P (and its s
 their stress is also sampled alone, and their tangential stretches are state.
 """
 
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -67,6 +70,10 @@ from .models import hydrodynamic_model
 from .monolayer import Monolayer
 from .shear import NoShear, Oscillatory, Steady, rate_of_strain
 
+if TYPE_CHECKING:
+    from ..config.schema import Job
+    from ..config.tasks import Task
+
 
 class RealisationFailed(RuntimeError):
     """A realisation cannot go on (e.g. a hydrodynamic matrix not positive definite): the
@@ -83,19 +90,42 @@ SIX_VECTOR_INDICES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 _SIX_OF_FIVE = np.array([[BASIS[m, a, b] for m in range(5)] for a, b in SIX_VECTOR_INDICES])
 
 
-def bulk_stress(tensors, volume):
-    """(1/V) sum of (N, 5) 5-basis tensors, as a 6-vector xx yy zz xy xz yz."""
+def bulk_stress(tensors: np.ndarray, volume: float) -> np.ndarray:
+    """(1/V) sum of (N, 5) 5-basis tensors, as a 6-vector xx yy zz xy xz yz.
+
+    Args:
+        tensors: per-particle tensors in the 5-basis, shape (N, 5) (e.g. eta_m a^3/t_D).
+        volume: the normalising volume V, in a^3.
+
+    Returns:
+        The 6-vector, shape (6,), in the tensors' unit per a^3 (e.g. eta_m/t_D).
+    """
     return _SIX_OF_FIVE @ tensors.sum(axis=0) / volume
 
 
-def symmetric_six(matrix):
-    """The symmetric part of a 3x3 matrix as a 6-vector xx yy zz xy xz yz."""
+def symmetric_six(matrix: np.ndarray) -> np.ndarray:
+    """The symmetric part of a 3x3 matrix as a 6-vector xx yy zz xy xz yz.
+
+    Args:
+        matrix: shape (3, 3).
+
+    Returns:
+        Shape (6,), in the matrix's unit.
+    """
     sym = 0.5 * (matrix + matrix.T)
     return np.array([sym[a, b] for a, b in SIX_VECTOR_INDICES])
 
 
-def protocol_of(job, task):
-    """The shear protocol of a task."""
+def protocol_of(job: Job, task: Task) -> Oscillatory | Steady | NoShear:
+    """The shear protocol of a task.
+
+    Args:
+        job: the validated job (shear.protocol and its parameters).
+        task: the task (its omega for oscillatory shear, 1/t_D).
+
+    Returns:
+        The protocol: strain and rate as functions of time.
+    """
     if job.shear.protocol == "oscillatory":
         return Oscillatory(job.shear.gamma0, task.omega)
     if job.shear.protocol == "steady":
@@ -103,9 +133,16 @@ def protocol_of(job, task):
     return NoShear()
 
 
-def sample_fields(job):
+def sample_fields(job: Job) -> dict[str, tuple[tuple[int, ...], str, str, str]]:
     """name -> (shape per sample, dtype, unit, description) of a task's sample stream:
-    the datasets under samples/ in docs/store.md (the same for every task of a job)."""
+    the datasets under samples/ in docs/store.md (the same for every task of a job).
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        The fields in stream order; shapes exclude the leading sample axis.
+    """
     su = "eta_m/t_D" if job.time_unit == "t_D" else "eta_m gamma_dot"
     fields = {
         "time": ((), "f8", job.time_unit, "t_k = k dt"),
@@ -188,12 +225,20 @@ class Realisation:
 
     # ------------------------------------------------------------------ interface
 
-    def sample_fields(self):
-        """name -> (shape per sample, dtype, unit, description) of the sample stream."""
+    def sample_fields(self) -> dict[str, tuple[tuple[int, ...], str, str, str]]:
+        """name -> (shape per sample, dtype, unit, description) of the sample stream.
+
+        Returns:
+            The module function `sample_fields` of this realisation's job.
+        """
         return sample_fields(self.job)
 
-    def state_fields(self):
-        """name -> (shape, dtype) of the state (fixed for the realisation)."""
+    def state_fields(self) -> dict[str, tuple[tuple[int, ...], str]]:
+        """name -> (shape, dtype) of the state (fixed for the realisation).
+
+        Returns:
+            The state's fields, the integrator's included.
+        """
         n = self.n_particles
         fields = {"positions": ((n, 3), "f8"), "step": ((1,), "i8"), "rng": ((6,), "u8")}
         if self.maxwell is not None:
@@ -208,8 +253,12 @@ class Realisation:
             fields["far_field_positions"] = ((n, 3), "f8")
         return {**fields, **self.integrator.state_fields()}
 
-    def get_state(self):
-        """The full state as arrays (see state_fields)."""
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The full state as arrays (see state_fields).
+
+        Returns:
+            name -> array (copies), shapes and dtypes of state_fields; positions in a.
+        """
         state = {"positions": self.positions.copy(), "step": np.array([self.step], dtype=np.int64),
                  "rng": _encode_rng(self.rng)}
         if self.maxwell is not None:
@@ -224,8 +273,12 @@ class Realisation:
             state["far_field_positions"] = self.far_field_positions.copy()
         return {**state, **self.integrator.get_state()}
 
-    def set_state(self, state):
-        """Restore a state from get_state()."""
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore a state from get_state().
+
+        Args:
+            state: name -> array, as returned by get_state (or read back from the store).
+        """
         self.positions = np.array(state["positions"], dtype=float)
         self.step = int(state["step"][0])
         self._unchecked = True
@@ -243,8 +296,16 @@ class Realisation:
             self._hold_far_field(np.array(state["far_field_positions"], dtype=float),
                                  self.step - self.step % self.far_field_every)
 
-    def advance(self, n):
-        """The next n samples (dict of arrays with leading axis n); steps n times."""
+    def advance(self, n: int) -> dict[str, np.ndarray]:
+        """The next n samples (dict of arrays with leading axis n); steps n times.
+
+        Args:
+            n: samples wanted; fewer are produced when fewer steps are left.
+
+        Returns:
+            name -> array of shape (n', *shape) for each of sample_fields, n' = min(n,
+            steps left), in the units of sample_fields.
+        """
         n = min(n, self.n_steps - self.step)
         fields = self.sample_fields()
         out = {k: np.empty((n, *shape), dtype=dt) for k, (shape, dt, _, _) in fields.items()}

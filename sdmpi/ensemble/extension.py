@@ -19,6 +19,7 @@ import datetime
 import json
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 from mpi4py import MPI
@@ -27,11 +28,22 @@ from ..config import enumerate_tasks
 from . import store, trajectory
 from .faults import fault
 
+if TYPE_CHECKING:
+    from ..config.schema import Job
 
-def problems(summary: store.RunSummary, job) -> list[str]:
+
+def problems(summary: store.RunSummary, job: Job) -> list[str]:
     """Why ``job`` cannot extend the run of ``summary`` (same job up to the length keys,
     checked by the caller): damaged data, tasks that would be shorter, or a changed time
-    step; one line per frequency."""
+    step; one line per frequency.
+
+    Args:
+        summary: the existing run file's summary.
+        job: the longer job.
+
+    Returns:
+        The problems, one line each; empty when the run can be extended.
+    """
     if summary.damage:
         return [f"it holds damaged data ({summary.damage[0]}); run it once without "
                 "--extend (it recomputes from the last intact checkpoint), then extend"]
@@ -46,9 +58,19 @@ def problems(summary: store.RunSummary, job) -> list[str]:
     return list(out.values())
 
 
-def extend(path: Path, job, job_text: str, versions: str) -> store.RunSummary:
+def extend(path: Path, job: Job, job_text: str, versions: str) -> store.RunSummary:
     """Replace the run file ``path`` by the same run lengthened to ``job`` (one process;
-    see the module docstring). Returns the summary of the extended file."""
+    see the module docstring). Returns the summary of the extended file.
+
+    Args:
+        path: the run file RUN.h5.
+        job: the longer job (checked by `problems`).
+        job_text: the job file's text, stored in the new file.
+        versions: the software versions of this session (JSON).
+
+    Returns:
+        The summary of the extended file.
+    """
     summary = store.read_summary(path)
     part = path.with_name(path.name + ".part")
     with h5py.File(path, "r") as old:

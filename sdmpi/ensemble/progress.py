@@ -17,6 +17,7 @@ import os
 import socket
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 TAG = 0x5D
@@ -35,12 +36,23 @@ class PipeSafe:
         self.stream, self.broken = stream, False
 
     def isatty(self) -> bool:
+        """Whether the wrapped stream is a terminal.
+
+        Returns:
+            The wrapped stream's isatty().
+        """
         return self.stream.isatty()
 
     def write(self, text: str) -> None:
+        """Write text, or drop it once the pipe is broken.
+
+        Args:
+            text: the text to write.
+        """
         self._guard(self.stream.write, text)
 
     def flush(self) -> None:
+        """Flush the wrapped stream (nothing once the pipe is broken)."""
         self._guard(self.stream.flush)
 
     def _guard(self, call, *args) -> None:
@@ -56,8 +68,15 @@ class PipeSafe:
                 pass
 
 
-def logs_dir(output) -> Path:
-    """The log directory of a run file: ``RUN.h5.logs`` (per-rank logs and the lock)."""
+def logs_dir(output: str | os.PathLike) -> Path:
+    """The log directory of a run file: ``RUN.h5.logs`` (per-rank logs and the lock).
+
+    Args:
+        output: the run file RUN.h5.
+
+    Returns:
+        The path RUN.h5.logs (not created).
+    """
     return Path(str(output) + ".logs")
 
 
@@ -65,9 +84,19 @@ class RunLocked(Exception):
     """Another process holds the run's lock; the message names it (pid on host)."""
 
 
-def take_lock(output) -> int:
+def take_lock(output: str | os.PathLike) -> int:
     """Create the log directory and take the run's lock (``RUN.h5.logs/lock``, flock;
-    released when the returned descriptor is closed or the process dies)."""
+    released when the returned descriptor is closed or the process dies).
+
+    Args:
+        output: the run file RUN.h5.
+
+    Returns:
+        The lock file's descriptor, holding the lock.
+
+    Raises:
+        RunLocked: another process holds the lock.
+    """
     logs = logs_dir(output)
     logs.mkdir(exist_ok=True)
     fd = os.open(logs / "lock", os.O_RDWR | os.O_CREAT, 0o644)
@@ -82,8 +111,15 @@ def take_lock(output) -> int:
     return fd
 
 
-def lock_holder(output) -> str | None:
-    """Who is running (writing) the run file now ("pid P on HOST"), or None. Read-only."""
+def lock_holder(output: str | os.PathLike) -> str | None:
+    """Who is running (writing) the run file now ("pid P on HOST"), or None. Read-only.
+
+    Args:
+        output: the run file RUN.h5.
+
+    Returns:
+        "pid P on HOST" ("unknown" if unreadable) while the lock is held, else None.
+    """
     try:
         fd = os.open(logs_dir(output) / "lock", os.O_RDONLY)
     except OSError:
@@ -98,7 +134,15 @@ def lock_holder(output) -> str | None:
 
 
 def rank_logger(logs_dir: Path, rank: int) -> logging.Logger:
-    """A logger writing to ``logs_dir/rank-N.log`` (appended across resumes)."""
+    """A logger writing to ``logs_dir/rank-N.log`` (appended across resumes).
+
+    Args:
+        logs_dir: the run's log directory (existing).
+        rank: the world rank N.
+
+    Returns:
+        The logger (level INFO, not propagating), its earlier handlers replaced.
+    """
     logger = logging.getLogger(f"sdmpi.ensemble.rank{rank}")
     logger.setLevel(logging.INFO)
     logger.propagate = False
@@ -112,7 +156,14 @@ def rank_logger(logs_dir: Path, rank: int) -> logging.Logger:
 
 
 def hms(seconds: float) -> str:
-    """A duration as H:MM:SS."""
+    """A duration as H:MM:SS.
+
+    Args:
+        seconds: the duration (s), >= 0.
+
+    Returns:
+        The text H:MM:SS, rounded to whole seconds.
+    """
     s = int(round(seconds))
     return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
 
@@ -137,7 +188,12 @@ class Progress:
         self._request = None
 
     def add(self, steps: int = 0, tasks: int = 0) -> None:
-        """Count steps / finished tasks of this rank; report if it is time."""
+        """Count steps / finished tasks of this rank; report if it is time.
+
+        Args:
+            steps: steps just done.
+            tasks: tasks just finished.
+        """
         self.steps += steps
         self.tasks += tasks
         now = time.monotonic()
@@ -149,9 +205,13 @@ class Progress:
         elif self.is_leader and now - self._last_send >= SEND_EVERY:
             self._send(final=False)
 
-    def finish(self, idle=None) -> None:
+    def finish(self, idle: Callable[[], object] | None = None) -> None:
         """Leaders: send the final count; rank 0: wait for every leader's final count,
-        printing (and calling ``idle()``) meanwhile, then print the last line."""
+        printing (and calling ``idle()``) meanwhile, then print the last line.
+
+        Args:
+            idle: called repeatedly on rank 0 while it waits, or None.
+        """
         if self.rank == 0:
             while len(self.finished) < len(self.others):
                 self._poll()
@@ -202,7 +262,14 @@ class Progress:
             self._first = (now, self._session())
 
     def line(self, now: float) -> str:
-        """The progress line: tasks done, steps done, steps/s, ETA."""
+        """The progress line: tasks done, steps done, steps/s, ETA.
+
+        Args:
+            now: time.monotonic() of the line (s).
+
+        Returns:
+            The line, without a newline.
+        """
         session = self._session()
         steps = self.steps_before + session
         tasks = self.tasks_before + self.tasks + sum(t for _, t in self.remote.values())

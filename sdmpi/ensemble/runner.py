@@ -36,8 +36,10 @@ import socket
 import sys
 import time
 import traceback
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TextIO
 
 import h5py
 import numpy as np
@@ -83,8 +85,10 @@ class Plan:
     backend: str = ""    # the solver backend the tasks solve on ("auto" resolved)
 
 
-def run(job_path, overrides, output, *, new=False, extend=False, realisation_factory=None,
-        comm=None, stream=None) -> bool:
+def run(job_path: str | os.PathLike, overrides: Iterable[str], output: str | os.PathLike, *,
+        new: bool = False, extend: bool = False,
+        realisation_factory: Callable[..., Any] | None = None,
+        comm: MPI.Intracomm | None = None, stream: TextIO | None = None) -> bool:
     """Run or resume the job in ``job_path`` (with ``--set`` ``overrides``) into the run
     file ``output``; ``new`` replaces an existing file; ``extend`` lengthens the existing
     run to the job's longer tasks first (:mod:`.extension`). Collective over ``comm``
@@ -94,6 +98,22 @@ def run(job_path, overrides, output, *, new=False, extend=False, realisation_fac
     ``realisation_factory(job, task)`` defaults to :class:`sdmpi.dynamics.Realisation`;
     with ``ensemble.ranks_per_task > 1`` it is called as ``(job, task, comm=group)``, the
     sub-communicator of the ranks that step the task together.
+
+    Args:
+        job_path: the job file (TOML).
+        overrides: ``--set`` strings "section.key=LITERAL".
+        output: the run file RUN.h5.
+        new: replace an existing run file.
+        extend: lengthen the existing run to the job's longer tasks first.
+        realisation_factory: builds a task's realisation, or None for the default.
+        comm: the communicator of all ranks, or None for MPI_COMM_WORLD.
+        stream: where rank 0 prints progress, or None for stdout.
+
+    Returns:
+        True when every task is complete, False when stopped by a signal.
+
+    Raises:
+        BadInput: the run was refused (nothing written).
     """
     comm = comm or MPI.COMM_WORLD
     lock = None
@@ -375,7 +395,14 @@ def _different_job(out: Path, stored, job, extend: bool) -> str:
 def source_digest(root: Path = Path(__file__).resolve().parents[1]) -> str:
     """The first 12 hex digits of the SHA-256 of the Python sources under ``root`` (sdmpi's
     package directory): each file's relative path and bytes, in sorted order. Run files
-    written by different code carry different digests, whatever the version number."""
+    written by different code carry different digests, whatever the version number.
+
+    Args:
+        root: the directory whose ``*.py`` files are digested (default: sdmpi's package).
+
+    Returns:
+        12 lowercase hex digits.
+    """
     digest = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0")
@@ -387,7 +414,11 @@ def versions() -> dict[str, str]:
     """Versions of sdmpi (its number and its source digest) and of the library stack it
     runs on (Python, numpy, scipy, numba, h5py and its HDF5, mpi4py and its MPI library,
     petsc4py when installed): a run's numbers are bit-for-bit reproducible for one such
-    stack."""
+    stack.
+
+    Returns:
+        name -> version text ("not installed" for a missing petsc4py).
+    """
     import mpi4py
     import numba
     import scipy
@@ -417,10 +448,12 @@ class _Stop:
         self._previous = {}
 
     def install(self) -> None:
+        """Handle STOP_SIGNALS with this object, keeping the previous handlers."""
         for sig in STOP_SIGNALS:
             self._previous[sig] = signal.signal(sig, self._handler)
 
     def restore(self) -> None:
+        """Put back the handlers that install replaced."""
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
 
@@ -430,8 +463,15 @@ class _Stop:
             os.kill(os.getpid(), signum)
         self.signal = signum
 
-    def requested(self, group) -> bool:
-        """Whether to stop now; agreed by all ranks of ``group`` (they step together)."""
+    def requested(self, group: MPI.Intracomm) -> bool:
+        """Whether to stop now; agreed by all ranks of ``group`` (they step together).
+
+        Args:
+            group: the ranks that step together (collective when it has several).
+
+        Returns:
+            True when any rank of the group has received a stop signal.
+        """
         flag = self.signal is not None
         return group.allreduce(flag, op=MPI.LOR) if group.size > 1 else flag
 
@@ -460,11 +500,21 @@ class _Driver:
         self.served = (0, 0.0)  # serial h5py, rank 0: other ranks' commits applied, s
 
     def say(self, text: str) -> None:
-        """Rank 0: print (and log) one line."""
+        """Rank 0: print (and log) one line.
+
+        Args:
+            text: the line, without a newline.
+        """
         if self.rank == 0:
             print(text, file=self.stream, flush=True)
 
     def run(self) -> bool:
+        """Step this rank's share of the tasks, committing checkpoints (module docstring,
+        phases 2, 4 and 5).
+
+        Returns:
+            True when every task is complete, False when stopped by a signal.
+        """
         comm, job, plan = self.comm, self.job, self.plan
         tasks = enumerate_tasks(job)
         rpt = job.ensemble.ranks_per_task

@@ -23,6 +23,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
@@ -32,6 +33,11 @@ from ..dynamics.initial import box_side
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import close_pairs
 from . import store
+
+if TYPE_CHECKING:
+    from ..config.schema import Job
+    from ..config.tasks import Task
+    from ..dynamics.realisation import Realisation
 
 BOX_RTOL = 1e-6
 RADII_ATOL = 1e-9
@@ -47,14 +53,31 @@ class Start:
 
     configurations: dict
 
-    def positions(self, task) -> np.ndarray:
-        """The starting positions (N, 3) of a task."""
+    def positions(self, task: Task) -> np.ndarray:
+        """The starting positions (N, 3) of a task.
+
+        Args:
+            task: the task (its phi and realisation index r).
+
+        Returns:
+            Configuration r mod M at the task's phi, shape (N, 3), in a.
+        """
         confs = self.configurations[task.phi]
         return confs[task.realisation % len(confs)]
 
 
-def load(job) -> Start | None:
-    """The job's validated start configurations, or None for a generated start."""
+def load(job: Job) -> Start | None:
+    """The job's validated start configurations, or None for a generated start.
+
+    Args:
+        job: the validated job (system.start, system.start_file, phi, radii).
+
+    Returns:
+        The configurations at every phi of the job, or None when system.start is not "file".
+
+    Raises:
+        StartError: the file cannot be read or does not fit the job.
+    """
     system = job.system
     if system.start != "file":
         return None
@@ -71,8 +94,13 @@ def load(job) -> Start | None:
     return Start(configurations)
 
 
-def apply(realisation, positions) -> None:
-    """Put the starting positions into a realisation's state (at step 0)."""
+def apply(realisation: Realisation, positions: np.ndarray) -> None:
+    """Put the starting positions into a realisation's state (at step 0).
+
+    Args:
+        realisation: the realisation (anything with get_state and set_state).
+        positions: starting positions, shape (N, 3), in a.
+    """
     state = realisation.get_state()
     state["positions"] = np.array(positions, dtype=float)
     realisation.set_state(state)

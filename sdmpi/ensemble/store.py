@@ -30,6 +30,7 @@ import os
 import time
 import zlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
@@ -40,6 +41,12 @@ from . import trajectory
 from .faults import fault
 from .h5 import new_dataset, open_read, parallel_hdf5
 from .progress import lock_holder
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
+
+    from ..config.schema import Job
+    from ..dynamics.realisation import Realisation
 
 FORMAT = "sdmpi-run"
 FORMAT_VERSION = 1
@@ -60,7 +67,14 @@ class StoreError(Exception):
 
 
 def task_key(task_id: int) -> str:
-    """The group name of a task under /tasks and /checkpoints."""
+    """The group name of a task under /tasks and /checkpoints.
+
+    Args:
+        task_id: the task's id.
+
+    Returns:
+        The six-digit name, e.g. "000007".
+    """
     return f"{task_id:06d}"
 
 
@@ -80,8 +94,16 @@ class TaskLayout:
     radii: tuple = ()
 
     @classmethod
-    def of(cls, realisation) -> "TaskLayout":
-        """The layout of a realisation (see sdmpi.dynamics.Realisation)."""
+    def of(cls, realisation: Realisation) -> "TaskLayout":
+        """The layout of a realisation (see sdmpi.dynamics.Realisation).
+
+        Args:
+            realisation: the task's realisation (sample_fields, state_fields,
+                n_particles, box and optionally radii).
+
+        Returns:
+            Its layout, dtypes as numpy dtype strings, box and radii in a.
+        """
         samples = {k: (tuple(s), np.dtype(d).str, u, t)
                    for k, (s, d, u, t) in realisation.sample_fields().items()}
         state = {k: (tuple(s), np.dtype(d).str) for k, (s, d) in realisation.state_fields().items()}
@@ -91,40 +113,83 @@ class TaskLayout:
         return cls(samples, state, tuple(float(x) for x in realisation.box), n, radii)
 
 
-def crc32(values, dtype=None, running: int = 0) -> int:
+def crc32(values: np.ndarray, dtype: np.dtype | str | None = None, running: int = 0) -> int:
     """CRC-32 of an array's bytes (C order, as ``dtype``, default its own), continuing
-    ``running`` (the CRC of what precedes it)."""
+    ``running`` (the CRC of what precedes it).
+
+    Args:
+        values: the array (any shape; array-likes are converted).
+        dtype: the dtype whose bytes are checksummed, or None for the array's own.
+        running: the CRC-32 of the preceding bytes (0: none).
+
+    Returns:
+        The CRC-32, an unsigned 32-bit value.
+    """
     return zlib.crc32(np.ascontiguousarray(values, dtype=dtype).view(np.uint8), running)
 
 
-def checksum_block(job, task: Task) -> int:
+def checksum_block(job: Job, task: Task) -> int:
     """Rows of a task's sample stream covered by one checksum: ``output.checkpoint_every``
-    at creation, larger for tasks of more than MAX_CHECKSUM_BLOCKS such blocks."""
+    at creation, larger for tasks of more than MAX_CHECKSUM_BLOCKS such blocks.
+
+    Args:
+        job: the validated job.
+        task: the task.
+
+    Returns:
+        Rows per checksum block.
+    """
     return max(job.output.checkpoint_every, -(-task.n_steps // MAX_CHECKSUM_BLOCKS))
 
 
 def session_row(mode: str, when: str, versions: str) -> bytes:
     """One row of /sessions: ``mode`` ("new", "resume", "extend"), ``when`` (UTC ISO 8601)
-    and ``versions`` (the JSON text of sdmpi.ensemble.runner.versions())."""
+    and ``versions`` (the JSON text of sdmpi.ensemble.runner.versions()).
+
+    Args:
+        mode: "new", "resume" or "extend".
+        when: UTC ISO 8601 time.
+        versions: JSON text of the versions.
+
+    Returns:
+        The row, a JSON text of at most SESSION_BYTES bytes.
+
+    Raises:
+        ValueError: the row is longer than SESSION_BYTES.
+    """
     row = json.dumps({"mode": mode, "time": when, "versions": json.loads(versions)}).encode()
     if len(row) > SESSION_BYTES:
         raise ValueError(f"a /sessions row holds {SESSION_BYTES} bytes, this one {len(row)}")
     return row
 
 
-def read_sessions(f) -> list[dict]:
+def read_sessions(f: h5py.File) -> list[dict]:
     """The sessions that wrote the open run file ``f``, oldest first (a file without
-    /sessions: its creation, from its root attributes)."""
+    /sessions: its creation, from its root attributes).
+
+    Args:
+        f: the open run file.
+
+    Returns:
+        One dict (mode, time, versions) per session.
+    """
     if "sessions" not in f:
         return [{"mode": "new", "time": f.attrs["created"],
                  "versions": json.loads(f.attrs["versions"])}]
     return [json.loads(row) for row in f["sessions"][()] if row]
 
 
-def record_session(path, mode: str, when: str, versions: str) -> None:
+def record_session(path: str | os.PathLike, mode: str, when: str, versions: str) -> None:
     """Append a session to /sessions of the run file at ``path`` (one process, under the
     run's lock, no other writer: raw data only, synced). Files without /sessions are left
-    as they are."""
+    as they are.
+
+    Args:
+        path: the run file.
+        mode: "new", "resume" or "extend".
+        when: UTC ISO 8601 time.
+        versions: JSON text of the versions.
+    """
     with h5py.File(path, "r+") as f:
         if "sessions" not in f:
             return
@@ -136,7 +201,15 @@ def record_session(path, mode: str, when: str, versions: str) -> None:
 
 
 def stack_differences(old: dict, new: dict) -> list[str]:
-    """``"name old -> new"`` for every version that differs between two versions dicts."""
+    """``"name old -> new"`` for every version that differs between two versions dicts.
+
+    Args:
+        old: name -> version recorded in the file.
+        new: name -> version of this session.
+
+    Returns:
+        One line per differing name, old's names first ("(absent)" where missing).
+    """
     return [f"{k} {old.get(k, '(absent)')} -> {new.get(k, '(absent)')}"
             for k in list(old) + [k for k in new if k not in old] if old.get(k) != new.get(k)]
 
@@ -167,12 +240,26 @@ def _open_collective(path, mode: str, comm, **kwargs) -> h5py.File:
                      "with MPI (parallel HDF5)")
 
 
-def create(path, job, job_text: str, layouts: dict[int, TaskLayout], comm, versions: str,
-           created: str, backend: str | None = None) -> None:
+def create(path: str | os.PathLike, job: Job, job_text: str, layouts: dict[int, TaskLayout],
+           comm: MPI.Intracomm, versions: str, created: str, backend: str | None = None) -> None:
     """Create the complete run file at ``path`` (collective over ``comm``; every rank
     passes the same arguments). ``versions`` is a JSON text, ``created`` UTC ISO 8601,
     ``backend`` the solver backend the tasks solve on (solver.backend with "auto"
-    resolved), recorded as the ``solver_backend`` attribute (None: not recorded)."""
+    resolved), recorded as the ``solver_backend`` attribute (None: not recorded).
+
+    Args:
+        path: the run file to create (overwritten).
+        job: the validated job.
+        job_text: the job's canonical text, stored in the file.
+        layouts: task id -> TaskLayout, for every task of the job.
+        comm: the ranks that create it together.
+        versions: JSON text of the versions.
+        created: UTC ISO 8601 creation time.
+        backend: the resolved solver backend, or None.
+
+    Raises:
+        StoreError: several ranks without parallel HDF5.
+    """
     tasks = enumerate_tasks(job)
     with _open_collective(path, "w", comm, libver="earliest") as f:
         f.attrs.update({
@@ -243,10 +330,17 @@ TASK_OVERHEAD = 16 * 2 ** 10
 STATE_PER_PARTICLE = 16 * 8
 
 
-def run_file_bytes(job) -> float:
+def run_file_bytes(job: Job) -> float:
     """Estimated size of a job's run file: every sample dataset and trajectory frame
     (exact: they are all allocated at creation), two state slots per task, the per-task
-    overhead and /sessions."""
+    overhead and /sessions.
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        The estimate, in bytes.
+    """
     from ..dynamics.realisation import sample_fields
 
     row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
@@ -289,8 +383,16 @@ class RunFile:
         self._last_served = 0.0
 
     @classmethod
-    def open(cls, path, comm) -> "RunFile":
-        """Collective over ``comm``: this rank's handle of the run file at ``path``."""
+    def open(cls, path: str | os.PathLike, comm: MPI.Intracomm) -> "RunFile":
+        """Collective over ``comm``: this rank's handle of the run file at ``path``.
+
+        Args:
+            path: the existing run file.
+            comm: the ranks that step together (all open it).
+
+        Returns:
+            A RunFile, or a RemoteRunFile on ranks other than 0 without parallel HDF5.
+        """
         if parallel_hdf5() or comm.size == 1:
             return cls(path, comm)
         if comm.rank == 0:
@@ -308,7 +410,11 @@ class RunFile:
     def serve(self, wait: bool = False) -> None:
         """The writer: apply the commits the other ranks have sent, at most every
         SERVE_EVERY seconds, all that have arrived as one batch (``wait``: now, after at
-        least one message, blocking). Other handles: nothing to do."""
+        least one message, blocking). Other handles: nothing to do.
+
+        Args:
+            wait: block until at least one message has arrived, and apply at once.
+        """
         if not self._senders:
             return
         if not wait and time.monotonic() - self._last_served < SERVE_EVERY:
@@ -331,7 +437,15 @@ class RunFile:
         self._last_served = time.monotonic()
 
     def layout_problems(self, task_id: int, layout: TaskLayout) -> list[str]:
-        """How the file's datasets for a task differ from ``layout`` (empty: they match)."""
+        """How the file's datasets for a task differ from ``layout`` (empty: they match).
+
+        Args:
+            task_id: the task.
+            layout: the layout its realisation needs.
+
+        Returns:
+            One line per differing group.
+        """
         key, problems = task_key(task_id), []
         expected = {f"tasks/{key}/samples": {k: (s, d) for k, (s, d, _, _) in
                                              layout.sample_fields.items()},
@@ -346,35 +460,71 @@ class RunFile:
         return problems
 
     def read_state(self, task_id: int, slot: int) -> dict[str, np.ndarray]:
-        """The state committed in checkpoint slot ``slot`` of a task."""
+        """The state committed in checkpoint slot ``slot`` of a task.
+
+        Args:
+            task_id: the task.
+            slot: the checkpoint slot, 0 or 1.
+
+        Returns:
+            name -> array, as the realisation's get_state gave it.
+        """
         group = self.file[f"checkpoints/{task_key(task_id)}/slot{slot}"]
         return {name: ds[()] for name, ds in group.items()}
 
     def begin(self, task_id: int, slot: int) -> None:
         """Prepare a task's commits from checkpoint ``slot`` (-1: from scratch): take the
-        slot's sample checksums as the running ones."""
+        slot's sample checksums as the running ones.
+
+        Args:
+            task_id: the task.
+            slot: its current checkpoint slot, 0 or 1, or -1.
+        """
         ckpt = self.file[f"checkpoints/{task_key(task_id)}"]
         if "sample_crc" in ckpt:  # a file without checksums is read and resumed unverified
             table = ckpt["sample_crc"]
             rows = table[slot] if slot >= 0 else np.zeros(table.shape[1:], "u4")
             self._checksums[task_id] = (rows, int(table.attrs["block"]))
 
-    def samples(self, task_id: int) -> dict:
-        """name -> dataset of a task's sample stream."""
+    def samples(self, task_id: int) -> dict[str, h5py.Dataset]:
+        """name -> dataset of a task's sample stream.
+
+        Args:
+            task_id: the task.
+
+        Returns:
+            The datasets, each of shape (n_steps, *shape per sample).
+        """
         group = self.file[f"tasks/{task_key(task_id)}/samples"]
         return {name: group[name] for name in group}
 
-    def write(self, path: str, rows, values) -> None:
+    def write(self, path: str, rows: slice, values: np.ndarray) -> None:
         """Write ``values`` into ``rows`` of the dataset at ``path`` with the next commit,
-        ahead of its samples (trajectory frames, sdmpi.ensemble.trajectory.Recorder)."""
+        ahead of its samples (trajectory frames, sdmpi.ensemble.trajectory.Recorder).
+
+        Args:
+            path: the dataset's path in the file.
+            rows: the rows (first axis) to write.
+            values: the values, shaped as those rows.
+        """
         self._pending.append(("write", path, rows, values))
 
-    def commit(self, task_id: int, datasets: dict, start: int, stop: int, buffers: dict,
-               state: dict, slot: int) -> None:
+    def commit(self, task_id: int, datasets: dict[str, h5py.Dataset], start: int, stop: int,
+               buffers: dict[str, np.ndarray], state: dict[str, np.ndarray], slot: int) -> None:
         """Commit samples ``start:stop`` (rows ``0:stop-start`` of ``buffers``) and the
         realisation's ``state`` at step ``stop`` into checkpoint ``slot`` (not the current
         one), then move ``/progress`` to ``stop``. A kill anywhere in between leaves the
-        previous checkpoint current and intact."""
+        previous checkpoint current and intact.
+
+        Args:
+            task_id: the task.
+            datasets: name -> sample dataset (`samples`).
+            start: first step of the samples committed.
+            stop: the step after them, the checkpoint's step.
+            buffers: name -> sample values, at least stop - start rows.
+            state: the realisation's state at step stop (get_state).
+            slot: the checkpoint slot written, 0 or 1.
+        """
         n, ops = stop - start, self._pending
         self._pending = []
         for i, (name, ds) in enumerate(datasets.items()):
@@ -471,11 +621,18 @@ class RemoteRunFile(RunFile):
         self.file.close()
 
 
-def checksum_slot(f, task_id: int, slot: int, step: int) -> None:
+def checksum_slot(f: h5py.File, task_id: int, slot: int, step: int) -> None:
     """Write the checksums of checkpoint ``slot`` (its state at ``step``) of a task from
     the data in the open file ``f``: the sample checksums of rows below ``step``, then the
     state's (as :meth:`RunFile.commit` does; used when data are copied into a new layout,
-    sdmpi.ensemble.extension)."""
+    sdmpi.ensemble.extension).
+
+    Args:
+        f: the run file, open for writing.
+        task_id: the task.
+        slot: the checkpoint slot, 0 or 1.
+        step: the slot's step.
+    """
     key = task_key(task_id)
     ckpt, samples = f[f"checkpoints/{key}"], f[f"tasks/{key}/samples"]
     if "sample_crc" not in ckpt:
@@ -501,11 +658,18 @@ def _extend_checksums(column, block: int, start: int, rows, dtype) -> None:
         lo = hi
 
 
-def fall_back(path, progress: dict, damaged: list) -> None:
+def fall_back(path: str | os.PathLike, progress: dict[int, int],
+              damaged: list[tuple[int, int]]) -> None:
     """Undo what failed its checksums (one process, under the run's lock, before the
     run opens the file): move ``/progress`` back (task id -> step, the resume point
     :func:`read_summary` found), sync, then mark every damaged ``(task id, slot)`` as never
-    written (``slot_step`` -1), sync. Each stage leaves a consistent file."""
+    written (``slot_step`` -1), sync. Each stage leaves a consistent file.
+
+    Args:
+        path: the run file.
+        progress: task id -> step to move /progress back to.
+        damaged: (task id, slot) of each damaged checkpoint slot.
+    """
     with h5py.File(path, "r+") as f:
         for tid, step in progress.items():
             f["progress"][tid] = step
@@ -565,16 +729,28 @@ class RunSummary:
 
     @property
     def complete(self) -> bool:
+        """Whether every task has committed all its steps.
+
+        Returns:
+            True when /progress equals n_steps for every task.
+        """
         return all(int(p) == t.n_steps for p, t in zip(self.progress, self.tasks))
 
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
-def is_run_file(path) -> bool:
+def is_run_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is (or was, before damage) an sdmpi run file: HDF5 with
     ``format = "sdmpi-run"``, or, if HDF5 cannot open it, an HDF5 signature and that
-    attribute's value among its first 64 KiB (where the root attributes are written)."""
+    attribute's value among its first 64 KiB (where the root attributes are written).
+
+    Args:
+        path: any file.
+
+    Returns:
+        Whether it is (or was) a run file; False if it cannot be read.
+    """
     try:
         with h5py.File(path, "r") as f:
             return f.attrs.get("format") == FORMAT
@@ -593,7 +769,7 @@ def is_run_file(path) -> bool:
 LIVE_READS, LIVE_PAUSE = 5, 0.5
 
 
-def read_summary(path) -> RunSummary:
+def read_summary(path: str | os.PathLike) -> RunSummary:
     """Open ``path`` read-only, check that it is an intact sdmpi run file, summarise it.
 
     Raises :class:`StoreError` for a file that is not HDF5, truncated, not a run file, of
@@ -602,7 +778,17 @@ def read_summary(path) -> RunSummary:
     read without HDF5's file lock, only its current checkpoints are verified (the other
     slot may be being rewritten), and a read that disagrees with itself is repeated
     (LIVE_READS times, LIVE_PAUSE apart) before :class:`StoreError` says the file is being
-    written; a live file is never reported damaged."""
+    written; a live file is never reported damaged.
+
+    Args:
+        path: the run file.
+
+    Returns:
+        Its summary.
+
+    Raises:
+        StoreError: not a usable run file (the message says why).
+    """
     path = str(path)
     holder = lock_holder(path)
     if holder is None:

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import getpass
 import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
@@ -27,6 +29,12 @@ from ..hydro.basis import from_five
 from ..hydro.geometry import Lattice
 from .h5 import new_dataset
 
+if TYPE_CHECKING:
+    from ..config.schema import Job
+    from ..config.tasks import Task
+    from ..dynamics.realisation import Realisation
+    from .store import TaskLayout
+
 H5MD_VERSION = (1, 1)
 #: the optional elements: output key -> (element name, value shape per particle, unit)
 EXTRAS = {"trajectory_velocities": ("velocity", (3,), "a/time unit"),
@@ -34,22 +42,52 @@ EXTRAS = {"trajectory_velocities": ("velocity", (3,), "a/time unit"),
 
 
 def group_name(task_id: int) -> str:
-    """The H5MD particles (and observables) group of a task."""
+    """The H5MD particles (and observables) group of a task.
+
+    Args:
+        task_id: the task's id.
+
+    Returns:
+        The group name, task_NNNNNN.
+    """
     return f"task_{task_id:06d}"
 
 
 def n_frames(n_steps: int, every: int) -> int:
-    """Frames of a task of n_steps steps, one every ``every`` steps from step 0."""
+    """Frames of a task of n_steps steps, one every ``every`` steps from step 0.
+
+    Args:
+        n_steps: the task's steps.
+        every: output.trajectory_every, >= 1.
+
+    Returns:
+        ceil(n_steps / every).
+    """
     return -(-n_steps // every)
 
 
 def frames_done(progress: int, every: int) -> int:
-    """Frames committed when ``progress`` steps are: those at steps below it."""
+    """Frames committed when ``progress`` steps are: those at steps below it.
+
+    Args:
+        progress: committed steps of the task.
+        every: output.trajectory_every, >= 1.
+
+    Returns:
+        ceil(progress / every).
+    """
     return n_frames(progress, every)
 
 
-def elements(job) -> dict[str, tuple]:
-    """element name -> (value shape per particle, unit) of the job's frames."""
+def elements(job: Job) -> dict[str, tuple[tuple[int, ...], str]]:
+    """element name -> (value shape per particle, unit) of the job's frames.
+
+    Args:
+        job: the validated job (output.trajectory_* keys, time unit).
+
+    Returns:
+        "position" and the optional elements the job asks for, in that order.
+    """
     out = {"position": ((3,), "a")}
     for key, (name, shape, unit) in EXTRAS.items():
         if getattr(job.output, key):
@@ -62,10 +100,17 @@ def elements(job) -> dict[str, tuple]:
 TASK_OVERHEAD = 16 * 2 ** 10
 
 
-def file_bytes(job) -> int:
+def file_bytes(job: Job) -> int:
     """Bytes of every task's trajectory (0 without one): per frame the elements' values,
     the cell (3, 3), the strain, and one step and time shared by all, preallocated; plus
-    TASK_OVERHEAD."""
+    TASK_OVERHEAD.
+
+    Args:
+        job: the validated job.
+
+    Returns:
+        The estimate, in bytes.
+    """
     every = job.output.trajectory_every
     if not every:
         return 0
@@ -75,10 +120,17 @@ def file_bytes(job) -> int:
                for t in enumerate_tasks(job))
 
 
-def create(f, job, tasks, layouts) -> None:
+def create(f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, TaskLayout]) -> None:
     """Create the H5MD groups of every task in the open run file ``f`` (collective, with
     the rest of the layout; nothing when the job has no trajectory). ``layouts``:
-    task id -> TaskLayout (box, n_particles, radii)."""
+    task id -> TaskLayout (box, n_particles, radii).
+
+    Args:
+        f: the run file, open for writing.
+        job: the validated job.
+        tasks: the job's tasks.
+        layouts: task id -> TaskLayout.
+    """
     every = job.output.trajectory_every
     if not every:
         return
@@ -159,13 +211,24 @@ class Recorder:
         self.pending = []   # frames (dicts) not yet written
         self._frame = None  # the frame of the current step, until after()
 
-    def before(self, step: int, realisation) -> None:
-        """Start a frame when ``step`` is a frame step: the positions of the state."""
+    def before(self, step: int, realisation: Realisation) -> None:
+        """Start a frame when ``step`` is a frame step: the positions of the state.
+
+        Args:
+            step: the step about to be taken.
+            realisation: the task's realisation, at the start of that step.
+        """
         if step % self.every == 0:
             self._frame = {"step": step, "position": realisation.get_state()["positions"]}
 
-    def after(self, sample: dict, realisation) -> None:
-        """Complete the current frame with the step's sample (and velocity)."""
+    def after(self, sample: dict[str, np.ndarray], realisation: Realisation) -> None:
+        """Complete the current frame with the step's sample (and velocity).
+
+        Args:
+            sample: the step's sample, name -> array with a leading axis of length 1.
+            realisation: the task's realisation, after the step (velocity: positions in a,
+                divided by dt in the time unit).
+        """
         frame, self._frame = self._frame, None
         if frame is None:
             return
@@ -196,9 +259,16 @@ class Recorder:
         self.pending = []
 
 
-def copy_frames(old, new, task_id: int, frames: int) -> None:
+def copy_frames(old: h5py.File, new: h5py.File, task_id: int, frames: int) -> None:
     """Copy the first ``frames`` frames of a task's trajectory from the run file ``old``
-    into ``new`` (a longer layout of the same job; see sdmpi.ensemble.extension)."""
+    into ``new`` (a longer layout of the same job; see sdmpi.ensemble.extension).
+
+    Args:
+        old: the run file read from.
+        new: the longer run file, open for writing.
+        task_id: the task.
+        frames: frames to copy (`frames_done` of its progress).
+    """
     if not frames:
         return
     name = group_name(task_id)
