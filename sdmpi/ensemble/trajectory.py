@@ -18,7 +18,7 @@ from __future__ import annotations
 import getpass
 import math
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
@@ -33,7 +33,6 @@ if TYPE_CHECKING:
     from ..config.schema import Job
     from ..config.tasks import Task
     from ..dynamics.realisation import Realisation
-    from .store import TaskLayout
 
 H5MD_VERSION = (1, 1)
 #: the optional elements: output key -> (element name, value shape per particle, unit)
@@ -120,7 +119,7 @@ def file_bytes(job: Job) -> int:
                for t in enumerate_tasks(job))
 
 
-def create(f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, TaskLayout]) -> None:
+def create(f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Any]) -> None:
     """Create the H5MD groups of every task in the open run file ``f`` (collective, with
     the rest of the layout; nothing when the job has no trajectory). ``layouts``:
     task id -> TaskLayout (box, n_particles, radii).
@@ -129,7 +128,7 @@ def create(f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Tas
         f: the run file, open for writing.
         job: the validated job.
         tasks: the job's tasks.
-        layouts: task id -> TaskLayout.
+        layouts: task id -> `store.TaskLayout`.
     """
     every = job.output.trajectory_every
     if not every:

@@ -80,7 +80,6 @@ from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_fie
 if TYPE_CHECKING:
     from .farfield import FarFieldPlan
     from .geometry import Lattice
-    from .resistance import SplitResistance
 
 #: default relative residual of the saddle-point solves and the Lanczos square roots
 DEFAULT_TOL = 1e-8
@@ -516,7 +515,7 @@ class KrylovSolver(SolverBackend):
     counts its iterations (`stats`)."""
 
     @classmethod
-    def build(cls, resistance: SplitResistance, comm: Any, tolerance: float,
+    def build(cls, resistance: Any, comm: Any, tolerance: float,
               lanczos_tolerance: float | None) -> KrylovSolver:
         """The solver of ``resistance`` on ``comm`` with the relative residual
         ``tolerance`` and Lanczos accuracy ``lanczos_tolerance`` (None: tolerance);
@@ -533,7 +532,7 @@ class KrylovSolver(SolverBackend):
         """
         return cls(resistance, comm, tolerance, lanczos_tolerance)
 
-    def __init__(self, resistance: SplitResistance, comm: Any = None, tol: float = DEFAULT_TOL,
+    def __init__(self, resistance: Any, comm: Any = None, tol: float = DEFAULT_TOL,
                  lanczos_tol: float | None = None) -> None:
         from .petsc_dense import _keepalive, _mpi_comm, load_petsc
 

@@ -44,14 +44,11 @@ import glob
 import os
 import sys
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .backend import SolverBackend
-
-if TYPE_CHECKING:
-    from .resistance import GrandResistance
 
 
 #: options PETSc is initialised with (when sdmpi is the first to import it)
@@ -189,7 +186,7 @@ class PetscDenseSolver(SolverBackend):
     """ScaLAPACK Cholesky of R_FU over `comm` (an mpi4py communicator; None: COMM_SELF), a
     `backend.SolverBackend`. Collective over comm; see the module docstring."""
 
-    def __init__(self, resistance: GrandResistance, comm: Any = None) -> None:
+    def __init__(self, resistance: Any, comm: Any = None) -> None:
         PETSc = load_petsc()
         if not PETSc.Sys.hasExternalPackage("scalapack"):
             info = petsc_info()
