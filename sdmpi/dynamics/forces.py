@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Union
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -64,12 +64,45 @@ if TYPE_CHECKING:
     from ..config.schema import Job
     from ..hydro.lubrication import PairList
 
-    PairLaw = Union["Repulsion", "CriticalLoadRepulsion", "VanDerWaals", "DoubleLayer", "Combined"]
-
 #: the job's force unit, 6 pi eta_m a^2 / (time unit), in Stokes units (eta_m = a = 1)
 FORCE_UNIT = 6 * math.pi
 #: largest allowed |F(cut-off)| / |F(contact)| of the truncated (shifted) laws
 TAIL = 1e-3
+
+
+class PairLaw(Protocol):
+    """A central pair force law between spheres of radii a_i, a_j at surface gap h; every
+    law below implements it."""
+
+    def magnitude(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Force magnitude F(h), positive when repulsive.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+        """
+        raise NotImplementedError
+
+    def potential(
+        self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
+    ) -> float | np.ndarray:
+        """Pair potential U(h), with F = -dU/dh.
+
+        Args:
+            gap: surface gaps h, scalar or shape (P,), in a.
+            a_i: radii of the first spheres, scalar or (P,), in a.
+            a_j: radii of the second spheres, scalar or (P,), in a.
+
+        Returns:
+            U(h), shaped like gap, in the law's force unit x a.
+        """
+        raise NotImplementedError
 
 
 @dataclass(frozen=True)
@@ -84,41 +117,17 @@ class Repulsion:
     def magnitude(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Force magnitude F(h), positive when repulsive.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
-        """
         e = np.exp(-self.tau * np.maximum(gap, 0.0))
         return self.f0 * self.tau * e / (1.0 + e)
 
     def potential(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Pair potential U(h), with F = -dU/dh.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            U(h), shaped like gap, in the law's force unit x a.
-        """
         return self.f0 * np.log1p(np.exp(-self.tau * np.maximum(gap, 0.0)))
 
     @property
     def reach(self) -> float:
-        """Gap beyond which F < 1e-12 F0 tau.
-
-        Returns:
-            The gap, in a.
-        """
+        """Gap beyond which F < 1e-12 F0 tau."""
         return 12 * math.log(10) / self.tau
 
 
@@ -133,42 +142,18 @@ class CriticalLoadRepulsion:
     def magnitude(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Force magnitude F(h), positive when repulsive.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
-        """
         return self.f0 * np.exp(-np.maximum(gap, 0.0) / self.length)
 
     def potential(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Pair potential U(h), with F = -dU/dh.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            U(h), shaped like gap, in the law's force unit x a.
-        """
         gap = np.asarray(gap, float)
         return self.f0 * (self.length * np.exp(-np.maximum(gap, 0.0) / self.length)
                           - np.minimum(gap, 0.0))
 
     @property
     def reach(self) -> float:
-        """Gap beyond which F < 1e-12 F0.
-
-        Returns:
-            The gap, in a.
-        """
+        """Gap beyond which F < 1e-12 F0."""
         return 12 * math.log(10) * self.length
 
 
@@ -182,16 +167,6 @@ class _Truncated:
     def magnitude(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Force magnitude F(h), positive when repulsive.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
-        """
         gap = np.asarray(gap, float)
         if math.isinf(self.cutoff):
             return self._force(gap, a_i, a_j)
@@ -201,16 +176,6 @@ class _Truncated:
     def potential(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Pair potential U(h), with F = -dU/dh.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            U(h), shaped like gap, in the law's force unit x a.
-        """
         gap = np.asarray(gap, float)
         if math.isinf(self.cutoff):
             return self._energy(gap, a_i, a_j)
@@ -284,31 +249,11 @@ class Combined:
     def magnitude(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Force magnitude F(h), positive when repulsive.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
-        """
         return sum(p.magnitude(gap, a_i, a_j) for p in self.parts)
 
     def potential(
         self, gap: float | np.ndarray, a_i: float | np.ndarray = 1.0, a_j: float | np.ndarray = 1.0
     ) -> float | np.ndarray:
-        """Pair potential U(h), with F = -dU/dh.
-
-        Args:
-            gap: surface gaps h, scalar or shape (P,), in a.
-            a_i: radii of the first spheres, scalar or (P,), in a.
-            a_j: radii of the second spheres, scalar or (P,), in a.
-
-        Returns:
-            U(h), shaped like gap, in the law's force unit x a.
-        """
         return sum(p.potential(gap, a_i, a_j) for p in self.parts)
 
 

@@ -176,41 +176,16 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         self._solvers = [solver]
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """U', Omega' = R_FU^-1 (F + R_FE e_inf) by the backend's solver.
-
-        Args:
-            forces: forces and torques (N, 6), in eta_m a^2/t_D and eta_m a^3/t_D.
-            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
-
-        Returns:
-            (U', Omega') (N, 6), in a/t_D and 1/t_D.
-        """
+        """U', Omega' = R_FU^-1 (F + R_FE e_inf) by the backend's solver."""
         return self.solver.velocities(forces, einf)
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """S = R_SE e_inf - R_SU U' by the backend's solver.
-
-        Args:
-            velocities: (U', Omega') (N, 6), in a/t_D and 1/t_D.
-            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
-
-        Returns:
-            S (N, 5) in the 5-basis, in eta_m a^3/t_D.
-        """
+        """S = R_SE e_inf - R_SU U' by the backend's solver."""
         return self.solver.stresslets(velocities, einf)
 
     def relative_mobility(self, i: np.ndarray, j: np.ndarray, e: np.ndarray) -> np.ndarray:
         """e.(M_jj + M_ii - M_ij - M_ji).e of the pairs (i, j) with unit lines of centres
-        e (M = R_FU^-1): f.M.f for unit and opposite forces f on j and i (`unit_pair_forces`).
-
-        Args:
-            i: first particles of the pairs, shape (P,).
-            j: second particles, shape (P,).
-            e: unit lines of centres from i to j, shape (P, 3).
-
-        Returns:
-            Relative mobilities, shape (P,), in 1/(eta_m a).
-        """
+        e (M = R_FU^-1): f.M.f for unit and opposite forces f on j and i (`unit_pair_forces`)."""
         return self.solver.mobility_forms(unit_pair_forces(i, j, e, self.n_particles))
 
     @property
@@ -233,17 +208,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
 
     def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
         """The step's Brownian terms (`brownian_terms`) for noise drawn from rng: z, then z'
-        of the near-contact correction where the model has one.
-
-        Args:
-            rng: the realisation's random stream.
-            kT: thermal energy (6 pi in reduced units; 0 without Brownian motion).
-            dt: the step's duration (t_D).
-
-        Returns:
-            The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
-            (N, 5) in eta_m a^3/t_D.
-        """
+        of the near-contact correction where the model has one."""
         shape = self.solver.noise_shape
         z = rng.standard_normal(shape)
         z_near = rng.standard_normal(shape) if self.model.near_contact else None
@@ -300,11 +265,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         return resistance_change(self.resistance, positions, vector, self.min_gap)
 
     def stats(self) -> dict[str, float]:
-        """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves.
-
-        Returns:
-            solver_iterations, solver_residual (relative), lanczos_iterations.
-        """
+        """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""
         stats = [s.stats for s in self._solvers]
         return {"solver_iterations": sum(s["iterations"] for s in stats),
                 "solver_residual": max(s["residual"] for s in stats),
@@ -341,20 +302,7 @@ class ResistanceModel(HydrodynamicModel):
     def from_job(cls, job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
                  separate: Callable | None = None, on_error: Callable | None = None) -> ResistanceModel:
         """The model of job.hydrodynamics.model, with lubrication when the model has it
-        (`sdmpi.registry.ModelSpec`) and hydrodynamics.lubrication is on.
-
-        Args:
-            job: the validated job.
-            radii: sphere radii, shape (N,), in a.
-            box: box sides (3,), in a.
-            comm: the MPI communicator of the ranks that solve together, or None.
-            separate: separate(positions, strain) -> (positions, overlaps), the midpoint
-                overlap correction, or None.
-            on_error: on_error(LinAlgError) -> the exception to raise, or None.
-
-        Returns:
-            The model.
-        """
+        (`sdmpi.registry.ModelSpec`) and hydrodynamics.lubrication is on."""
         hyd = job.hydrodynamics
         return cls(radii, box, lubrication=HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication,
                    ewald_tol=job.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
@@ -402,15 +350,7 @@ class ResistanceModel(HydrodynamicModel):
         return self._guarded(make_solver, self.backend, resistance, self.comm, **self._solver_args)
 
     def at(self, positions: np.ndarray, strain: float) -> ResistanceEvaluation:
-        """The resistance assembled and factorised at ``positions`` (N, 3), box at ``strain``.
-
-        Args:
-            positions: centres, shape (N, 3), in a.
-            strain: Lees-Edwards strain of the box, dimensionless.
-
-        Returns:
-            The evaluation at that configuration.
-        """
+        """The resistance assembled and factorised at ``positions`` (N, 3), box at ``strain``."""
         res = self._assemble(positions, strain, **self._far())
         if self.lubrication:
             pairs = res.pairs  # the lubrication pairs are the force pairs (same cut-off)
@@ -449,66 +389,27 @@ class FreeDrainingEvaluation(HydrodynamicEvaluation):
         self._stresslet = (20 / 3) * np.pi * radii ** 3  # R_SE per sphere
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """Stokes' laws: U = F/(6 pi a), Omega = T/(8 pi a^3); E_inf moves no sphere.
-
-        Args:
-            forces: forces and torques (N, 6), in eta_m a^2/t_D and eta_m a^3/t_D.
-            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
-
-        Returns:
-            (U', Omega') (N, 6), in a/t_D and 1/t_D.
-        """
+        """Stokes' laws: U = F/(6 pi a), Omega = T/(8 pi a^3); E_inf moves no sphere."""
         return self._mobility * forces
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """S = (20/3) pi a^3 E_inf per sphere, independent of the velocities.
-
-        Args:
-            velocities: (U', Omega') (N, 6), in a/t_D and 1/t_D.
-            einf: E_inf per sphere (N, 5) in the 5-basis, in 1/t_D.
-
-        Returns:
-            S (N, 5) in the 5-basis, in eta_m a^3/t_D.
-        """
+        """S = (20/3) pi a^3 E_inf per sphere, independent of the velocities."""
         return self._stresslet[:, None] * np.asarray(einf)
 
     def relative_mobility(self, i: np.ndarray, j: np.ndarray, e: np.ndarray) -> np.ndarray:
-        """1/(6 pi a_i) + 1/(6 pi a_j) of the pairs (i, j).
-
-        Args:
-            i: first particles of the pairs, shape (P,).
-            j: second particles, shape (P,).
-            e: unit lines of centres from i to j, shape (P, 3).
-
-        Returns:
-            Relative mobilities, shape (P,), in 1/(eta_m a).
-        """
+        """1/(6 pi a_i) + 1/(6 pi a_j) of the pairs (i, j)."""
         inv = self._mobility[:, 0]
         return inv[i] + inv[j]
 
     def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
         """Independent Brownian velocities (2 kT M / dt)^1/2 z per sphere, no drift, zero
-        Brownian stresslets.
-
-        Args:
-            rng: the realisation's random stream.
-            kT: thermal energy (6 pi in reduced units; 0 without Brownian motion).
-            dt: the step's duration (t_D).
-
-        Returns:
-            The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
-            (N, 5) in eta_m a^3/t_D.
-        """
+        Brownian stresslets."""
         z = rng.standard_normal((self.n_particles, 6))
         return BrownianTerms(math.sqrt(2 * kT / dt) * np.sqrt(self._mobility) * z,
                              np.zeros((self.n_particles, 5)))
 
     def stats(self) -> dict[str, float]:
-        """Nothing is solved: all zero.
-
-        Returns:
-            solver_iterations, solver_residual (relative), lanczos_iterations.
-        """
+        """Nothing is solved: all zero."""
         return {"solver_iterations": 0, "solver_residual": 0.0, "lanczos_iterations": 0}
 
 
@@ -523,32 +424,11 @@ class FreeDrainingModel(HydrodynamicModel):
     def from_job(cls, job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
                  separate: Callable | None = None, on_error: Callable | None = None) -> FreeDrainingModel:
         """The model for the job's cut-off and minimum gap (it solves nothing: comm,
-        separate and on_error do not apply).
-
-        Args:
-            job: the validated job.
-            radii: sphere radii, shape (N,), in a.
-            box: box sides (3,), in a.
-            comm: the MPI communicator of the ranks that solve together, or None.
-            separate: separate(positions, strain) -> (positions, overlaps), the midpoint
-                overlap correction, or None.
-            on_error: on_error(LinAlgError) -> the exception to raise, or None.
-
-        Returns:
-            The model.
-        """
+        separate and on_error do not apply)."""
         return cls(radii, box, cutoff=job.hydrodynamics.lubrication_cutoff, min_gap=job.hydrodynamics.min_gap)
 
     def at(self, positions: np.ndarray, strain: float) -> FreeDrainingEvaluation:
-        """The spheres at ``positions`` (N, 3), wrapped, with their force pairs, box at ``strain``.
-
-        Args:
-            positions: centres, shape (N, 3), in a.
-            strain: Lees-Edwards strain of the box, dimensionless.
-
-        Returns:
-            The evaluation at that configuration.
-        """
+        """The spheres at ``positions`` (N, 3), wrapped, with their force pairs, box at ``strain``."""
         lattice = Lattice(self.box, strain)
         pos = lattice.wrap(positions)
         return FreeDrainingEvaluation(self.radii, pos, close_pairs(pos, self.radii, lattice, self.cutoff,

@@ -52,25 +52,62 @@ class SolverBackend(Protocol):
         return cls(resistance, comm)
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """U' (N, 6) = R_FU^-1 (F + R_FE e_inf) for forces/torques (N, 6) and e_inf (N, 5)."""
+        """U' (N, 6) = R_FU^-1 (F + R_FE e_inf) for forces/torques (N, 6) and e_inf (N, 5).
+
+        Args:
+            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 6) velocities and angular velocities relative to the imposed flow.
+        """
         raise NotImplementedError
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """S (N, 5) = R_SE e_inf - R_SU U' for rigid-body velocities U' (N, 6) and e_inf (N, 5)."""
+        """S (N, 5) = R_SE e_inf - R_SU U' for rigid-body velocities U' (N, 6) and e_inf (N, 5).
+
+        Args:
+            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
+            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
+
+        Returns:
+            (N, 5) stresslets (`basis` components, Stokes units).
+        """
         raise NotImplementedError
 
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
-        """C z (N, 6), of covariance R_FU, for the standard normal noise z (`noise_shape`)."""
+        """C z (N, 6), of covariance R_FU, for the standard normal noise z (`noise_shape`).
+
+        Args:
+            noise: standard normal noise z, of shape `noise_shape`.
+
+        Returns:
+            (N, 6) forces and torques C z (per unit variance of the noise).
+        """
         raise NotImplementedError
 
     def brownian_velocities(self, noise: np.ndarray) -> np.ndarray:
         """R_FU^-1 C z (N, 6) for the noise z (`noise_shape`): the velocities of the
-        Brownian force C z. Generic form: ``velocities(brownian_forces(z), 0)``."""
+        Brownian force C z. Generic form: ``velocities(brownian_forces(z), 0)``.
+
+        Args:
+            noise: standard normal noise z, of shape `noise_shape`.
+
+        Returns:
+            (N, 6) velocities and angular velocities R_FU^-1 C z.
+        """
         return self.velocities(self.brownian_forces(noise), np.zeros((self.n, 5)))
 
     def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
         """f.R_FU^-1.f (P,) for each of the force sets ``forces`` (P, N, 6). Generic form:
-        one solve per set."""
+        one solve per set.
+
+        Args:
+            forces: (P, N, 6) force/torque sets.
+
+        Returns:
+            (P,) the quadratic forms f.R_FU^-1.f.
+        """
         zero = np.zeros((self.n, 5))
         return np.array([np.vdot(f, self.velocities(f, zero)) for f in forces])
 

@@ -278,18 +278,12 @@ def pairs_in_reach(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | 
     (`pairs_within`): one search serves several reaches.
 
     Args:
-        positions: (N, 3) sphere centres (length unit of the radii).
-        radii: (N,) sphere radii.
-        lattice: the periodic lattice, or None (unbounded fluid).
-        reach_abs: absolute part of the reach (length).
-        reach_rel: part of the reach per sum of radii a_i + a_j (dimensionless).
+        positions, radii, lattice, reach_abs, reach_rel: as for `find_pairs`.
         candidates: (images, reach) of an earlier `find_pairs` at absolute reach `reach`
             (length), or None.
 
     Returns:
-        i: (P,) int64 first sphere of each pair image.
-        j: (P,) int64 second sphere (i <= j).
-        shift: (P, 3) lattice translations (length): the separation is x_j + shift - x_i.
+        (i, j, shift) as `find_pairs` returns them.
     """
     if candidates is not None and candidates[1] >= reach_abs + 2.0 * reach_rel * float(np.max(radii)):
         return pairs_within(candidates[0], positions, radii, reach_abs, reach_rel)

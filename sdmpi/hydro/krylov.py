@@ -519,17 +519,7 @@ class KrylovSolver(SolverBackend):
               lanczos_tolerance: float | None) -> KrylovSolver:
         """The solver of ``resistance`` on ``comm`` with the relative residual
         ``tolerance`` and Lanczos accuracy ``lanczos_tolerance`` (None: tolerance);
-        collective over comm.
-
-        Args:
-            resistance: the matrix-free resistance.
-            comm: the MPI communicator, or None (this rank alone).
-            tolerance: relative residual of every solve.
-            lanczos_tolerance: relative accuracy of the Lanczos square roots, or None.
-
-        Returns:
-            The solver.
-        """
+        collective over comm."""
         return cls(resistance, comm, tolerance, lanczos_tolerance)
 
     def __init__(self, resistance: Any, comm: Any = None, tol: float = DEFAULT_TOL,
@@ -761,13 +751,6 @@ class KrylovSolver(SolverBackend):
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
         """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
 
-        Args:
-            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 6) velocities and angular velocities relative to the imposed flow.
-
         Raises:
             KrylovError: GMRES did not converge.
         """
@@ -781,15 +764,7 @@ class KrylovSolver(SolverBackend):
         return u
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5).
-
-        Args:
-            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 5) stresslets (`basis` components, Stokes units).
-        """
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
         v = self._generalized(velocities, einf)
         last = self._last
         if last is not None and np.array_equal(last[0], velocities) and np.array_equal(last[1], einf):
@@ -808,14 +783,7 @@ class KrylovSolver(SolverBackend):
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
         """F (N, 6) with covariance R_FU over the noise (flat, noise_shape, standard
         normal): P_u P (P^T M P)^-1/2 z_1 + sum_p Q_p^T C_p z_p (module docstring; P:
-        `LongWaveFactor`).
-
-        Args:
-            noise: (`noise_shape`,) standard normal noise (z_1 (11N), then 12 per pair).
-
-        Returns:
-            (N, 6) Brownian forces and torques (per unit variance of the noise).
-        """
+        `LongWaveFactor`)."""
         n = self.n
         z1 = noise[:NDOF * n]
         z2 = noise[NDOF * n:].reshape(-1, 12)

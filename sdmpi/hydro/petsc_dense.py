@@ -269,39 +269,16 @@ class PetscDenseSolver(SolverBackend):
         return self._gathered(self._x)
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
-
-        Args:
-            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 6) velocities and angular velocities relative to the imposed flow.
-        """
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
         rhs = forces.ravel() + self.resistance.strain_forces(einf)
         return self._solve(rhs).reshape(self.n, 6)
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5).
-
-        Args:
-            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 5) stresslets (`basis` components, Stokes units).
-        """
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
         return self.resistance.stresslets(velocities, einf)
 
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
-        """L z for z (N, 6), R_FU = L L^T: a force sample with covariance R_FU.
-
-        Args:
-            noise: (N, 6) standard normal noise z.
-
-        Returns:
-            (N, 6) forces and torques L z.
-        """
+        """L z for z (N, 6), R_FU = L L^T: a force sample with covariance R_FU."""
         z, y = self._chol_vecs
         r0, r1 = self._chol_range
         z.setArray(noise.ravel()[r0:r1])

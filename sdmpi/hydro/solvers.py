@@ -41,15 +41,7 @@ class DenseSolver(SolverBackend):
         self._upper = upper
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
-
-        Args:
-            forces: (N, 6) forces and torques on the spheres (Stokes units, viscosity 1).
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 6) velocities and angular velocities relative to the imposed flow.
-        """
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'."""
         rhs = forces.ravel()
         if einf.any():
             rhs = rhs + self.resistance.strain_forces(einf)
@@ -59,37 +51,15 @@ class DenseSolver(SolverBackend):
         return sol.reshape(self.n, 6)
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5).
-
-        Args:
-            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 5) stresslets (`basis` components, Stokes units).
-        """
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
         return self.resistance.stresslets(velocities, einf)
 
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
-        """C z for z (N, 6): a force sample with covariance R_FU (times z's variance).
-
-        Args:
-            noise: (N, 6) standard normal noise z.
-
-        Returns:
-            (N, 6) forces and torques C z.
-        """
+        """C z for z (N, 6): a force sample with covariance R_FU (times z's variance)."""
         return (self._upper.T @ noise.ravel()).reshape(self.n, 6)
 
     def brownian_velocities(self, noise: np.ndarray) -> np.ndarray:
-        """R_FU^-1 C z (N, 6) for z (N, 6) (C = U^T): U^-1 z, one triangular solve.
-
-        Args:
-            noise: (N, 6) standard normal noise z.
-
-        Returns:
-            (N, 6) velocities and angular velocities R_FU^-1 C z.
-        """
+        """R_FU^-1 C z (N, 6) for z (N, 6) (C = U^T): U^-1 z, one triangular solve."""
         sol, info = lapack.dtrtrs(self._upper, noise.ravel(), lower=0)
         if info != 0:
             raise ValueError(f"trtrs: illegal argument {-info}")
@@ -97,14 +67,7 @@ class DenseSolver(SolverBackend):
 
     def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
         """f.R_FU^-1.f for each of the force sets forces (P, N, 6): |U^-T f|^2 with R_FU =
-        U^T U, one triangular solve for all P.
-
-        Args:
-            forces: (P, N, 6) force/torque sets.
-
-        Returns:
-            (P,) the quadratic forms f.R_FU^-1.f.
-        """
+        U^T U, one triangular solve for all P."""
         y, info = lapack.dtrtrs(self._upper, forces.reshape(len(forces), -1).T, lower=0, trans=1)
         if info != 0:
             raise ValueError(f"trtrs: illegal argument {-info}")
