@@ -379,7 +379,7 @@ class Realisation:
             self._hold_far_field(pos, k)
         at = self.model.at(pos, strain)
         n = self.n_particles
-        e5 = np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
+        e5 = _imposed_rate(n, rate)
         u_flow = at.velocities(np.zeros((n, 6)), e5)
         s_h = at.stresslets(u_flow, e5)
         contributions, contact_sample = self._forces(at)
@@ -467,7 +467,7 @@ class Realisation:
         whose springs are state, do not enter it)."""
         at = self.model.at(positions, self.protocol.strain(t))
         n = self.n_particles
-        e5 = np.broadcast_to(to_five(rate_of_strain(self.protocol.rate(t))), (n, 5))
+        e5 = _imposed_rate(n, self.protocol.rate(t))
         velocity = at.velocities(np.zeros((n, 6)), e5)
         if self.force_law is not None:
             velocity = velocity + at.velocities(self._pair_forces(at)[0], np.zeros((n, 5)))
@@ -492,7 +492,13 @@ def _at_step_rate(at, u_flow, rate, step_rate):
     if rate != 0.0:
         return (step_rate / rate) * u_flow
     n = len(u_flow)
-    return at.velocities(np.zeros((n, 6)), np.broadcast_to(to_five(rate_of_strain(step_rate)), (n, 5)))
+    return at.velocities(np.zeros((n, 6)), _imposed_rate(n, step_rate))
+
+
+def _imposed_rate(n, rate):
+    """E_inf of simple shear at shear rate ``rate`` for each of n spheres, (n, 5) in the
+    5-basis (a read-only broadcast)."""
+    return np.broadcast_to(to_five(rate_of_strain(rate)), (n, 5))
 
 
 def _encode_rng(rng):
