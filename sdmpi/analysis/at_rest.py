@@ -34,14 +34,12 @@ Short times: lags 0-4 are replaced by the hard-sphere form fitted to lags 5-20 (
 ``contact`` rule of :mod:`.green_kubo`, whose docstring gives the measurement behind it).
 
 Validation status. Free draining is validated (tests/test_green_kubo.py: the dilute
-O(phi^2) G(t) and moduli; docs/validation/green_kubo/). With hydrodynamic interactions
-(``far-field``, ``stokesian``) the sampled Brownian stress carries per-step estimator
-noise (white at lag 0 in far field at phi = 0.3 and full SD at phi = 0.45) and
-lubrication makes G(t) finite at t = 0, which the default short-time rule does not
-assume. Full SD at phi = 0.45, N = 27, against the oscillatory study of Schaink et al.
-(2000): eta_H from the frames and G'' with the ``lag1`` rule agree at 2-80 pi, G' is
-19-35% high from 8 pi up (docs/validation/green_kubo/). The result is NOT validated, and
-the reduction says so in a warning, in ``green_kubo.json`` and on the terminal.
+O(phi^2) G(t) and moduli). With hydrodynamic interactions (``far-field``, ``stokesian``) the
+sampled Brownian stress carries per-step estimator noise, and lubrication makes G(t) finite
+at t = 0 (the default short-time rule is then ``lag1``, :func:`default_lag0`); what agrees
+with oscillatory runs and what does not is in docs/validation/green_kubo/. The result is
+NOT validated there, and the reduction says so in a warning, in ``green_kubo.json`` and on
+the terminal.
 
 Units: t and 1/omega in t_D, G, G', G'' in eta_m/t_D, eta', eta'' relative to eta_m.
 """
