@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test pip-check bench schaink2000 finite-size dratler1996 clean
+.PHONY: setup run test pip-check bench schaink2000 finite-size dratler1996 dratler1996-sensitivity clean
 
 setup: $(VENV)/.installed
 
@@ -109,6 +109,26 @@ dratler1996: setup
 	done
 	$(VPY) postprocess/dratler1996.py --hydro out/dratler1996/hydro.h5 \
 	  --repulsion out/dratler1996/repulsion.h5 -o $(DS_OUT)
+
+# Its sensitivity runs (sec. 4.2 of the paper; jobs/dratler1996_sensitivity.toml): the
+# reference and one parameter changed at a time, then sensitivity.csv into DSS_OUT.
+DSS_OUT   ?= docs/validation/dratler1996/sensitivity
+DSS_JOB    = jobs/dratler1996_sensitivity.toml
+DSS_RUN    = mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run $(DSS_JOB)
+dratler1996-sensitivity: setup
+	mkdir -p out/dratler1996
+	$(DSS_RUN) -o out/dratler1996/sens_reference.h5
+	$(DSS_RUN) -o out/dratler1996/sens_gstar0.1.h5 --set interparticle.f0=5.0
+	$(DSS_RUN) -o out/dratler1996/sens_gstar10.h5 --set interparticle.f0=0.05
+	$(DSS_RUN) -o out/dratler1996/sens_tau1.25e4.h5 --set interparticle.tau=12500.0
+	$(DSS_RUN) -o out/dratler1996/sens_tau1.25e5.h5 --set interparticle.tau=125000.0
+	$(DSS_RUN) -o out/dratler1996/sens_n36.h5 --set system.n_particles=36
+	$(VPY) postprocess/dratler1996_sensitivity.py --reference out/dratler1996/sens_reference.h5 \
+	  --variant "gamma*=0.1=out/dratler1996/sens_gstar0.1.h5" \
+	  "gamma*=10=out/dratler1996/sens_gstar10.h5" \
+	  "tau=1.25e4=out/dratler1996/sens_tau1.25e4.h5" \
+	  "tau=1.25e5=out/dratler1996/sens_tau1.25e5.h5" \
+	  "N=36=out/dratler1996/sens_n36.h5" -o $(DSS_OUT)
 
 clean:
 	rm -rf $(VENV) $(PIP_VENV) .numba_cache .numba_cache_pip build *.egg-info

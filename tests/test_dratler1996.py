@@ -1,7 +1,8 @@
-"""postprocess/dratler1996.py, the regeneration path of docs/validation/dratler1996/, on
-tiny real runs of its two job files (N = 9 spheres, 40 steps, 2 realisations): the tables
-agree with `sdmpi reduce`, the neighbour count with a direct count from the stored
-positions, the tables are byte-identical when regenerated, and bad input exits 2."""
+"""postprocess/dratler1996.py and dratler1996_sensitivity.py, the regeneration paths of
+docs/validation/dratler1996/, on tiny real runs of its job files (N = 9 spheres, 40 steps,
+2 realisations): the tables agree with `sdmpi reduce`, the neighbour count with a direct
+count from the stored positions, the paired sensitivity with the realisations' own means,
+the tables are byte-identical when regenerated, and bad input exits 2."""
 
 import csv
 import math
@@ -125,3 +126,71 @@ def test_bad_input_exits_2_and_writes_nothing(runs, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         SCRIPT.main(["-o", str(out)])
     assert exc.value.code == 2
+
+
+#: postprocess/dratler1996_sensitivity.py as a module
+SENSITIVITY = postprocess_script("dratler1996_sensitivity")
+#: the repulsion acts within so few steps only with a longer range (see `runs`)
+SHORT_RANGE = ["--set", "interparticle.tau=200.0", "--set", "interparticle.f0=0.05"]
+
+
+@pytest.fixture(scope="module")
+def sensitivity_runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sensitivity")
+    job = "dratler1996_sensitivity.toml"
+    ref = sdmpi_run(d / "ref.h5", *SHORT_RANGE, job=job, shrink=TINY)
+    f0 = sdmpi_run(d / "f0.h5", *SHORT_RANGE, "--set", "interparticle.f0=0.5", job=job, shrink=TINY)
+    n12 = sdmpi_run(d / "n12.h5", *SHORT_RANGE, "--set", "system.n_particles=12", job=job, shrink=TINY)
+    return ref, f0, n12
+
+
+def test_sensitivity_table(sensitivity_runs, tmp_path):
+    ref, f0, n12 = sensitivity_runs
+    out = tmp_path / "s"
+    args = ["--reference", str(ref), "--variant", f"gamma*=1={f0}", f"N=12={n12}", "-o", str(out)]
+    assert SENSITIVITY.main(args) == 0
+    table = {r["label"]: r for r in rows(out / "sensitivity.csv")}
+    assert list(table) == ["reference", "gamma*=1", "N=12"]
+    assert table["reference"]["changed"] == "" and float(table["reference"]["change"]) == 0.0
+    assert table["gamma*=1"]["changed"] == "interparticle.f0=0.5"
+    assert table["N=12"]["changed"] == "system.n_particles=12"
+    # each realisation's time average (what the paired change is built from) averages to the
+    # table's eta, which is sdmpi reduce's
+    etas = {}
+    for label, path in (("reference", ref), ("gamma*=1", f0)):
+        n, eta = SENSITIVITY.task_etas(path)
+        assert list(n) == [30, 30]
+        etas[label] = np.nanmean(eta, axis=1)
+        assert math.isclose(etas[label].mean(), float(table[label]["eta"]), rel_tol=1e-12)
+        assert sdmpi_main(["reduce", str(path), "-o", str(tmp_path / label), "--no-plots"]) == 0
+        total = {r["component"]: r for r in rows(tmp_path / label / "viscosity.csv")}
+        assert float(table[label]["eta"]) == float(total["total"]["eta"])
+    # the same starts: the change is paired, realisation by realisation
+    per = (etas["gamma*=1"] - etas["reference"]) / etas["reference"]
+    assert table["gamma*=1"]["paired"] == "1"
+    assert math.isclose(float(table["gamma*=1"]["change"]), per.mean(), rel_tol=1e-12)
+    assert math.isclose(float(table["gamma*=1"]["change_err"]), per.std(ddof=1) / math.sqrt(2),
+                        rel_tol=1e-12)
+    assert float(table["gamma*=1"]["eta_p"]) > float(table["reference"]["eta_p"])  # a 10x stronger force
+    # other starts: the ratio of the means
+    assert table["N=12"]["paired"] == "0"
+    assert math.isclose(float(table["N=12"]["change"]),
+                        float(table["N=12"]["eta"]) / float(table["reference"]["eta"]) - 1,
+                        rel_tol=1e-12)
+    again = tmp_path / "again"
+    assert SENSITIVITY.main([*args[:-1], str(again)]) == 0
+    assert (again / "sensitivity.csv").read_bytes() == (out / "sensitivity.csv").read_bytes()
+
+
+def test_sensitivity_bad_input_exits_2(sensitivity_runs, tmp_path, capsys):
+    ref, f0, _ = sensitivity_runs
+    out = tmp_path / "bad"
+    assert SENSITIVITY.main(["--reference", str(ref), "--variant", f"x={tmp_path / 'no.h5'}",
+                             "-o", str(out)]) == 2
+    assert "no.h5" in capsys.readouterr().err
+    assert not out.exists()
+    with pytest.raises(SystemExit) as exc:
+        SENSITIVITY.main(["--reference", str(ref), "--variant", str(f0), "-o", str(out)])
+    assert exc.value.code == 2
+    assert "LABEL=RUN.h5" in capsys.readouterr().err
+    assert not out.exists()
