@@ -129,10 +129,14 @@ class DriftSpec(Spec):
         matrix_free: it suits the matrix-free (iterative) backends (`BackendSpec.matrix_free`);
             every scheme suits the direct ones.
         why_not: why it does not suit the matrix-free backends (the checks' message).
+        stress_draw: it estimates the Brownian stresslets from a standard normal draw of
+            their own (the ``z_stress`` of `sdmpi.dynamics.drift.DriftScheme.brownian`),
+            drawn after the step's other noise.
     """
 
     matrix_free: bool = True
     why_not: str = ""
+    stress_draw: bool = False
 
 
 @dataclass(frozen=True)
@@ -269,11 +273,17 @@ HYDRODYNAMIC_MODELS.register(ModelSpec(
 
 #: brownian.scheme absent: the first registered scheme that suits the backend
 DRIFT_SCHEMES: Registry[DriftSpec] = Registry("brownian.scheme")
+_RFD_ON_ITERATIVE = ("the random finite difference takes a difference over ~1e-6 a, which an "
+                     "iterative solver's tolerance would swamp")
 DRIFT_SCHEMES.register(DriftSpec(
     "rfd", "random finite difference at every step (exact in the mean at every gap)",
     "sdmpi.dynamics.drift:RandomFiniteDifference", matrix_free=False,
-    why_not="the random finite difference takes a difference over ~1e-6 a, which an iterative "
-            "solver's tolerance would swamp"))
+    why_not=_RFD_ON_ITERATIVE))
+DRIFT_SCHEMES.register(DriftSpec(
+    "rfd-split", "rfd, the Brownian stresslets from a random finite difference along a draw of their "
+    "own (independent of the step's displacement: for Green-Kubo at rest; one more solve per step)",
+    "sdmpi.dynamics.drift:SplitRandomFiniteDifference", matrix_free=False,
+    why_not=_RFD_ON_ITERATIVE, stress_draw=True))
 DRIFT_SCHEMES.register(DriftSpec(
     "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt)", "sdmpi.dynamics.drift:Midpoint"))
 

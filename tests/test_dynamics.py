@@ -63,7 +63,8 @@ def _model(scheme):
                            min_gap=1e-4, scheme=scheme)
 
 
-@pytest.mark.parametrize("scheme,dt,tol", [("midpoint", 1e-7, 1e-3), ("rfd", 5e-4, 1e-5)])
+@pytest.mark.parametrize("scheme,dt,tol", [("midpoint", 1e-7, 1e-3), ("rfd", 5e-4, 1e-5),
+                                           ("rfd-split", 5e-4, 1e-5)])
 def test_drift_and_brownian_stress_match_finite_difference_divergence(scheme, dt, tol):
     """The expectation over z of either scheme's estimates is a linear (mean 0) plus a
     quadratic form in z, up to O(dt^2) terms (midpoint: its half step) or O(epsilon^2)
@@ -81,12 +82,47 @@ def test_drift_and_brownian_stress_match_finite_difference_divergence(scheme, dt
         for sign in (1.0, -1.0):
             z = np.zeros(6 * n)
             z[k] = sign
-            terms = at.brownian_terms(z.reshape(n, 6), kt, dt)
+            z_stress = z.reshape(n, 6) if scheme == "rfd-split" else None  # the same quadrature
+            terms = at.brownian_terms(z.reshape(n, 6), kt, dt, None, z_stress)
             drift += 0.5 * terms.velocities
             stress += 0.5 * terms.stresslets
-    rows = slice(None) if scheme == "rfd" else slice(0, 3)
+    rows = slice(0, 3) if scheme == "midpoint" else slice(None)
     assert np.abs(drift[:, rows] - kt * div_m[:, rows]).max() < tol * np.abs(div_m[:, :3]).max()
     assert np.abs(stress + kt * div_a).max() < tol * np.abs(div_a).max()
+
+
+def test_split_rfd_takes_the_drift_from_z_and_the_stress_from_its_own_draw():
+    """rfd-split: the velocities are a function of the step's z alone, equal to rfd's bit
+    for bit, and the stresslets a function of z_stress alone, equal to rfd's for z = z_stress:
+    the stress estimator's noise is independent of the displacement by construction (so its
+    mean is rfd's, tested against the divergence above)."""
+    rng = np.random.default_rng(7)
+    n = len(CONFIG)
+    rfd, split = _model("rfd").at(CONFIG, STRAIN), _model("rfd-split").at(CONFIG, STRAIN)
+    z, z_stress, other = (rng.standard_normal((n, 6)) for _ in range(3))
+    both = split.brownian_terms(z, 1.0, 5e-4, None, z_stress)
+    assert np.array_equal(both.velocities, rfd.brownian_terms(z, 1.0, 5e-4).velocities)
+    assert np.array_equal(both.stresslets, rfd.brownian_terms(z_stress, 1.0, 5e-4).stresslets)
+    assert np.array_equal(both.velocities, split.brownian_terms(z, 1.0, 5e-4, None, other).velocities)
+    assert np.array_equal(both.stresslets, split.brownian_terms(other, 1.0, 5e-4, None, z_stress).stresslets)
+    assert not np.allclose(both.stresslets, split.brownian_terms(z, 1.0, 5e-4, None, other).stresslets)
+    with pytest.raises(ValueError, match="z_stress"):
+        split.brownian_terms(z, 1.0, 5e-4)
+
+
+def test_split_rfd_draws_the_stress_noise_after_the_steps_other_noise():
+    """A realisation with rfd-split draws z, the near-contact z', then z_stress each step: its
+    first step's displacement equals rfd's from the same start (the same z and z'), and the
+    stress differs."""
+    samples, positions = {}, {}
+    for scheme in ("rfd", "rfd-split"):
+        job = _job("system.n_particles=8", f"brownian.scheme='{scheme}'")
+        real = Realisation(job, enumerate_tasks(job)[0])
+        samples[scheme] = real.advance(1)
+        positions[scheme] = real.positions.copy()
+    assert np.array_equal(positions["rfd"], positions["rfd-split"])
+    assert np.array_equal(samples["rfd"]["stress_hydrodynamic"], samples["rfd-split"]["stress_hydrodynamic"])
+    assert not np.array_equal(samples["rfd"]["stress_brownian"], samples["rfd-split"]["stress_brownian"])
 
 
 def test_single_sphere_self_diffusion_in_periodic_box():

@@ -120,7 +120,7 @@ class NoDrift:
     """Brownian velocities without drift or Brownian stress (the example of
     docs/extending.md)."""
 
-    def brownian(self, evaluation, z, kT, dt, near):
+    def brownian(self, evaluation, z, kT, dt, near, z_stress=None):
         m = evaluation.solver.brownian_velocities(z)
         return BrownianTerms(np.sqrt(2 * kT / dt) * m + near(m), np.zeros((evaluation.n_particles, 5)))
 

@@ -47,6 +47,7 @@ STEPS = 24
 CASES = {
     "demo": ("demo.toml", [], -1),
     "demo_midpoint": ("demo.toml", ['brownian.scheme="midpoint"'], 0),
+    "demo_rfd_split": ("demo.toml", ['brownian.scheme="rfd-split"'], 0),
     "demo_far_field": ("demo.toml", ['hydrodynamics.model="far-field"',
                                      "integration.steps_per_period=40"], 0),
     "demo_per_particle": ("demo.toml", ["output.per_particle=true"], 0),
@@ -59,6 +60,7 @@ CASES = {
     "large_n_krylov": ("large_n_krylov.toml", ["system.n_particles=8", "ensemble.ranks_per_task=1"], 0),
     "dratler1996_hydro": ("dratler1996_hydro.toml", ["system.n_particles=9"], 0),
     "dratler1996_repulsion": ("dratler1996_repulsion.toml", ["system.n_particles=9"], 0),
+    "dratler1996_sensitivity": ("dratler1996_sensitivity.toml", ["system.n_particles=9"], 0),
     "monolayer_hydro": ("monolayer_hydro.toml", ["system.n_particles=9"], 0),
     "monolayer_repulsion": ("monolayer_repulsion.toml", ["system.n_particles=9"], 0),
     "schaink2000_fixed_dt": ("schaink2000_fixed_dt.toml", ["system.n_particles=8"], 0),

@@ -14,6 +14,8 @@ configuration: `sdmpi.dynamics.models.ResistanceEvaluation`):
   the noise's own directions over a length RFD_STEP hydrodynamics.min_gap, to first order in
   the change of R (Delong, Balboa Usabiaga & Donev, J. Chem. Phys. 140, 134110 (2014);
   Sprinkle et al., J. Chem. Phys. 147, 244103 (2017));
+* `SplitRandomFiniteDifference` (``rfd-split``): the same, with the stresslets' difference
+  taken along an independent draw of their own;
 * `Midpoint` (``midpoint``): Fixman's midpoint as used for SD by Banchio & Brady, J. Chem.
   Phys. 118, 10323 (2003).
 
@@ -88,11 +90,13 @@ class DriftScheme(Protocol):
     (docs/extending.md)."""
 
     def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
-                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
+                 near: Callable[[np.ndarray], Any], z_stress: np.ndarray | None = None) -> BrownianTerms:
         """The step's `BrownianTerms` for the standard normal noise z (the solver's
         noise_shape) at temperature kT and time step dt; near(m): the velocities (N, 6), or
         0, that the near-contact correction adds for the step's displacement direction
-        m = R_FU^-1 C z (N, 6)."""
+        m = R_FU^-1 C z (N, 6); z_stress: the stresslets' own standard normal draw (same
+        shape), drawn after the step's other noise for a scheme registered with
+        `sdmpi.registry.DriftSpec.stress_draw`, else None."""
         raise NotImplementedError
 
 
@@ -102,25 +106,54 @@ def rfd_length(min_gap: float) -> float:
     return RFD_STEP * min_gap * 6 * math.pi
 
 
+def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> tuple[np.ndarray, np.ndarray]:
+    """(drift (N, 6), Brownian stresslets (N, 5)) of one random finite difference along the
+    direction m = R_FU^-1 F (N, 6): (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F and
+    -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F, eps = `rfd_length`, to first
+    order in Delta R = R(x + eps m) - R (docs/numerics.md). Their means over F = C z are
+    kT div R_FU^-1 and -kT div(R_SU R_FU^-1)."""
+    solver = evaluation.solver
+    zero = np.zeros((evaluation.n_particles, 5))
+    step = rfd_length(evaluation.min_gap)
+    direction = np.zeros((evaluation.n_particles, NDOF))
+    direction[:, :6] = m
+    change = evaluation.resistance_change(evaluation.positions + step * m[:, :3], direction)
+    dm = -solver.velocities(change[:, :6], zero)  # (R + Delta R)_FU^-1 F - m, first order
+    return (kT / step) * dm, (kT / step) * (solver.stresslets(dm, zero) - change[:, 6:])
+
+
 class RandomFiniteDifference:
-    """``rfd``: kT div R_FU^-1 ~ (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F and
-    -kT div(R_SU R_FU^-1) ~ -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F with
-    F = C z, m = R_FU^-1 F, eps = `rfd_length`, both to first order in
-    Delta R = R(x + eps m) - R (docs/numerics.md)."""
+    """``rfd``: kT div R_FU^-1 and -kT div(R_SU R_FU^-1) by one random finite difference
+    (`rfd_terms`) along the step's own displacement direction m = R_FU^-1 C z (Delong,
+    Balboa Usabiaga & Donev 2014; Sprinkle et al. 2017)."""
 
     def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
-                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
+                 near: Callable[[np.ndarray], Any], z_stress: np.ndarray | None = None) -> BrownianTerms:
+        m = evaluation.solver.brownian_velocities(z)
+        noise = math.sqrt(2 * kT / dt) * m
+        drift, stress = rfd_terms(evaluation, m, kT)
+        return BrownianTerms(noise + drift + near(m), stress)
+
+
+class SplitRandomFiniteDifference:
+    """``rfd-split``: the drift by a random finite difference along the step's displacement
+    direction m = R_FU^-1 C z, as ``rfd``, and the Brownian stresslets by a second one along
+    m' = R_FU^-1 C z_stress of an independent draw (`rfd_terms`). The estimator noise of the
+    stresslets is then independent of the step's displacement and of every later
+    configuration, so that the sampled Brownian stress's time correlation at lags >= 1 is
+    that of -kT div(R_SU R_FU^-1) itself (Green-Kubo at rest, docs/reduce.md); with ``rfd``
+    it is correlated with the displacement at second order in z. One more resistance change
+    and solve per step than ``rfd``."""
+
+    def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
+                 near: Callable[[np.ndarray], Any], z_stress: np.ndarray | None = None) -> BrownianTerms:
+        if z_stress is None:
+            raise ValueError("rfd-split needs the stresslets' own draw z_stress")
         solver = evaluation.solver
-        zero = np.zeros((evaluation.n_particles, 5))
         m = solver.brownian_velocities(z)
         noise = math.sqrt(2 * kT / dt) * m
-        step = rfd_length(evaluation.min_gap)
-        direction = np.zeros((evaluation.n_particles, NDOF))
-        direction[:, :6] = m
-        change = evaluation.resistance_change(evaluation.positions + step * m[:, :3], direction)
-        dm = -solver.velocities(change[:, :6], zero)  # (R + Delta R)_FU^-1 F - m, first order
-        drift = (kT / step) * dm
-        stress = (kT / step) * (solver.stresslets(dm, zero) - change[:, 6:])
+        drift, _ = rfd_terms(evaluation, m, kT)
+        _, stress = rfd_terms(evaluation, solver.brownian_velocities(z_stress), kT)
         return BrownianTerms(noise + drift + near(m), stress)
 
 
@@ -130,7 +163,7 @@ class Midpoint:
     (R_SU R_FU^-1)(x)] F_B (Banchio & Brady 2003; docs/numerics.md)."""
 
     def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
-                 near: Callable[[np.ndarray], Any]) -> BrownianTerms:
+                 near: Callable[[np.ndarray], Any], z_stress: np.ndarray | None = None) -> BrownianTerms:
         solver = evaluation.solver
         zero = np.zeros((evaluation.n_particles, 5))
         unit_force = solver.brownian_forces(z)

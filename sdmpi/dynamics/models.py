@@ -208,14 +208,17 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
 
     def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
         """The step's Brownian terms (`brownian_terms`) for noise drawn from rng: z, then z'
-        of the near-contact correction where the model has one."""
+        of the near-contact correction where the model has one, then the stresslets' own
+        draw where the drift scheme takes one (`sdmpi.registry.DriftSpec.stress_draw`)."""
         shape = self.solver.noise_shape
         z = rng.standard_normal(shape)
         z_near = rng.standard_normal(shape) if self.model.near_contact else None
+        z_stress = rng.standard_normal(shape) if self.model.stress_draw else None
         # the iterative backend's Brownian forces (Lanczos) need a positive definite M_inf
-        return self.model._guarded(self.brownian_terms, z, kT, dt, z_near)
+        return self.model._guarded(self.brownian_terms, z, kT, dt, z_near, z_stress)
 
-    def brownian_terms(self, z: np.ndarray, kT: float, dt: float, z_near: np.ndarray | None = None) -> BrownianTerms:
+    def brownian_terms(self, z: np.ndarray, kT: float, dt: float, z_near: np.ndarray | None = None,
+                       z_stress: np.ndarray | None = None) -> BrownianTerms:
         """The step's `BrownianTerms` by the model's drift scheme (`drift`) for the standard
         normal noise z (the solver's noise_shape); z_near: the independent noise z' of the
         near-contact correction (`drift.near_contact_velocities`; None: no correction).
@@ -225,6 +228,8 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
             kT: thermal energy (6 pi in reduced units).
             dt: the step's duration (t_D).
             z_near: standard normal noise of the near-contact correction, same shape, or None.
+            z_stress: the stresslets' own standard normal draw (same shape) of a scheme
+                that takes one, or None.
 
         Returns:
             The step's `BrownianTerms`: velocities (N, 6) in a/t_D and 1/t_D, stresslets
@@ -233,7 +238,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         def near(m):
             return 0.0 if z_near is None else near_contact_velocities(self, m, z_near, kT, dt)
 
-        return self.model.drift.brownian(self, z, kT, dt, near)
+        return self.model.drift.brownian(self, z, kT, dt, near, z_stress)
 
     def displaced(self, positions: np.ndarray) -> tuple[Any, int]:
         """The solver at ``positions`` with this evaluation's pair sets and strain, overlaps
@@ -283,6 +288,7 @@ class ResistanceModel(HydrodynamicModel):
         self.backend = resolve_backend(backend, len(radii), comm)
         self.scheme = default_drift_scheme(self.backend) if scheme is None else scheme
         self.drift = DRIFT_SCHEMES[self.scheme].load()()
+        self.stress_draw = DRIFT_SCHEMES[self.scheme].stress_draw
         self.lubrication, self.cutoff, self.min_gap = lubrication, cutoff, min_gap
         # the near-contact correction (`drift`): with lubrication, on the direct
         # backends (an iterative solve's error is amplified in the small radial parts m_h)
