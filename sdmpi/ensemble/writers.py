@@ -43,6 +43,7 @@ class TaskRecorder(Protocol):
             step: the step about to be taken.
             realisation: the task's realisation, at the start of that step.
         """
+        raise NotImplementedError
 
     def after(self, step: int, sample: dict[str, np.ndarray], realisation: Realisation) -> None:
         """Called after step ``step``.
@@ -52,6 +53,7 @@ class TaskRecorder(Protocol):
             sample: its sample, name -> array with a leading axis of length 1.
             realisation: the task's realisation, after the step.
         """
+        raise NotImplementedError
 
     def flush(self, stop: int) -> None:
         """Hand what was recorded since the last flush (the steps below ``stop``) to the run
@@ -60,6 +62,7 @@ class TaskRecorder(Protocol):
         Args:
             stop: the step of that checkpoint.
         """
+        raise NotImplementedError
 
 
 class Writer(Protocol):
@@ -75,6 +78,7 @@ class Writer(Protocol):
         Returns:
             False: the writer creates, records and estimates nothing for this job.
         """
+        raise NotImplementedError
 
     def create(self, f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Any]) -> None:
         """Create the datasets of every task in the run file being created (collectively,
@@ -87,6 +91,7 @@ class Writer(Protocol):
             layouts: task id -> `sdmpi.ensemble.store.TaskLayout` (sample fields, box,
                 n_particles, radii).
         """
+        raise NotImplementedError
 
     def recorder(self, job: Job, task: Task, realisation: Realisation, run_file: Any,
                  start: int) -> TaskRecorder:
@@ -102,6 +107,7 @@ class Writer(Protocol):
         Returns:
             The task's recorder.
         """
+        raise NotImplementedError
 
     def carry_over(self, old: h5py.File, new: h5py.File, job: Job, task_id: int, done: int) -> None:
         """Copy a task's committed data into a longer layout of the same job
@@ -114,6 +120,7 @@ class Writer(Protocol):
             task_id: the task.
             done: its committed steps.
         """
+        raise NotImplementedError
 
     def file_bytes(self, job: Job) -> float:
         """The bytes of this output in the job's run file (preallocated, so exact up to
@@ -125,6 +132,7 @@ class Writer(Protocol):
         Returns:
             The estimate, in bytes.
         """
+        raise NotImplementedError
 
 
 def active(job: Job) -> list[Writer]:
