@@ -1,18 +1,21 @@
 """The registries of sdmpi's extension points: solver backends, hydrodynamic models, drift
-schemes and integrators.
+schemes, integrators and the writers of the run file.
 
 A registry maps a name, as a job file spells it (``solver.backend``,
-``hydrodynamics.model``, ``brownian.scheme``, ``integration.scheme``), to an entry: a frozen spec that declares what the job loader,
+``hydrodynamics.model``, ``brownian.scheme``, ``integration.scheme``; a writer's own
+name), to an entry: a frozen spec that declares what the job loader,
 the checks, the resource estimates, the command line and the key reference need to know
 of an implementation, and where the implementation is (the class itself, or
 ``"module:Class"``, imported on first use). Every list of choices users see is read from
 here. This module uses only the standard library, so that `sdmpi.config` derives its
 choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`,
-`sdmpi.dynamics.models` and `sdmpi.dynamics.realisation` build the implementations it names.
+`sdmpi.dynamics.models`, `sdmpi.dynamics.realisation` and `sdmpi.ensemble.writers` build
+the implementations it names.
 
 Adding an implementation: docs/extending.md. In short, one module with the class
 (`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`,
-`sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`) and one
+`sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`,
+`sdmpi.ensemble.writers.Writer`) and one
 ``register``: an entry below for those shipped with sdmpi, or a call of
 ``SOLVER_BACKENDS.register(BackendSpec(...))`` in the user's own module before the job is
 loaded.
@@ -311,3 +314,17 @@ INTEGRATORS.register(IntegratorSpec(
     "adams-bashforth-4", "fourth-order Adams-Bashforth (non-Brownian jobs; Dratler & Schowalter "
     "1996), started by three classical Runge-Kutta steps", "sdmpi.dynamics.integrators:AdamsBashforth4",
     brownian=False, contacts=False))
+
+
+# --------------------------------------------------------------------------- writers
+
+#: the outputs of a run, each a set of datasets in the run file (docs/store.md), created,
+#: recorded, committed and carried over on --extend in this order; a writer whose
+#: ``enabled(job)`` is false writes nothing
+WRITERS: Registry[Spec] = Registry("writer")
+WRITERS.register(Spec(
+    "samples", "the sample stream: one row per time step (tasks/NNNNNN/samples)",
+    "sdmpi.ensemble.samples:SampleStream"))
+WRITERS.register(Spec(
+    "trajectory", "H5MD trajectory frames every output.trajectory_every steps (particles/, "
+    "observables/)", "sdmpi.ensemble.trajectory:TrajectoryWriter"))

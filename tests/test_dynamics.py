@@ -1,6 +1,6 @@
-"""Brownian SD dynamics: fluctuation-dissipation, drift and Brownian stress estimates,
-periodic self-diffusion, oscillatory shear of a simple cubic lattice (Newtonian and
-Maxwell media), checkpointable state."""
+"""Brownian SD dynamics: periodic self-diffusion, oscillatory shear of a simple cubic
+lattice (Newtonian and Maxwell media), checkpointable state. Fluctuation-dissipation and the
+drift of every drift scheme: tests/test_dynamics_contract.py."""
 
 import math
 
@@ -11,103 +11,10 @@ from sdmpi.analysis.projection import project_periods
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.media import MaxwellFilter
-from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.hydro.bulk import hydrodynamic_viscosity
-from sdmpi.hydro.resistance import grand_resistance, mobility_divergence
-from sdmpi.hydro.solvers import make_solver
-
-BOX = np.array([7.0, 7.0, 7.0])
-# three spheres, one pair 0.05 radii apart, in a sheared periodic box
-CONFIG = np.array([[1.0, 1.2, 0.8], [3.05, 1.2, 0.8], [2.0, 3.9, 3.5]])
-STRAIN = 0.1
-
-
-def _resistance(pos, plan=None):
-    return grand_resistance(pos, np.ones(len(pos)), BOX, STRAIN, plan=plan)
-
 
 def _job(*overrides):
     return load_job("jobs/demo.toml", overrides=list(overrides))
-
-
-def test_brownian_forces_satisfy_fluctuation_dissipation():
-    """Velocities driven by F_B = C z have covariance R_FU^-1: whitened by the exact
-    covariance, the sample covariance of S draws is Wishart(S, I)/S. Tested: its trace
-    (z-score < 5, false alarm 6e-7) and its largest off-diagonal entry (< 5/sqrt(S))."""
-    res = _resistance(CONFIG)
-    solver = make_solver("dense", res)
-    rng = np.random.default_rng(42)
-    n_samples = 20000
-    zero = np.zeros((3, 5))
-    u = np.array([solver.velocities(solver.brownian_forces(rng.standard_normal((3, 6))), zero).ravel()
-                  for _ in range(n_samples)])
-    exact = np.linalg.inv(res.blocks()[0])
-    chol = np.linalg.cholesky(exact)
-    white = np.linalg.solve(chol, u.T)
-    cov = white @ white.T / n_samples
-    p = cov.shape[0]
-    assert abs((np.trace(cov) - p) / math.sqrt(2 * p / n_samples)) < 5
-    assert np.abs(cov - np.diag(np.diag(cov))).max() < 5 / math.sqrt(n_samples)
-
-
-def _divergences(h=1e-5):
-    """Centred finite differences over the 3N translations (pair sets frozen) of
-    M = R_FU^-1 (6N x 6N) and A = R_SU R_FU^-1 (5N x 6N): sum_j dM_ij/dx_j, sum_j dA_ij/dx_j."""
-    base = _resistance(CONFIG)
-    div_m, div_a = mobility_divergence(_resistance, base, h)
-    return base, div_m.reshape(-1, 6), div_a.reshape(-1, 5)
-
-
-def _model(scheme):
-    return ResistanceModel(np.ones(len(CONFIG)), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0,
-                           min_gap=1e-4, scheme=scheme)
-
-
-@pytest.mark.parametrize("scheme,dt,tol", [("midpoint", 1e-7, 1e-3), ("rfd", 5e-4, 1e-5),
-                                           ("rfd-split", 5e-4, 1e-5)])
-def test_drift_and_brownian_stress_match_finite_difference_divergence(scheme, dt, tol):
-    """The expectation over z of either scheme's estimates is a linear (mean 0) plus a
-    quadratic form in z, up to O(dt^2) terms (midpoint: its half step) or O(epsilon^2)
-    (rfd), so the symmetric quadrature z = +-e_k (weights 1/2) gives it exactly: it must
-    equal kT div R_FU^-1 and -kT div(R_SU R_FU^-1) from finite differences of step 1e-5.
-    midpoint: within its O(dt) error at dt = 1e-7 (1e-3 relative); rfd: at any dt, within
-    the truncation of both differences and the rounding of a difference over epsilon
-    (1e-5 relative), rotational rows included."""
-    kt = 1.0
-    base, div_m, div_a = _divergences()
-    at = _model(scheme).at(CONFIG, STRAIN)
-    n = len(CONFIG)
-    drift, stress = np.zeros((n, 6)), np.zeros((n, 5))
-    for k in range(6 * n):
-        for sign in (1.0, -1.0):
-            z = np.zeros(6 * n)
-            z[k] = sign
-            z_stress = z.reshape(n, 6) if scheme == "rfd-split" else None  # the same quadrature
-            terms = at.brownian_terms(z.reshape(n, 6), kt, dt, None, z_stress)
-            drift += 0.5 * terms.velocities
-            stress += 0.5 * terms.stresslets
-    rows = slice(0, 3) if scheme == "midpoint" else slice(None)
-    assert np.abs(drift[:, rows] - kt * div_m[:, rows]).max() < tol * np.abs(div_m[:, :3]).max()
-    assert np.abs(stress + kt * div_a).max() < tol * np.abs(div_a).max()
-
-
-def test_split_rfd_takes_the_drift_from_z_and_the_stress_from_its_own_draw():
-    """rfd-split: the velocities are a function of the step's z alone, equal to rfd's bit
-    for bit, and the stresslets a function of z_stress alone, equal to rfd's for z = z_stress:
-    the stress estimator's noise is independent of the displacement by construction (so its
-    mean is rfd's, tested against the divergence above)."""
-    rng = np.random.default_rng(7)
-    n = len(CONFIG)
-    rfd, split = _model("rfd").at(CONFIG, STRAIN), _model("rfd-split").at(CONFIG, STRAIN)
-    z, z_stress, other = (rng.standard_normal((n, 6)) for _ in range(3))
-    both = split.brownian_terms(z, 1.0, 5e-4, None, z_stress)
-    assert np.array_equal(both.velocities, rfd.brownian_terms(z, 1.0, 5e-4).velocities)
-    assert np.array_equal(both.stresslets, rfd.brownian_terms(z_stress, 1.0, 5e-4).stresslets)
-    assert np.array_equal(both.velocities, split.brownian_terms(z, 1.0, 5e-4, None, other).velocities)
-    assert np.array_equal(both.stresslets, split.brownian_terms(other, 1.0, 5e-4, None, z_stress).stresslets)
-    assert not np.allclose(both.stresslets, split.brownian_terms(z, 1.0, 5e-4, None, other).stresslets)
-    with pytest.raises(ValueError, match="z_stress"):
-        split.brownian_terms(z, 1.0, 5e-4)
 
 
 def test_split_rfd_draws_the_stress_noise_after_the_steps_other_noise():

@@ -1,5 +1,5 @@
-"""Extension is local: a solver backend and a hydrodynamic model defined outside the package
-(tests/extension_plugin.py, one module that registers both) run jobs through `sdmpi run`,
+"""Extension is local: a solver backend, a hydrodynamic model and a writer defined outside the
+package (tests/extension_plugin.py, one module that registers them) run jobs through `sdmpi run`,
 and the job loader's choices, checks and estimates follow the registries
 (`sdmpi.registry`, docs/extending.md)."""
 
@@ -15,8 +15,8 @@ import sdmpi
 from sdmpi.cli import main
 from sdmpi.config import JobError, parse_job, resources
 from sdmpi.dynamics.drift import BrownianTerms
-from sdmpi.registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, BackendSpec,
-                            DriftSpec, IntegratorSpec, ModelSpec)
+from sdmpi.registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, WRITERS,
+                            BackendSpec, DriftSpec, IntegratorSpec, ModelSpec, Spec)
 
 from .runs import child_env, fresh_lubrication_tables
 
@@ -28,14 +28,19 @@ ONE_TASK = ["ensemble.realisations=1", "shear.omega=[25.132741228718345]", "inte
             "integration.discard_periods=0", "integration.steps_per_period=20"]
 
 
+def _plugin(out, sets, *flags, env=None):
+    """`sdmpi run` of demo.toml with ``sets`` into ``out``, with the plugin's registrations."""
+    cmd = [sys.executable, str(PLUGIN), "run", str(DEMO), "-o", str(out), *flags]
+    for item in sets:
+        cmd += ["--set", item]
+    return subprocess.run(cmd, capture_output=True, text=True, env=child_env(env), timeout=600)
+
+
 def _run_with_plugin(tmp_path, sets):
     """The samples of the one task of demo.toml with ``sets``, run by `sdmpi run` with the
     plugin's registrations."""
     out = tmp_path / "run.h5"
-    cmd = [sys.executable, str(PLUGIN), "run", str(DEMO), "-o", str(out)]
-    for item in sets:
-        cmd += ["--set", item]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=600)
+    res = _plugin(out, sets)
     assert res.returncode == 0, res.stderr
     with h5py.File(out, "r") as f:
         return {name: data[()] for name, data in f["tasks/000000/samples"].items()}
@@ -76,6 +81,50 @@ def test_registered_model_runs_a_job(tmp_path):
     assert np.array_equal(ours["stress_hydrodynamic"], 2.0 * plain["stress_hydrodynamic"])
     for name in ("strain", "min_gap", "stress_collision", "n_overlaps"):
         assert np.array_equal(ours[name], plain[name]), name
+
+
+def test_registered_writer_is_committed_resumed_and_extended(tmp_path):
+    """The plugin's writer (the time of every step, extra/000000/time) through a run killed
+    after its second checkpoint, its resume and an extension to twice the length: every row
+    equals the sample stream's time of that step, bit for bit (both are the same value)."""
+    out = tmp_path / "run.h5"
+    sets = [*ONE_TASK, 'hydrodynamics.model="free-draining"', "output.checkpoint_every=5"]
+    killed = _plugin(out, sets, env={"SDMPI_TEST_KILL": "commit:2"})
+    assert killed.returncode != 0
+    with h5py.File(out, "r") as f:
+        assert f["progress"][0] == 5  # the first checkpoint alone is committed
+    for more, flags in (([], ()), (["integration.periods=2"], ("--extend",))):
+        res = _plugin(out, [*sets, *more], *flags)
+        assert res.returncode == 0, res.stderr
+    with h5py.File(out, "r") as f:
+        assert f["progress"][0] == 40
+        times, samples = f["extra/000000/time"][()], f["tasks/000000/samples/time"][()]
+    assert times.shape == (40,) and np.all(np.diff(times) > 0)
+    assert np.array_equal(times, samples)
+
+
+class _Sized:
+    """A writer as far as the size estimate sees it."""
+
+    def enabled(self, job):
+        return True
+
+    def file_bytes(self, job):
+        return 1000.0
+
+
+def test_the_size_estimate_counts_every_registered_writer():
+    """`sdmpi validate`'s run-file size is the sum over the registry: a registered writer
+    adds its bytes."""
+    from sdmpi.ensemble.store import run_file_bytes
+
+    job = sdmpi.load_job(DEMO, ONE_TASK)
+    without = run_file_bytes(job)
+    WRITERS.register(Spec("test-sized", "a test writer", _Sized))
+    try:
+        assert run_file_bytes(job) - without == 1000.0
+    finally:
+        WRITERS.unregister("test-sized")
 
 
 @pytest.fixture

@@ -1,45 +1,28 @@
 """Reduce run files at rest (``shear.protocol = "none"``) by Green-Kubo: G(t), G'(w), G''(w).
 
-The estimator is :mod:`.green_kubo`'s; this module reads the run files (the same checks
-as :func:`.reduce.reduce_runs`: intact files of one system, distinct seeds, committed
-samples only) and writes the tables.
+The estimator is :mod:`.green_kubo`'s; this module reads the run files (the checks of
+:func:`.reduce.reduce_runs`: intact files of one system, distinct seeds, committed
+samples only) and writes the tables. Per task, the stress 6-vectors of the
+configurational contributions (:data:`STREAMS`: Brownian, interparticle, collision) after
+``integration.discard_steps`` are correlated with their sum. Rows of ``moduli_gk.csv``
+(the columns of moduli.csv):
 
-Per task, the stress 6-vectors of the configurational contributions (Brownian,
-interparticle, collision; :data:`STREAMS`) after ``integration.discard_steps`` are
-correlated with their sum. The hydrodynamic stress sampled at rest is not used: the
-hydrodynamic part of the moduli is instantaneous, eta_H G*_medium/(i omega) with eta_H =
-eta'_inf - 1 the equilibrium average of (1/V) sum_i S_H,xy per unit shear rate of force-
-and torque-free spheres (Schaink et al. 2000, eqs. 32-38; Batchelor 1970), which no sample
-stream of a run at rest holds. It is computed here from the configurations the run file
-keeps: each committed trajectory frame (``output.trajectory_every``) at or after
-``integration.discard_steps`` gives one eta_H by :func:`sdmpi.hydro.bulk.
-hydrodynamic_viscosity` with the job's hydrodynamics (far field by Ewald sums to
-``hydrodynamics.ewald_tolerance``, lubrication when the model has it), one resistance
-solve per frame; errors as for the stress samples (:func:`.errors.ensemble_average`:
-blocking of each realisation's frames, the larger of the spread between realisations and
-the propagated errors within). Rows of ``moduli_gk.csv`` (the columns of moduli.csv):
+* ``medium``: exact (Schaink et al. 2000 eq. 36);
+* ``hydrodynamic``: instantaneous, eta_H times the medium's moduli, eta_H = eta'_inf - 1
+  (Schaink et al. 2000, eqs. 32-38): 5/2 phi for free draining (exact); with
+  hydrodynamic interactions from the committed trajectory frames, one
+  :func:`sdmpi.hydro.bulk.hydrodynamic_viscosity` per frame, errors by
+  :func:`.errors.ensemble_average`; NaN without frames or with lubrication settings that
+  :func:`sdmpi.hydro.solve_mobility` does not take (:func:`hydrodynamic_settings`);
+* ``brownian``, ``interparticle``, ``collision``: Green-Kubo cross-correlations with the
+  configurational stress, lags 0-4 by the short-time rule (:func:`default_lag0`:
+  ``contact`` without lubrication, ``lag1`` with it);
+* ``total``: their sum (NaN where the hydrodynamic row is), errors in quadrature.
 
-* ``medium``: exact, as in the oscillatory tables (Schaink et al. 2000 eq. 36);
-* ``hydrodynamic``: free draining (each sphere's stresslet (20/3) pi a^3 E in the
-  medium, Einstein): 5/2 phi times the medium's moduli, exact (error 0); with
-  hydrodynamic interactions eta_H times the medium's moduli from the frames, NaN without
-  frames or with lubrication settings :func:`sdmpi.hydro.solve_mobility` does not take
-  (:func:`hydrodynamic_settings`; ``green_kubo.json`` says which);
-* ``brownian``, ``interparticle``, ``collision``: Green-Kubo, each the cross-correlation
-  of that contribution with the configurational stress;
-* ``total``: medium + hydrodynamic + the three (NaN where the hydrodynamic row is); its
-  error the hydrodynamic row's and the configurational stress's in quadrature.
-
-Short times: lags 0-4 are replaced by the hard-sphere form fitted to lags 5-20 (the
-``contact`` rule of :mod:`.green_kubo`, whose docstring gives the measurement behind it).
-
-Validation status. Free draining is validated (tests/test_green_kubo.py: the dilute
-O(phi^2) G(t) and moduli). With hydrodynamic interactions (``far-field``, ``stokesian``) the
-sampled Brownian stress carries per-step estimator noise, and lubrication makes G(t) finite
-at t = 0 (the default short-time rule is then ``lag1``, :func:`default_lag0`); what agrees
-with oscillatory runs and what does not is in docs/validation/green_kubo/. The result is
-NOT validated there, and the reduction says so in a warning, in ``green_kubo.json`` and on
-the terminal.
+Validated for free draining only (tests/test_green_kubo.py); with hydrodynamic
+interactions the reduction warns (``green_kubo.json``, terminal). The manual, and what
+agrees with oscillatory runs: docs/reduce.md, "Runs at rest: Green-Kubo";
+docs/validation/green_kubo/.
 
 Units: t and 1/omega in t_D, G, G', G'' in eta_m/t_D, eta', eta'' relative to eta_m.
 """

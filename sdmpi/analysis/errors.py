@@ -1,53 +1,26 @@
 """Sub-average (blocking) errors of per-period values and their ensemble combination.
 
-Within one realisation the per-period moduli are correlated over the structural
-relaxation time, so the naive error sqrt(var/n) is too small. ``blocking`` applies the
-Flyvbjerg-Petersen transformation (J. Chem. Phys. 91, 461 (1989)): average neighbouring
-values pairwise, again and again (block size 1, 2, 4, ...; an odd last value is
-dropped at that level), and at each level estimate var(mean) = c0/(n_b - 1), c0 the
-biased variance of the n_b block means. The level is chosen from the data with
-Jonsson's test (Phys. Rev. E 98, 043304 (2018)): the first level j at which
+``blocking``: the Flyvbjerg-Petersen transformation (J. Chem. Phys. 91, 461 (1989)) of one
+realisation's per-period values: average neighbouring values pairwise, again and again
+(an odd last value dropped at each level), with var(mean) = c0/(n_b - 1) at each level,
+c0 the biased variance of the n_b block means. The level is the first j at which
+Jonsson's test (Phys. Rev. E 98, 043304 (2018)) passes,
 M_j = sum_{k >= j} n_k rho_k^2 < chi2_{0.99}(number of levels >= j), rho_k the lag-1
-autocorrelation of the level-k block means, i.e. the first level whose blocks (and all
-coarser ones) look uncorrelated at the 1% level. Blocks that pass this test still
-correlate with their neighbours (rho ~ tau/B for block size B >> tau), which biases the
-plain estimate low (coverage 0.57 instead of 0.68 for AR(1) with tau = 4, n = 1024), so
-the chosen level's estimate is corrected for that lag-1 (MA(1)) correlation:
-var(mean) = c0/(n_b - 1) * max(1, 1 + 2 rho_j). Measured coverage of +-err is then
-within 1-3% of P(|t_(n_b - 1)| < 1) once a run spans >~ 100 correlation times (AR(1),
-tau = 1-10 periods); shorter runs still under-cover (n = 128, tau = 4: 0.59), which no
-single-run estimate can fix: use several realisations.
+autocorrelation of the level-k block means; its estimate is corrected for the remaining
+lag-1 correlation of the blocks, var(mean) = c0/(n_b - 1) * max(1, 1 + 2 rho_j).
 
-Across realisations (independent by construction: each task's random stream and start
-come from its own SeedSequence(job seed, spawn_key=(task id,))) ``combine`` forms the
-period-weighted mean  mu = sum_r n_r m_r / sum_r n_r  (the mean over all periods; the
-plain mean of realisation means when runs are complete) and two estimates of its
-standard error:
+``combine``: over R independent realisations, the period-weighted mean
+mu = sum_r n_r m_r / sum_r n_r and two standard errors,
 
     between:  err_b^2 = sum_r n_r (m_r - mu)^2 / ((R - 1) sum_r n_r),  dof_b = R - 1  (R >= 2)
     within:   err_w^2 = sum_r n_r^2 e_r^2 / (sum_r n_r)^2,   dof_w = sum_r (n_blocks_r - 1)
 
-err_b is the (Hartung-Knapp) spread of realisation means: for equal n_r it is exactly
-s/sqrt(R), unbiased for var(mu) whatever the within-realisation correlations and any
-extra spread between realisations (e.g. slowly relaxing structure); for unequal n_r
-(partial runs) it is unbiased without extra spread and a few % low with it (measured:
-err^2 6% low, coverage 0.663 instead of 0.674 for R = 30). But with R - 1 degrees of
-freedom it is itself very uncertain at small R: at R = 2 it comes out below a third of
-the true error 26% of the time (P(chi2_1 < 1/9)). err_w, the blocking errors e_r of the
-realisations propagated to the mean, has many more degrees of freedom but misses
-correlations longer than the blocks and any extra spread between realisations.
-
-The reported error is the larger of the two, ``err = max(err_b, err_w)`` (err_w alone
-for R = 1), so that no error is smaller than either estimate supports; ``dof`` is that
-of the larger one and ``source`` says which it was (:data:`SOURCES`). Measured on
-AR(1)-correlated per-period values (64 periods per run, correlation time 3 periods;
-tests/test_error_bars.py, docs/reduce.md), mu +- err covers the truth 0.67, 0.70, 0.69
-of the time at R = 2, 3, 7 (nominal 0.68), where the between estimate alone covers 0.50,
-0.59, 0.66 and is below a third of the true error 26%, 10%, 0.6% of the time (the
-combined error: never). Runs of only ~8 correlation times under-cover (0.63-0.65: the
-blocking within them sees too few blocks), as any estimate from so little data does.
-err_b >> err_w means correlations longer than a run or structure that differs between
-realisations.
+(err_b the Hartung-Knapp spread of the realisation means, e_r the realisations' blocking
+errors). The reported error is ``err = max(err_b, err_w)`` (err_w alone for R = 1), with
+the ``dof`` of the larger one and ``source`` saying which (:data:`SOURCES`); err_b >> err_w
+means correlations longer than a run or structure that differs between realisations.
+Why the larger of the two, and the coverage measured on synthetic ensembles:
+docs/reduce.md, "Error bars".
 """
 
 from typing import NamedTuple

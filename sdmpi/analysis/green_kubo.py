@@ -1,89 +1,43 @@
 """Relaxation modulus G(t) and complex modulus G*(w) by Green-Kubo from a run at rest.
 
-Linear response of a suspension at rest (Brady, J. Chem. Phys. 99, 567 (1993); Nägele &
-Bergenholtz, J. Chem. Phys. 108, 9893 (1998); Foss & Brady, J. Rheol. 44, 629 (2000)):
-the shear stress that follows a small strain history gamma(t) is
-
-    sigma_xy(t) = eta'_inf gamma_dot(t) + int_{-inf}^t G(t - s) gamma_dot(s) ds,
-    G(t) = (V/kT) <sigma_xy(t) sigma_xy(0)>,
-
-sigma the configurational particle stress at rest (Brownian + interparticle + collision),
-eta'_inf the instantaneous (medium and hydrodynamic) part, V the box volume. The response
-of one contribution A of the stress is the cross-correlation with the whole
-configurational stress C,
+Linear response at rest (Brady, J. Chem. Phys. 99, 567 (1993); Nägele & Bergenholtz,
+J. Chem. Phys. 108, 9893 (1998); Foss & Brady, J. Rheol. 44, 629 (2000)): for the
+configurational stress C (Brownian + interparticle + collision) and each contribution A,
 
     G_A(t) = (V/kT) <sigma_A(t) sigma_C(0)>,     sum_A G_A = G,
 
-so the rows per contribution add up to the total as in the oscillatory tables.
+averaged over the five deviatoric components that an isotropic fluid correlates equally
+and not with each other (:func:`deviatoric`: xy, xz, yz, u = (s_xx - s_yy)/2,
+v = (s_xx + s_yy - 2 s_zz)/(2 sqrt 3); Daivis & Evans, J. Chem. Phys. 100, 541 (1994)),
+with no mean subtracted (isotropy).
 
-Five components. In an isotropic fluid the fourth-rank correlation of the deviatoric stress
-s (symmetric traceless) is (kT/V) G(t) (d_ik d_jl + d_il d_jk - (2/3) d_ij d_kl), so
+Estimator: per realisation, over the time origins k = 0 .. n - M - 1 (every origin sees
+every lag m = 0 .. M),
 
-    <s_xy s_xy> = <s_xz s_xz> = <s_yz s_yz> = <u u> = <v v> = (kT/V) G,
-    u = (s_xx - s_yy)/2,  v = (s_xx + s_yy - 2 s_zz)/(2 sqrt 3),
+    G_A(m dt) = (V/kT) (1/5) sum_c  mean_k  a_c(k + m) b_c(k);
 
-and the five are uncorrelated with each other at every lag; their mean is Daivis & Evans'
-(J. Chem. Phys. 100, 541 (1994)) G = (V/(10 kT)) sum_ij <s_ij(t) s_ij(0)>. u and v are
-insensitive to the trace, so the collision stress (which has one) needs no correction.
-:func:`deviatoric` forms them; the five-fold average cuts the variance up to five-fold.
-The stress at rest has zero mean in every one of them (isotropy), so no mean is
-subtracted (that would bias G by O(1/run length)).
+the origins cut into :data:`BASE_BLOCKS` blocks, each with its own G(t) and G*, whose
+blocking (:func:`.errors.blocking`) and combination over realisations
+(:func:`.errors.combine`) give the errors.
 
-Estimator. Per realisation, over the time origins k = 0 .. n - M - 1 (every origin sees
-every lag m = 0 .. M, so all lags are averaged over the same origins):
-
-    G_A(m dt) = (V/kT) (1/5) sum_c  mean_k  a_c(k + m) b_c(k),
-
-a the contribution's and b the configurational stress, c the five components above. The
-origins are cut into :data:`BASE_BLOCKS` consecutive blocks, each giving its own G(t) and
-(by the transform below, which is linear) its own G*; the Flyvbjerg-Petersen blocking of
-those block values (:func:`.errors.blocking`) gives each realisation's error and
-:func:`.errors.combine` the ensemble's: the larger of the spread between realisations and
-the propagated blocking errors, realisations weighted by their number of origins.
-
-Transform. The one-sided Fourier transform G*(w) = G' + i G'' = i w int_0^inf G(t)
-e^(-i w t) dt, truncated at the window t_M = M dt and done by the trapezoid rule from t = 0:
+Transform: G*(w) = G' + i G'' = i w int_0^t_M G(t) e^(-i w t) dt by the trapezoid rule
+from t = 0,
 
     G'(w)  = w dt sum_m w_m G(m dt) sin(w m dt),
-    G''(w) = w dt sum_m w_m G(m dt) cos(w m dt),      w_0 = w_M = 1/2, else 1.
+    G''(w) = w dt sum_m w_m G(m dt) cos(w m dt),      w_0 = w_M = 1/2, else 1,
 
-For a stress sampled as its mean over each step (the collision impulses of a step divided
-by dt) the discrete correlation is G smoothed by the triangle of half-width dt, and the
-two-sided sum dt sum_m C_m e^(-i w m dt) equals int G e^(-i w t) dt times
-sinc^2(w dt/2): the trapezoid from lag 0 is then exact for the integral of an integrable
-singularity at t = 0 (hard spheres: G ~ t^-1/2), to the factor 1 - (w dt)^2/12. The grid
-(:func:`omega_grid`) stops at w dt = :data:`MAX_OMEGA_DT` (0.2: that factor, and the
-trapezoid's own error on a smooth G, below 0.4%) and starts at 1/t_M; the window (a
-fraction :data:`WINDOW_FRACTION` of the longest analysed realisation unless given) must
-hold the whole decay of G: :func:`tail_check` says when G at the end of the window is not
-zero within its errors.
+on the grid of :func:`omega_grid` (1/t_M to w dt = :data:`MAX_OMEGA_DT`), the window
+t_M = M dt a fraction :data:`WINDOW_FRACTION` of the longest realisation unless given;
+:func:`tail_check` says when G has not decayed within it.
 
-Short times (``lag0``). The first lags of the sampled correlations are not those of the
-physical stress, for two reasons. (1) The collision stress is the impulse of the overlap
-correction at the end of each step divided by dt; the overlap it undoes was made by the
-step's own random displacement. Measured at rest (free draining, phi = 0.05, 4 x 80 t_D;
-docs/validation/green_kubo/) against the exact dilute G(t) averaged over a step, the
-sampled lags 0-4 are 2.58, 0.62, 0.95, 1.02 and 1.09 times the exact values at dt = 2e-3
-(2.52, 0.62, 0.97, 1.02, 1.10 at dt = 1e-3: the pattern is per step, not per unit time),
-and lags 5-32 lie on a plateau of 1.13-1.20 (the O(phi^3) excess). (2) The sampled
-Brownian stress of a run with hydrodynamic interactions is an unbiased estimate of
--kT div(R_SU R_FU^-1) plus zero-mean noise drawn with the step's own random displacement
-(Banchio & Brady, J. Chem. Phys. 118, 10323 (2003)); the noise adds its variance to lag 0.
-So ``lag0 = "contact"`` (the reducer's default without lubrication,
-`sdmpi.analysis.at_rest.default_lag0`) replaces lags 0-4 (:data:`CONTACT_REPLACED`) by the step means of c t^-1/2 + b fitted (least squares) to lags 5-20
-(:data:`CONTACT_FIT_LAGS`): the short-time form of hard spheres, whose contact boundary
-layer gives G ~ t^-1/2 (Brady 1993; the dilute limit,
-:func:`.analytic.dilute_hard_sphere_relaxation`), and a constant for stresses that are smooth
-over a few steps. ``lag0 = "keep"`` uses the sampled lags as they are; ``"lag1"`` replaces
-lag 0 alone by lag 1 (it removes white estimator noise, but not the collision stream's
-lag-1 deficit); ``"linear"`` replaces lags 0-4 by the straight line a + b t fitted (least
-squares) to lags 5-20: the short-time form of a G(t) that is finite and smooth at t = 0,
-as for hard spheres with full lubrication, whose high-frequency modulus G'_inf = G(0+) is
-finite (Lionberger & Russel, J. Rheol. 38, 1885 (1994); without lubrication it diverges,
-Brady 1993), with the Brownian estimator noise of lag 0 removed. Fitted to a smooth G,
-the contact form's t^-1/2 term extrapolates a spurious rise into lags 0-4 (an exponential
-G with lags 5-20 spanning 0.1-0.4 of its decay time: G(0) 3.3 times too large). Which
-rule a reduction used is in its metadata.
+Short times (``lag0``): ``"contact"`` replaces lags 0-4 (:data:`CONTACT_REPLACED`) by the
+step means of c t^-1/2 + b fitted to lags 5-20 (:data:`CONTACT_FIT_LAGS`; the contact
+boundary layer of hard spheres, :func:`.analytic.dilute_hard_sphere_relaxation`);
+``"linear"`` by a + b t fitted to the same lags (a G finite at t = 0, as with
+lubrication: Lionberger & Russel, J. Rheol. 38, 1885 (1994)); ``"lag1"`` replaces lag 0
+by lag 1; ``"keep"`` keeps the sampled lags. Why the sampled short lags differ from the
+physical ones, the accuracy of the transform and the measurements: docs/reduce.md, "Runs
+at rest: Green-Kubo".
 
 Units: reduced, a = 1, eta_m = 1, t in t_D, kT = 6 pi eta_m a^3/t_D, stresses and moduli
 in eta_m/t_D, omega in 1/t_D.

@@ -6,34 +6,22 @@ the hydrodynamic stresslets, mode by mode (eqs. 33-35, 42):
 
     lambda_k dS_k/dt + S_k = (eta_k / eta_m) S_0(t),    S_H = sum_k S_k.
 
-The filter is linear and acts on every particle alike, so it commutes with the sum over
-particles: applied to the stored bulk hydrodynamic stress (1/V) sum_i S_0,i of a run in
-the viscous medium (``samples/stress_hydrodynamic``), it gives the bulk stress that a run
-in the Maxwell medium stores (``stress_hydrodynamic_maxwell``), equal to rounding. The
-Brownian and interparticle stresses are the viscous medium's in both (Schaink et al.'s
-protocol). So one Newtonian run holds the results of every Maxwell medium whose shortest
-relaxation time exceeds its time step, and a Maxwell run's viscous stress gives its
-Newtonian view.
-
-The step update is :class:`sdmpi.dynamics.media.MaxwellFilter`'s (exact for a source
-linear over each step, S_k = 0 at t = 0), applied here to a whole committed series at once
-as the first-order recursive filter it is:
+The filter is linear and the same for every particle, so applied to the stored bulk
+hydrodynamic stress of a run in the viscous medium (``samples/stress_hydrodynamic``) it
+gives the bulk stress a run in the Maxwell medium stores (``stress_hydrodynamic_maxwell``)
+to rounding. It is :class:`sdmpi.dynamics.media.MaxwellFilter`'s step update (exact for a
+source linear over each step, S_k = 0 at t = 0) applied to a whole committed series as
+the first-order recursive filter it is:
 
     S_k(t_j) = decay S_k(t_{j-1}) + w_old S_0(t_{j-1}) + w_new S_0(t_j),   S_k(t_0) = 0,
 
 with (decay, w_old, w_new) = ``MaxwellFilter.coefficients()``.
 
-Medium specifications (``--medium SPEC``; :func:`parse_medium`):
-
-* ``newtonian``;
-* ``maxwell:eta=E,lambda=L`` with modes separated by ``;``, e.g.
-  ``maxwell:eta=0.7,lambda=0.5;eta=0.3,lambda=0.05`` (eta relative to eta_m, the modes
-  summing to 1; lambda in the job's time unit, t_D);
-* the path of a TOML file holding a ``[medium]`` table as in a job file
-  (``kind = "maxwell"``, ``modes = [{eta = 1.0, lambda = 0.5}]``).
-
-The medium is checked as part of the whole job (sdmpi.config): modes summing to 1, every
-lambda longer than the time step, no interparticle forces in a Maxwell medium.
+Medium specifications (``--medium SPEC``; :func:`parse_medium`): ``newtonian``;
+``maxwell:eta=E,lambda=L`` with modes separated by ``;`` (eta relative to eta_m, the
+modes summing to 1; lambda in t_D); or the path of a TOML file holding a ``[medium]``
+table as in a job file. The medium is checked as part of the whole job (sdmpi.config).
+The manual: docs/reduce.md, "Another medium after the fact".
 """
 
 from __future__ import annotations

@@ -13,26 +13,14 @@ and each whole period [t_p, t_p + 2 pi/w) is projected on sin and cos (eq. 18):
 Units: reduced (radius 1, eta_m = 1, time in t_D), so stresses and moduli are in
 eta_m/t_D and w in 1/t_D; eta' = G''/w, eta'' = G'/w are relative to eta_m (eq. 19).
 
-Quadrature: the stress is sampled uniformly, n = ``samples_per_period`` samples per
-period, at t_k = t0 + k dt with dt = 2 pi/(w n). Period p is the n samples
-k = p n ... p n + n - 1: it holds ONE end of the period (its start, t0 + p T) and not
-the other, which is the first sample of period p + 1, so no sample is counted twice.
-The integral is the rectangle rule dt sum_k f(t_k), which for a periodic integrand
-equals the trapezoid rule with both ends (the two half-weighted end samples coincide).
-It is exact for every sampled harmonic that is resolved: sum_k exp(i m w t_k) vanishes
-unless n divides m, so with n >= 3 the projection returns G', G'' exactly for any
-signal that is a constant plus harmonics of order <= n - 2 (no leakage from the mean
-or from higher harmonics). If a store records the stress at the END of each time step
-(t_k = (k + 1) dt), pass t0 = dt: the result is then exact over (t_p, t_p + T].
-
-Sample times: a stream whose sample k represents t_k + c dt (the registry's
-``sample_offset`` c, `sdmpi.config.stresses`) is projected with t0 = c dt; t0 may differ
-from one signal to the next (an array over the leading axes). Projected at t_k instead,
-a first harmonic gamma0 (G' sin + G'' cos) gives, with phi = w c dt = 2 pi c/n,
-
-    G' cos phi - G'' sin phi,   G'' cos phi + G' sin phi,
-
-so G' is off by -phi G'' to first order (c = -1/2: +(pi/n) G'').
+Quadrature: n = ``samples_per_period`` uniform samples per period at t_k = t0 + k dt,
+dt = 2 pi/(w n); period p is the n samples k = p n ... p n + n - 1 (its start, not its
+end: no sample counted twice), integrated by the rectangle rule dt sum_k f(t_k), which
+for a periodic integrand is the trapezoid rule and returns G', G'' exactly for a constant
+plus harmonics of order <= n - 2 (n >= 3). A stream whose sample k represents t_k + c dt
+(``sample_offset`` c, `sdmpi.config.stresses`) is projected with t0 = c dt; t0 may
+differ from one signal to the next (an array over the leading axes). Projected half a
+step off, G' would be off by (pi/n) G'' (docs/physics.md, "Sample times").
 """
 
 import numpy as np

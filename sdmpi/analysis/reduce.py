@@ -1,85 +1,36 @@
 """Gather and reduce: run files -> ensemble-averaged moduli with one standard error.
 
-Pipeline (Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36):
+Pipeline (Schaink et al., J. Rheol. 44 (2000), eqs. 17-19, 36; the manual:
+docs/reduce.md):
 
-1. Open each run file read-only and validate it (:func:`sdmpi.ensemble.store.read_summary`:
-   format, version, stored job, progress, checkpoints). Several files are reduced
-   together only if they hold the same system: their jobs may differ in the seed, the
-   number of realisations, the job name and keys that never change results (run layout,
-   output, linear solver); any other difference is refused, key by key. Two files with
-   the same seed are refused too: task streams are keyed by (seed, task id), so they
-   would hold copies of the same realisations and shrink the error bars falsely.
-2. Per task, read only the committed samples (``/progress``, the "valid up to") of the
-   xy stress of each stored contribution, stored at t_k = k dt: hydrodynamic
-   (``stress_hydrodynamic_maxwell`` for Maxwell media: the hydrodynamic
-   stresslets filtered by the medium's modes, eqs. 33-35, 42; the unfiltered
-   ``stress_hydrodynamic`` is the viscous-medium signal and is not used), Brownian
-   (eq. 16), interparticle and collision; and the time each stream's sample k represents,
-   t_k + c dt, c the dataset's ``sample_offset`` attribute (files without it: the
-   registry's, `sdmpi.config.stresses`; 0 except the collision stream's +1/2, -1/2 in
-   files written without the attribute).
-3. Oscillatory jobs: project every whole period after the ``discard_periods`` start-up
-   periods on sin(w t) and cos(w t) at the stream's own sample times t_k + c dt
-   (:func:`.projection.project_periods` with t0 = c dt, eq. 18):
+1. Read and validate each run file (:func:`sdmpi.ensemble.store.read_summary`); several
+   files are reduced together only if they hold the same system with different seeds
+   (any other difference is refused, key by key).
+2. Per task, read the committed samples of the xy stress of each stored contribution
+   (hydrodynamic: ``stress_hydrodynamic_maxwell`` in a Maxwell medium, eqs. 33-35, 42;
+   Brownian, eq. 16; interparticle; collision) and the time each stream's sample k
+   represents, t_k + c dt (c: the dataset's ``sample_offset``, else the registry's,
+   `sdmpi.config.stresses`).
+3. Oscillatory jobs: project every whole period after the ``discard_periods`` on sin and
+   cos at those times (:func:`.projection.project_periods`, eq. 18):
 
        G'  = w/(pi gamma0) int_period sigma_xy sin(w t) dt,
-       G'' = w/(pi gamma0) int_period sigma_xy cos(w t) dt,
+       G'' = w/(pi gamma0) int_period sigma_xy cos(w t) dt;
 
-   in eta_m/t_D; partial periods are never used. The medium's own stress is analytic
-   and added here (:func:`medium_moduli`, eq. 36; exact, error 0). The total is formed
-   per period as medium + hydrodynamic + Brownian + interparticle + collision and reduced like
-   the parts, so its mean is the sum of the parts' means (to round-off) and its error
-   includes the correlations between the parts.
-4. Per realisation: mean and blocking error of the per-period values; over the
-   ensemble: period-weighted mean and one standard error, the larger of the spread
-   between realisations and the propagated blocking errors within them (:mod:`.errors`,
-   ``blocking`` then ``combine``; errors.csv says which). Ensembles of fewer than
-   :data:`SMALL_ENSEMBLE` realisations are flagged in the notes. eta' = G''/w and
-   eta'' = G'/w, relative to eta_m (eq. 19; :func:`.projection.viscosities`).
+   the medium's moduli are analytic (:func:`medium_moduli`, eq. 36); the total is formed
+   per period and reduced like the parts.
+4. Per realisation the blocking error of the per-period values, over the ensemble the
+   period-weighted mean and the larger of the spread between realisations and the
+   propagated errors (:mod:`.errors`); eta' = G''/w, eta'' = G'/w (eq. 19).
 
-Another medium after the fact (``reduce_runs(paths, medium=...)``, ``sdmpi reduce
---medium``; :mod:`.medium_view`): the hydrodynamic stress is then the stored viscous one,
-``stress_hydrodynamic``, filtered by that medium's Maxwell modes (Schaink et al. eqs. 33-35, 42;
-unfiltered for a Newtonian medium), and the medium row is that medium's (eq. 36); the
-trajectories, and so the Brownian and interparticle stresses, are the same in both media.
-
-Steady-shear jobs (Dratler & Schowalter 1996, sec. 2) are reduced to ``viscosity.csv`` instead,
-one row per (phi, rate, component), from every sample after ``discard_steps`` of the stored
-particle-stress 6-vectors Sigma (xx yy zz xy xz yz) of each contribution. The bulk
-stress is sigma = -p I + 2 eta_m E_inf + Sigma (p the fluid pressure, tension positive),
-and per sample
-
-    eta = Sigma_xy / gamma_dot                      (relative viscosity, eta_m = 1)
-    N1  = (Sigma_xx - Sigma_yy) / gamma_dot         (first normal-stress difference)
-    N2  = (Sigma_yy - Sigma_zz) / gamma_dot         (second normal-stress difference)
-    Pi  = -(Sigma_xx + Sigma_yy + Sigma_zz) / (3 gamma_dot)   (particle pressure,
-                                                     positive = pushes outwards)
-
-all made dimensionless with eta_m gamma_dot (multiply by the rate for eta_m/t_D in a
-Brownian job). Components: ``medium`` (eta = its zero-shear viscosity, the sum of the
-Maxwell modes' eta_k or 1; N1 = N2 = Pi = 0: the medium's linear stress, Schaink et al. 2000, eq. 2,
-has no normal stresses; exact, errors 0), ``hydrodynamic``, ``brownian``,
-``interparticle``, ``collision`` and ``total`` (medium + the parts, sample by sample). NB:
-SD's FTS stresslets are traceless, so the hydrodynamic and Brownian rows have Pi = 0 by
-construction: Pi here is the interparticle and collision (virial) pressure only; the stresslet trace
-(Jeffrey, Morris & Brady 1993) and the kinetic n kT are not computed. Errors: the same
-blocking within a realisation and spread between realisations (:mod:`.errors`, the
-larger of the two) give one standard error ``*_err`` with ``dof`` degrees of freedom
-(those of the larger estimate); ``*_ci95`` is the half-width of the 95% confidence interval, the wider of
-t_{0.975, R-1} x err_between and t_{0.975, dof_within} x err_within (Student t; the sub-average method of Allen & Tildesley 1987 that
-Dratler & Schowalter 1996 uses). For figures, running averages (1/t) int_0^t of every quantity
-from t = 0 (start-up included) are kept per realisation (:attr:`Reduction.running`).
-Quiescent jobs (``shear.protocol = "none"``) impose no deformation and are refused here;
-:mod:`.at_rest` reduces them by Green-Kubo.
-
-Monolayers (``system.geometry = "monolayer"``, sdmpi.dynamics.monolayer) store stresses per
-layer volume 2 a L^2, so their eta is Dratler & Schowalter's (1996) eq. 6 and the ``phi``
-column holds the areal fraction; realisations stopped on an overlap (``integration.overlap_stop``)
-contribute their samples before the stop, with a note.
-Partial runs are reduced from what is committed; every incomplete task is named in
-:attr:`Reduction.notes`, and a task with no whole period (no sample) after the discarded
-start-up contributes nothing. Files that are not intact run files raise
-:class:`ReduceError` (the CLI exits with status 2).
+Another medium after the fact (``medium=``, :mod:`.medium_view`) filters the stored
+viscous ``stress_hydrodynamic`` by that medium's modes. Steady-shear jobs give
+``viscosity.csv`` (eta, N1, N2, Pi per component, with ``*_err`` and ``*_ci95``; Dratler &
+Schowalter 1996; definitions in docs/physics.md, "Steady shear"), with running averages
+per realisation (:attr:`Reduction.running`); monolayers per layer volume 2 a L^2 (their
+eq. 6). Runs at rest are refused here (:mod:`.at_rest` reduces them by Green-Kubo).
+Partial runs are reduced from what is committed, each incomplete task named in
+:attr:`Reduction.notes`; files that are not intact run files raise :class:`ReduceError`.
 
 Units: radius a = 1, eta_m = 1, time t_D (1/gamma_dot for non-Brownian steady shear);
 omega in 1/t_D, moduli in eta_m/t_D, viscosities relative to eta_m.
@@ -109,7 +60,8 @@ TABLE_COMPONENTS = ("medium", *(c.component for c in CONTRIBUTIONS), "total")
 MODULI_COLUMNS = ("phi", "omega", "component", "n_realisations", "G_prime", "G_prime_err",
                   "G_dprime", "G_dprime_err", "eta_prime", "eta_prime_err", "eta_dprime",
                   "eta_dprime_err")
-#: quantities of a steady-shear reduction (module docstring), in units of eta_m gamma_dot
+#: quantities of a steady-shear reduction (docs/physics.md, "Steady shear"), in units of
+#: eta_m gamma_dot
 STEADY_QUANTITIES = ("eta", "N1", "N2", "Pi")
 #: viscosity.csv columns (steady shear): per quantity mean, one standard error, and the
 #: half-width of the 95% confidence interval; dof of the intervals last
@@ -425,7 +377,7 @@ def _read_xy(f, task, committed, names, columns=XY):
 def task_series(job: Job, task, stress, offsets=0.0):
     """Per-value series of one task, (C, Q, n): per whole period (G', G'') after the
     start-up for oscillatory jobs, per sample (eta, N1, N2, Pi) after discard_steps for
-    steady ones (module docstring). ``stress``: the contributions' stress of the committed
+    steady ones (docs/physics.md, "Steady shear"). ``stress``: the contributions' stress of the committed
     samples (`read_stress`), (C, committed) xy for oscillatory jobs and (C, committed, 6)
     6-vectors for steady ones; ``offsets``: (C,) or one number, sample k of contribution c
     represents t_k + offsets[c] dt (`sample_offsets`; the projection's sample times).
@@ -446,7 +398,8 @@ def task_series(job: Job, task, stress, offsets=0.0):
 
 def steady_quantities(stress, rate):
     """(..., n, 6) stress 6-vectors (xx yy zz xy xz yz) -> (..., 4, n): eta, N1, N2, Pi
-    per sample in units of eta_m gamma_dot (module docstring)."""
+    per sample in units of eta_m gamma_dot: eta = Sigma_xy, N1 = Sigma_xx - Sigma_yy,
+    N2 = Sigma_yy - Sigma_zz, Pi = -tr(Sigma)/3, each over gamma_dot."""
     s = np.moveaxis(np.asarray(stress, float), -1, -2) / rate       # (..., 6, n)
     xx, yy, zz, xy = s[..., 0, :], s[..., 1, :], s[..., 2, :], s[..., 3, :]
     return np.stack([xy, xx - yy, yy - zz, -(xx + yy + zz) / 3.0], axis=-2)

@@ -1,52 +1,18 @@
 """Writing a :class:`.reduce.Reduction`: the CSV table, the HDF5 archive, a text table.
 
-``moduli.csv`` (oscillatory jobs; DESIGN.md contract 4): one row per (phi, omega,
-component), columns :data:`.reduce.MODULI_COLUMNS`; ``*_err`` is one standard error;
-floats in shortest round-trip form, ``nan`` where nothing is known yet. Steady-shear
-jobs give ``viscosity.csv`` instead, one row per (phi, rate, component), columns
-:data:`.reduce.VISCOSITY_COLUMNS`: ``phi, rate, component, n_realisations``, then for
-each of ``eta`` (relative viscosity), ``N1``, ``N2`` (normal-stress differences) and
-``Pi`` (particle pressure), all in units of eta_m gamma_dot, the mean, ``*_err`` (one
-standard error) and ``*_ci95`` (half-width of the 95% confidence interval, Student t),
-and last ``dof`` (see :mod:`.reduce` for definitions and sign conventions). Jobs with
-a ``[physical]`` section get the SI columns :data:`.reduce.PHYSICAL_COLUMNS` appended
-(rates in 1/s, Pe, moduli and stresses in Pa, viscosities in Pa s).
+Files (their columns and layout: docs/reduce.md, "Outputs" and "The HDF5 archive"):
 
-``errors.csv``: where each error comes from, one row per (phi, omega or rate,
-component, quantity) with quantity G_prime or G_dprime (the errors of eta'' and eta'
-are those of G' and G'' divided by omega) or eta, N1, N2, Pi: ``n_realisations``,
-``err`` (the table's ``*_err``), ``err_within`` (propagated blocking error within the
-realisations), ``err_between`` (spread between them; nan below 2), their degrees of
-freedom ``dof``, ``dof_within``, ``dof_between``, ``source`` (:data:`.errors.SOURCES`:
-``between`` or ``within``, whichever is larger and so reported; ``exact`` for the
-medium; ``none`` without data) and ``small_ensemble`` (1 when fewer than
-:data:`.reduce.SMALL_ENSEMBLE` realisations: error bars resting on few runs).
-
-``trust.csv`` and ``trust.png``: the trust report of the dynamics per group (overlap
-corrections per unit time and per step at the start of a step and at the Brownian
-midpoint, the minimum-gap distribution, solver statistics, steps per unit time;
-:mod:`.trust`), with warnings above its thresholds in the notes.
-
-``units.json`` (format ``sdmpi-units`` version 1): the unit of every column of the CSV
-tables (``tables`` -> file -> column -> unit), the time, length and viscosity units,
-what the error columns mean, and the SI value of each reduced unit when the job has a
-``[physical]`` section (else null).
-
-``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1):
-
-| path | contents |
-|---|---|
-| `/` attrs | `format`, `format_version`, `kind`, `job_text` (canonical TOML; with ``--medium``, the job with that medium), `medium_applied` (1 when the medium was applied after the fact, :mod:`.medium_view`), `input_files` and `seeds` (JSON lists), `components`, `quantities`, `units` (JSON), `notes` (JSON list), `sdmpi_version`, `created` |
-| `/table/<column>` | the CSV table, one dataset per column (component as UTF-8 strings) |
-| `/groups/phi`, `/groups/omega` or `/groups/rate` | (G,) the task groups |
-| `/ensemble/<field>` | (G, C, Q): `mean`, `err`, `dof`, `n_realisations`, `n_periods`, `err_within`, `err_between`, `dof_within`, `dof_between`, `source` (int8 index into the attr `sources`) (:class:`.errors.EnsembleEstimate`) |
-| `/realisations/<field>` | (G, C, Q, R): per-realisation `mean`, `err`, `n` (periods or samples used), `block_size`, `n_blocks` (:class:`.errors.Blocking`) |
-| `/realisations/file_index`, `realisation` | (R,): input file (index into `input_files`) and realisation number in it |
-| `/realisations/task_id`, `committed`, `n_steps` | (G, R): task of each realisation, samples committed and planned |
-| `/running/time`, `/running/values` | steady shear only: (T,) times and (G, C, Q, R, T) running averages from t = 0 (`Reduction.running`); attr `discard_time` |
-
-Axes: G task groups (phi-major, then omega), C = components in the order of
-:data:`.reduce.TABLE_COMPONENTS`, Q = quantities (G', G''; or eta, N1, N2, Pi), R = realisations.
+* ``moduli.csv`` (oscillatory jobs; DESIGN.md contract 4), columns
+  :data:`.reduce.MODULI_COLUMNS`, or ``viscosity.csv`` (steady shear), columns
+  :data:`.reduce.VISCOSITY_COLUMNS`; jobs with a ``[physical]`` section get
+  :data:`.reduce.PHYSICAL_COLUMNS` appended (SI). Floats in shortest round-trip form,
+  ``nan`` where nothing is known yet; ``*_err`` is one standard error.
+* ``errors.csv``: where each error comes from (:class:`.errors.EnsembleEstimate`,
+  :data:`.errors.SOURCES`), one row per (phi, omega or rate, component, quantity).
+* ``trust.csv``, ``trust.png``: the trust report of the dynamics (:mod:`.trust`).
+* ``units.json`` (format ``sdmpi-units`` version 1): the unit of every column.
+* ``moduli.h5`` / ``viscosity.h5`` (format ``sdmpi-moduli`` version 1): the table, the
+  ensemble and per-realisation estimates, the job and the notes.
 """
 
 from __future__ import annotations
@@ -68,7 +34,7 @@ from .tables import csv_value
 from .trust import TRUST_UNITS
 from .reduce import TABLE_COMPONENTS, SMALL_ENSEMBLE, ReduceError, task_of
 
-#: errors.csv columns after phi and omega (or rate): see the module docstring
+#: errors.csv columns after phi and omega (or rate): docs/reduce.md, "Outputs"
 ERROR_COLUMNS = ("component", "quantity", "n_realisations", "err", "err_within",
                  "err_between", "dof", "dof_within", "dof_between", "source",
                  "small_ensemble")
@@ -101,7 +67,7 @@ def write_csv(red, path) -> Path:
 
 def write_h5(red, path) -> Path:
     """The table plus per-realisation values, dof, block sizes, the job text and the
-    input file names (module docstring)."""
+    input file names (layout: docs/reduce.md, "The HDF5 archive")."""
     import h5py
     path = Path(path)
     rows = red.rows()
@@ -189,7 +155,7 @@ def format_table(red) -> str:
 
 def error_rows(red) -> list[dict]:
     """errors.csv: one row per (group, component, quantity) with :data:`ERROR_COLUMNS`
-    (module docstring)."""
+    (docs/reduce.md, "Outputs")."""
     e, out = red.ensemble, []
     control = red.columns[1]
     for g in range(len(red.phi)):

@@ -8,32 +8,15 @@ change. A run file without a contribution's dataset is refused by the reducer, e
 where ``absent_is_zero`` is set (the collision stress): that contribution is then reduced
 as zero.
 
-Sample time. Sample k of every stream is stored at row k, t_k = k dt, but a stream may
-represent another instant: ``sample_offset`` (in units of dt) says which, t_k + offset dt,
-and the reducer projects each stream on sin and cos at its own times
-(`sdmpi.analysis.projection.project_periods`, ``t0 = offset dt``). The store writes it as
-the ``sample_offset`` attribute of each stress dataset; files without it take the values
-here (`unrecorded_offset`).
-
-* hydrodynamic, 0: S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf(t_k), that of the configuration x_k
-  at the rate gamma_dot(t_k);
-* Brownian and interparticle, 0: functions of the configuration x_k, which the step moves
-  with the flow of its own strain (the mean rate, `sdmpi.dynamics.shear`). The explicit
-  step's O(dt) error acts on such a stream of modulus G*(w) like a shift of
-  (dt/2) d ln G*/d ln w (a linear toy in tests/test_sampling_time.py): none where the
-  stream is elastic (w tau >> 1, tau its relaxation time), half a step where it is viscous
-  (w tau << 1), where it changes G' by dt/(2 tau) G', the step's own accuracy. A fixed
-  shift of half a step would add (pi/n) |G*| where the stream is elastic, which is where
-  few steps per period occur (w dt large, dt << tau); so these stay at t_k.
-* collision, +1/2: the impulses of the overlap correction at the end of step k,
-  f = s/(G dt), undo the overlaps that the motion over [t_k, t_{k+1}] made: they are that
-  step's mean collision force, at its midpoint t_k + dt/2. A dataset without the
-  attribute is read with -1/2 (``unrecorded_offset``): its sample k is then the correction
-  made at the start of step k, which undoes the motion of step k - 1.
-
-Projected at t_k instead of t_k + offset dt, a stream sigma = gamma0 (G' sin + G'' cos)
-gives G' - (2 pi offset/n) G'' and G'' + (2 pi offset/n) G' to first order (n samples
-per period): the collision stream's G' too large by (pi/n) G''.
+Sample time: sample k of every stream is stored at row k, t_k = k dt, and represents
+t_k + ``sample_offset`` dt, at which the reducer projects it
+(`sdmpi.analysis.projection.project_periods`, ``t0 = offset dt``); the store writes the
+offset as the ``sample_offset`` attribute of each stress dataset, and files without it
+take ``unrecorded_offset``. Offsets: hydrodynamic, Brownian and interparticle 0 (functions
+of the configuration x_k); collision +1/2 (the impulses at the end of step k are that
+step's mean collision force; -1/2 in files without the attribute, whose sample k is the
+correction made at the start of step k). Why, and the error of another choice:
+docs/physics.md, "Sample times".
 """
 
 from dataclasses import dataclass

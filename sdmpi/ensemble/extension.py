@@ -3,8 +3,9 @@
 Every dataset of a run file is preallocated at its final length (docs/store.md), so a run
 is extended by writing a new file: rank 0 alone creates the longer job's complete layout
 into ``RUN.h5.part`` (:func:`sdmpi.ensemble.store.create` on MPI_COMM_SELF), copies every
-committed value into it (the samples and trajectory frames below each task's
-``/progress``, both checkpoint slots and their steps, ``/progress``) and the recorded solver
+committed value into it (what each writer committed below each task's ``/progress``:
+`sdmpi.ensemble.writers.Writer.carry_over`, the samples and trajectory frames; both
+checkpoint slots and their steps; ``/progress``) and the recorded solver
 backend (``solver_backend``: the extended run solves on it), syncs it, and renames
 it to ``RUN.h5``. A kill before the rename leaves ``RUN.h5`` as it was (the leftover
 ``.part`` is overwritten by the next attempt); after it, the file is an ordinary
@@ -25,7 +26,7 @@ import h5py
 from mpi4py import MPI
 
 from ..config import enumerate_tasks
-from . import store, trajectory
+from . import store, writers
 from .faults import fault
 
 if TYPE_CHECKING:
@@ -86,7 +87,9 @@ def extend(path: Path, job: Job, job_text: str, versions: str) -> store.RunSumma
             rows.append(store.session_row("extend", _now(), versions))
             sessions[:min(len(rows), len(sessions))] = rows[-len(sessions):]
             for task, done in zip(summary.tasks, summary.progress):
-                _copy_task(old, new, task.task_id, int(done), job.output.trajectory_every)
+                for writer in writers.active(job):
+                    writer.carry_over(old, new, job, task.task_id, int(done))
+                _copy_checkpoints(old, new, task.task_id, int(done))
             new["progress"][:] = old["progress"][()]
             new.flush()
     with open(part, "rb+") as f:
@@ -118,14 +121,11 @@ def _layout(f, task_id: int) -> store.TaskLayout:
                             int(task.attrs["n_particles"]), radii)
 
 
-def _copy_task(old, new, task_id: int, done: int, every: int) -> None:
-    """Copy a task's committed samples, checkpoint slots and trajectory frames; the
-    slots' checksums are computed afresh for the longer layout (its checksum blocks may
+def _copy_checkpoints(old, new, task_id: int, done: int) -> None:
+    """Copy a task's checkpoint slots and their steps; the slots' checksums are computed
+    afresh from the samples already carried over (the longer layout's checksum blocks may
     differ)."""
     key = store.task_key(task_id)
-    for name, ds in old[f"tasks/{key}/samples"].items():
-        if done:
-            new[f"tasks/{key}/samples/{name}"][:done] = ds[:done]
     old_ckpt, new_ckpt = old[f"checkpoints/{key}"], new[f"checkpoints/{key}"]
     new_ckpt["slot_step"][:] = old_ckpt["slot_step"][()]
     for slot in (0, 1):
@@ -134,5 +134,3 @@ def _copy_task(old, new, task_id: int, done: int, every: int) -> None:
         step = int(old_ckpt["slot_step"][slot])
         if 0 < step <= done:
             store.checksum_slot(new, task_id, slot, step)
-    if every:
-        trajectory.copy_frames(old, new, task_id, trajectory.frames_done(done, every))

@@ -54,7 +54,7 @@ from ..dynamics.checks import load_job
 from ..dynamics.models import job_backend
 from ..dynamics.realisation import RealisationFailed
 from ..registry import SOLVER_BACKENDS
-from . import extension, start_file, store, trajectory
+from . import extension, start_file, store, writers
 from .farm import assign, remaining_costs, split_groups
 from .faults import fault
 from .progress import (PipeSafe, Progress, RunLocked, lock_holder, logs_dir, rank_logger,
@@ -619,32 +619,24 @@ class _Driver:
         if real.step != start:
             raise RuntimeError(f"task {tid}: realisation at step {real.step}, expected {start}")
         chunk = self.job.output.checkpoint_every
-        recorder = None
-        if leader:
-            datasets = run_file.samples(tid)
-            buffers = {k: np.empty((min(chunk, n), *shape), dtype)
-                       for k, (shape, dtype, _, _) in real.sample_fields().items()}
-            if self.job.output.trajectory_every:
-                recorder = trajectory.Recorder(self.job, task, real.box, run_file.write)
+        recorders = [writer.recorder(self.job, task, real, run_file, start)
+                     for writer in writers.active(self.job)] if leader else []
         self.log.info(f"task {tid}: {'resumed at' if start else 'started at'} step {start} of {n}")
         t_task = time.perf_counter()
         io_before = self.t_io
-        committed = step = start
+        step = start
         stopped = False
         while step < n and not stopped:
             end = min((step // chunk + 1) * chunk, n)
             t0 = time.perf_counter()
             while step < end:
-                if recorder:
+                for recorder in recorders:
                     recorder.before(step, real)
                 sample = real.advance(1)
                 fault("step")
                 run_file.serve()  # the writer rank of a serial h5py: others' commits
-                if leader:
-                    for k, buf in buffers.items():
-                        buf[step - committed] = sample[k][0]
-                if recorder:
-                    recorder.after(sample, real)
+                for recorder in recorders:
+                    recorder.after(step, sample, real)
                 step += 1
                 progress.add(steps=1)
                 if self.stop.requested(group):
@@ -654,11 +646,10 @@ class _Driver:
             self.t_step += t1 - t0
             if leader:
                 slot = 0 if slot < 0 else 1 - slot
-                if recorder:
-                    recorder.write()  # frames first: the commit below makes them valid
-                run_file.commit(tid, datasets, committed, step, buffers, real.get_state(), slot)
+                for recorder in recorders:  # their data first: the checkpoint makes them valid
+                    recorder.flush(step)
+                run_file.checkpoint(tid, step, real.get_state(), slot)
                 self.t_io += time.perf_counter() - t1
-            committed = step
         elapsed = time.perf_counter() - t_task
         io = self.t_io - io_before
         rate = (step - start) / elapsed if elapsed > 0 else 0.0

@@ -36,8 +36,8 @@ import h5py
 import numpy as np
 
 from ..config import JobError, Task, enumerate_tasks, job_hash, parse_job, resume_hash
-from ..config import stresses, units
-from . import trajectory
+from ..config import units
+from . import writers
 from .faults import fault
 from .h5 import new_dataset, open_read, parallel_hdf5
 from .progress import lock_holder
@@ -282,7 +282,8 @@ def create(path: str | os.PathLike, job: Job, job_text: str, layouts: dict[int, 
             "time (UTC), versions (sdmpi and its library stack); empty rows unused")
         for task in tasks:
             _create_task(f, job, task, layouts[task.task_id])
-        trajectory.create(f, job, tasks, layouts)
+        for writer in writers.active(job):
+            writer.create(f, job, tasks, layouts)
 
 
 def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
@@ -296,13 +297,6 @@ def _create_task(f, job, task: Task, layout: TaskLayout) -> None:
     radii = new_dataset(group, "radii", data=np.array(layout.radii or
                                                       (1.0,) * layout.n_particles, dtype="f8"))
     radii.attrs.update({"unit": "a", "description": "sphere radius of each particle"})
-    samples = group.create_group("samples")
-    for name, (shape, dtype, unit, description) in layout.sample_fields.items():
-        ds = new_dataset(samples, name, (task.n_steps, *shape), dtype)
-        ds.attrs.update({"unit": unit, "description": description})
-        offset = stresses.sample_offset(name)
-        if offset is not None:  # the time sample k represents, t_k + offset dt
-            ds.attrs["sample_offset"] = offset
     ckpt = f.create_group(f"checkpoints/{key}")
     new_dataset(ckpt, "slot_step", (2,), "i8", fillvalue=-1)
     block = checksum_block(job, task)
@@ -331,9 +325,9 @@ STATE_PER_PARTICLE = 16 * 8
 
 
 def run_file_bytes(job: Job) -> float:
-    """Estimated size of a job's run file: every sample dataset and trajectory frame
-    (exact: they are all allocated at creation), two state slots per task, the per-task
-    overhead and /sessions.
+    """Estimated size of a job's run file: every writer's datasets (the sample stream,
+    trajectory frames: `sdmpi.ensemble.writers.Writer.file_bytes`), two state slots per
+    task, the per-task overhead and /sessions.
 
     Args:
         job: the validated job.
@@ -341,12 +335,10 @@ def run_file_bytes(job: Job) -> float:
     Returns:
         The estimate, in bytes.
     """
-    from ..dynamics.realisation import sample_fields
-
-    row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
     per_task = TASK_OVERHEAD + 2 * STATE_PER_PARTICLE * job.system.n_particles
-    return float(sum(t.n_steps * row + per_task for t in enumerate_tasks(job))
-                 + trajectory.file_bytes(job) + MAX_SESSIONS * SESSION_BYTES)
+    return float(per_task * len(enumerate_tasks(job))
+                 + sum(writer.file_bytes(job) for writer in writers.active(job))
+                 + MAX_SESSIONS * SESSION_BYTES)
 
 
 # --------------------------------------------------------------------------- write
@@ -377,7 +369,7 @@ class RunFile:
         self._buffered = not parallel_hdf5()
         self._senders = senders  # ranks whose commits this one applies, until they close
         self._checksums = {}  # task id -> (sample checksum table, block) being extended
-        self._pending = []    # operations of the next commit (trajectory frames first)
+        self._pending = []    # operations of the next commit (what the writers wrote)
         self.t_checksum = 0.0  # s spent computing checksums
         self.t_served, self.n_served = 0.0, 0  # s spent applying other ranks' commits, and how many
         self._last_served = 0.0
@@ -499,8 +491,8 @@ class RunFile:
         return {name: group[name] for name in group}
 
     def write(self, path: str, rows: slice, values: np.ndarray) -> None:
-        """Write ``values`` into ``rows`` of the dataset at ``path`` with the next commit,
-        ahead of its samples (trajectory frames, sdmpi.ensemble.trajectory.Recorder).
+        """Write ``values`` into ``rows`` of the dataset at ``path`` with the next commit
+        (a writer's data, `sdmpi.ensemble.writers.TaskRecorder.flush`).
 
         Args:
             path: the dataset's path in the file.
@@ -509,12 +501,69 @@ class RunFile:
         """
         self._pending.append(("write", path, rows, values))
 
+    def write_samples(self, task_id: int, datasets: dict[str, h5py.Dataset], start: int,
+                      stop: int, buffers: dict[str, np.ndarray]) -> None:
+        """Write samples ``start:stop`` (rows ``0:stop-start`` of ``buffers``) with the next
+        commit, and extend the task's running sample checksums by them.
+
+        Args:
+            task_id: the task.
+            datasets: name -> sample dataset (`samples`).
+            start: first step of the samples.
+            stop: the step after them, the next checkpoint's step.
+            buffers: name -> sample values, at least stop - start rows.
+        """
+        n = stop - start
+        # the operations own copies of the buffers, which change after the call (a commit
+        # may be applied later, by another rank)
+        for i, (name, ds) in enumerate(datasets.items()):
+            self._pending.append(("write", ds.name, slice(start, stop), buffers[name][:n].copy()))
+            if i == 0:
+                self._pending.append(("fault", "samples"))
+        if task_id in self._checksums:
+            t0 = time.perf_counter()
+            table, block = self._checksums[task_id]
+            for j, name in enumerate(sorted(datasets)):
+                _extend_checksums(table[:, j], block, start, buffers[name][:n],
+                                  datasets[name].dtype)
+            self.t_checksum += time.perf_counter() - t0
+
+    def checkpoint(self, task_id: int, stop: int, state: dict[str, np.ndarray], slot: int) -> None:
+        """Commit what was written since the last commit (`write`, `write_samples`) and
+        the realisation's ``state`` at step ``stop`` into checkpoint ``slot`` (not the
+        current one), then move ``/progress`` to ``stop``. A kill anywhere in between
+        leaves the previous checkpoint current and intact.
+
+        Args:
+            task_id: the task.
+            stop: the checkpoint's step (the samples written cover the steps below it).
+            state: the realisation's state at step stop (get_state).
+            slot: the checkpoint slot written, 0 or 1.
+        """
+        ops = self._pending
+        self._pending = []
+        key = f"checkpoints/{task_key(task_id)}"
+        # the operations own copies of the running checksums, which change after the call
+        ops.append(("write", f"{key}/slot_step", slot, -1))  # invalid while rewritten
+        group = self.file[f"{key}/slot{slot}"]
+        for name, value in state.items():
+            ops.append(("write", f"{key}/slot{slot}/{name}", (), np.array(value)))
+        if task_id in self._checksums:
+            t0 = time.perf_counter()
+            table, _ = self._checksums[task_id]
+            crcs = [crc32(state[k], group[k].dtype) for k in sorted(state)] + [crc32(table)]
+            self.t_checksum += time.perf_counter() - t0
+            ops += [("write", f"{key}/sample_crc", slot, table.copy()),
+                    ("write", f"{key}/state_crc", slot, crcs)]
+        ops += [("fault", "state"), ("write", f"{key}/slot_step", slot, stop),
+                SYNC,                                   # all of the above on disk first
+                ("fault", "commit"), ("write", "progress", task_id, stop)]
+        self._submit(ops)
+
     def commit(self, task_id: int, datasets: dict[str, h5py.Dataset], start: int, stop: int,
                buffers: dict[str, np.ndarray], state: dict[str, np.ndarray], slot: int) -> None:
-        """Commit samples ``start:stop`` (rows ``0:stop-start`` of ``buffers``) and the
-        realisation's ``state`` at step ``stop`` into checkpoint ``slot`` (not the current
-        one), then move ``/progress`` to ``stop``. A kill anywhere in between leaves the
-        previous checkpoint current and intact.
+        """Commit samples ``start:stop`` and the state at step ``stop`` in one call:
+        `write_samples`, then `checkpoint` (same arguments).
 
         Args:
             task_id: the task.
@@ -525,33 +574,8 @@ class RunFile:
             state: the realisation's state at step stop (get_state).
             slot: the checkpoint slot written, 0 or 1.
         """
-        n, ops = stop - start, self._pending
-        self._pending = []
-        for i, (name, ds) in enumerate(datasets.items()):
-            ops.append(("write", ds.name, slice(start, stop), buffers[name][:n].copy()))
-            if i == 0:
-                ops.append(("fault", "samples"))
-        key = f"checkpoints/{task_key(task_id)}"
-        # the operations own copies of the buffers and the running checksums, which change
-        # after the call (a commit may be applied later, by another rank)
-        ops.append(("write", f"{key}/slot_step", slot, -1))  # invalid while rewritten
-        group = self.file[f"{key}/slot{slot}"]
-        for name, value in state.items():
-            ops.append(("write", f"{key}/slot{slot}/{name}", (), np.array(value)))
-        if task_id in self._checksums:
-            t0 = time.perf_counter()
-            table, block = self._checksums[task_id]
-            for j, name in enumerate(sorted(datasets)):
-                _extend_checksums(table[:, j], block, start, buffers[name][:n],
-                                  datasets[name].dtype)
-            crcs = [crc32(state[k], group[k].dtype) for k in sorted(state)] + [crc32(table)]
-            self.t_checksum += time.perf_counter() - t0
-            ops += [("write", f"{key}/sample_crc", slot, table.copy()),
-                    ("write", f"{key}/state_crc", slot, crcs)]
-        ops += [("fault", "state"), ("write", f"{key}/slot_step", slot, stop),
-                SYNC,                                   # all of the above on disk first
-                ("fault", "commit"), ("write", "progress", task_id, stop)]
-        self._submit(ops)
+        self.write_samples(task_id, datasets, start, stop, buffers)
+        self.checkpoint(task_id, stop, state, slot)
 
     def _submit(self, ops: list) -> None:
         self._apply([ops])

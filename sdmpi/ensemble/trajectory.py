@@ -10,7 +10,8 @@ stresslets of step k. Frames are created with the rest of the file (preallocated
 H5MD particles group per task) and written by the task's owner just before each
 checkpoint commit, so ``/progress`` = p also commits the frames below step p:
 ``frames_done(p, K) = ceil(p / K)``, and a killed and resumed run ends with the same
-frames as an uninterrupted one.
+frames as an uninterrupted one. :class:`TrajectoryWriter` is their
+`sdmpi.ensemble.writers.Writer`.
 """
 
 from __future__ import annotations
@@ -119,28 +120,47 @@ def file_bytes(job: Job) -> int:
                for t in enumerate_tasks(job))
 
 
-def create(f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Any]) -> None:
-    """Create the H5MD groups of every task in the open run file ``f`` (collective, with
-    the rest of the layout; nothing when the job has no trajectory). ``layouts``:
-    task id -> TaskLayout (box, n_particles, radii).
+class TrajectoryWriter:
+    """The writer of the H5MD trajectories (`sdmpi.ensemble.writers.Writer`): enabled by
+    output.trajectory_every >= 1."""
 
-    Args:
-        f: the run file, open for writing.
-        job: the validated job.
-        tasks: the job's tasks.
-        layouts: task id -> `store.TaskLayout`.
-    """
-    every = job.output.trajectory_every
-    if not every:
-        return
-    h5md = f.create_group("h5md")
-    h5md.attrs["version"] = np.array(H5MD_VERSION, dtype="i4")
-    h5md.create_group("author").attrs["name"] = _user()
-    creator = h5md.create_group("creator")
-    creator.attrs.update({"name": "sdmpi", "version": __version__})
-    for task in tasks:
-        layout = layouts[task.task_id]
-        _create_task(f, job, task, layout, n_frames(task.n_steps, every))
+    def enabled(self, job: Job) -> bool:
+        """Whether the job keeps a trajectory (output.trajectory_every >= 1)."""
+        return bool(job.output.trajectory_every)
+
+    def create(self, f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Any]) -> None:
+        """The /h5md group, then one H5MD particles group (and observables group) per task,
+        ``n_frames(n_steps, trajectory_every)`` frames preallocated."""
+        every = job.output.trajectory_every
+        h5md = f.create_group("h5md")
+        h5md.attrs["version"] = np.array(H5MD_VERSION, dtype="i4")
+        h5md.create_group("author").attrs["name"] = _user()
+        creator = h5md.create_group("creator")
+        creator.attrs.update({"name": "sdmpi", "version": __version__})
+        for task in tasks:
+            _create_task(f, job, task, layouts[task.task_id], n_frames(task.n_steps, every))
+
+    def recorder(self, job: Job, task: Task, realisation: Realisation, run_file: Any,
+                 start: int) -> "Recorder":
+        """Frames of the task, written through ``run_file.write``."""
+        return Recorder(job, task, realisation.box, run_file.write)
+
+    def carry_over(self, old: h5py.File, new: h5py.File, job: Job, task_id: int, done: int) -> None:
+        """Copy the frames below step ``done`` (``frames_done(done, trajectory_every)``)."""
+        frames = frames_done(done, job.output.trajectory_every)
+        if not frames:
+            return
+        name = group_name(task_id)
+        for top in ("particles", "observables"):
+            def copy(path, obj):
+                if isinstance(obj, h5py.Dataset) and path.split("/")[-1] in ("step", "time", "value"):
+                    new[f"{top}/{name}/{path}"][:frames] = obj[:frames]
+
+            old[f"{top}/{name}"].visititems(copy)
+
+    def file_bytes(self, job: Job) -> float:
+        """`file_bytes` of the job."""
+        return float(file_bytes(job))
 
 
 def _user() -> str:
@@ -192,7 +212,7 @@ class Recorder:
     """Collects one task's frames while it steps and writes them into the run file.
 
     Call :meth:`before` ahead of each step and :meth:`after` with the step's sample;
-    :meth:`write` puts the frames collected since the last call into the file (before
+    :meth:`flush` puts the frames collected since the last call into the file (before
     the checkpoint commit that makes them valid)."""
 
     def __init__(self, job, task, box, write):
@@ -220,10 +240,11 @@ class Recorder:
         if step % self.every == 0:
             self._frame = {"step": step, "position": realisation.get_state()["positions"]}
 
-    def after(self, sample: dict[str, np.ndarray], realisation: Realisation) -> None:
+    def after(self, step: int, sample: dict[str, np.ndarray], realisation: Realisation) -> None:
         """Complete the current frame with the step's sample (and velocity).
 
         Args:
+            step: the step just taken.
             sample: the step's sample, name -> array with a leading axis of length 1.
             realisation: the task's realisation, after the step (velocity: positions in a,
                 divided by dt in the time unit).
@@ -240,8 +261,9 @@ class Recorder:
             frame["stresslet"] = from_five(sample["stresslets"][0])
         self.pending.append(frame)
 
-    def write(self) -> None:
-        """Write the pending frames (consecutive frame indices) into the file."""
+    def flush(self, stop: int) -> None:
+        """Write the pending frames (consecutive frame indices, the frames below step
+        ``stop``) into the file."""
         if not self.pending:
             return
         first = self.pending[0]["step"] // self.every
@@ -256,24 +278,3 @@ class Recorder:
             self.sink(f"{self.group}/{element}/value", rows,
                       np.stack([fr[element] for fr in frames]))
         self.pending = []
-
-
-def copy_frames(old: h5py.File, new: h5py.File, task_id: int, frames: int) -> None:
-    """Copy the first ``frames`` frames of a task's trajectory from the run file ``old``
-    into ``new`` (a longer layout of the same job; see sdmpi.ensemble.extension).
-
-    Args:
-        old: the run file read from.
-        new: the longer run file, open for writing.
-        task_id: the task.
-        frames: frames to copy (`frames_done` of its progress).
-    """
-    if not frames:
-        return
-    name = group_name(task_id)
-    for top in ("particles", "observables"):
-        def copy(path, obj):
-            if isinstance(obj, h5py.Dataset) and path.split("/")[-1] in ("step", "time", "value"):
-                new[f"{top}/{name}/{path}"][:frames] = obj[:frames]
-
-        old[f"{top}/{name}"].visititems(copy)

@@ -11,30 +11,18 @@ and the auxiliary unknown lambda = M^-1 V, the problem (F, L, -S) = R V becomes
     P_u lambda + L_uu U' = F - L_ue (-e_inf)            (viscosity 1)
 
 solved for (lambda, U') by left-preconditioned GMRES in PETSc (a shell matrix: the far
-field as a product `matvec`, L_uu a PETSc BAIJ matrix). The stresslets follow without
-another solve: -S = P_e (lambda + L V).
+field as a product `matvec`, L_uu a PETSc BAIJ matrix); -S = P_e (lambda + L V).
 
-Preconditioner: the same block system with M replaced by a block-diagonal D (the
-isolated-sphere 11x11 self blocks, divided by `self_resistance_scale(phi)`: a sphere's
-far-field resistance among others is larger than alone; 20-30% fewer iterations at
-phi >= 0.45; and weighted per translation, rotation and stresslet,
-`self_resistance_weights`: ~10% fewer), solved by block elimination,
+Preconditioner: the same system with M replaced by the block-diagonal D (isolated-sphere
+self blocks divided by `self_resistance_scale(phi)`, weighted by
+`self_resistance_weights`), solved by block elimination,
 
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
-where G (sparse, 6N x 6N, the lubrication plus the far-field self resistance) is applied
-through an incomplete factor with FILL_LEVELS levels of fill on the pattern of G's full
-6x6 blocks (block ILU of a PETSc BAIJ matrix: for the symmetric G the same factor as the
-incomplete Cholesky LDL^T on that pattern, in PETSc's 6x6 block kernels), of the whole G,
-which every rank computes for itself (the iteration counts do not depend on the number
-of ranks). G keeps the lubrication coupling of the pairs closer
-than PRECONDITIONER_MAX_GAP only (the others' diagonal parts), which makes the factor
-several times cheaper for one more iteration per solve; it needs about as few iterations
-as the exact factor (measurements at INNER_OPTIONS). The Brownian midpoint's solver
-takes over the start's factor (same pattern: only the numeric factorisation is redone,
-`take_preconditioner`). Near-contact pairs, which make R ill-conditioned, are thus (nearly
-exactly) in the preconditioner: the iterations mostly see the far field's many-body part
-M - D.
+G applied through a block incomplete factor with FILL_LEVELS levels of fill, keeping the
+lubrication coupling of pairs closer than PRECONDITIONER_MAX_GAP, computed by every rank
+for itself (iteration counts independent of the rank count); the Brownian midpoint's
+solver takes over the start's factor (`take_preconditioner`).
 
 Brownian forces with covariance R_FU = P_u M^-1 P_u^T + L_uu, without a dense root:
 
@@ -42,15 +30,12 @@ Brownian forces with covariance R_FU = P_u M^-1 P_u^T + L_uu, without a dense ro
     C_p C_p^T = (R_2B - R_2B,inf)_FU,p,
 
 the first term by the Lanczos method for matrix functions (Saad 1992; Ando, Chow, Saad &
-Skolnick, J. Chem. Phys. 137, 064106 (2012)) on M preconditioned by a factor P with
-P^T C P = I, C = D + M_long the self mobilities plus the far field's longest waves
-(`LongWaveFactor`; any invertible P gives the covariance P (P^T M P)^-1 P^T = M^-1, as
-in the preconditioned samplers of Chow & Saad, SIAM J. Sci. Comput. 36, A588 (2014); C
-takes out the largest eigenvalues of M, the collective flows of the box: ~40% fewer
-Lanczos iterations), the
-near field exactly pair by pair (each pair's 12x12 rigid-body correction is positive
-definite; Q_p places it on the pair's particles). The noise is z_1 (11N) followed by z_p
-(12 per pair): `noise_shape`.
+Skolnick, J. Chem. Phys. 137, 064106 (2012)) preconditioned by P with P^T C P = I,
+C = D + M_long the self mobilities plus the far field's longest waves (`LongWaveFactor`;
+any invertible P gives the covariance P (P^T M P)^-1 P^T = M^-1: Chow & Saad, SIAM J.
+Sci. Comput. 36, A588 (2014)), the near field exactly pair by pair (Q_p places each
+pair's 12x12 factor on its particles). The noise is z_1 (11N) followed by z_p (12 per
+pair): `noise_shape`.
 
 Parallel layout over the communicator: particles split in contiguous ranges; every PETSc
 vector holds this rank's particles, (lambda, U') laid out [11 per particle, then 6 per
@@ -62,6 +47,9 @@ Far field: an object with matvec((11N,)) -> M (11N,) from `far_field_operator`:
 "spectral" (`spectral.SpectralFarField`, particle-mesh Ewald, O(N log N); the default in
 a periodic box from DENSE_FAR_FIELD_MAX_N particles on) or "dense" (the Ewald matrix of
 `farfield`: small N, unbounded fluid).
+
+The choices of D, G and P and their measured effect on the iteration counts:
+docs/numerics.md, "Krylov backend".
 """
 
 from __future__ import annotations

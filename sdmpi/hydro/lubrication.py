@@ -26,17 +26,14 @@ on the uniform grid u_k = k h, h = 1/64, of u = log(xi), xi = s - 2, as
 xi/(1 + xi) D (the factor removes the 1/xi lubrication singularity; the log terms become
 smooth in u). Lookup: 8-point Lagrange interpolation in u. The table covers
 xi in [5e-5, 12] when built (gap cut-off up to 10 mean radii) and is extended on the same
-grid when a pair needs more (old rows unchanged, results deterministic). Interpolation
-error (measured, tests/test_lubrication_fast.py): < ~1e-9 of the largest entry of the
-pair's 22x22 correction for xi in [1e-4, 10] and lam in [1/8, 8]; at xi ~ 10 this is the
-round-off floor of the exact path itself (D ~ 1e-5 of R_2B there).
-The exact path is kept (`lubrication_matrix_exact`, `pair_corrections_exact`) and is
-used for pairs whose lam has no table: a table (~1000 exact evaluations, ~15 ms) is built
-for a lam only when a call has >= _MIN_PAIRS_FOR_TABLE pairs with it, and at most
-_MAX_TABLES tables are kept (continuous polydispersity then stays on the exact path);
-also for gaps outside [_XI_TABLE_MIN, _XI_TABLE_MAX]. The choice depends only on the
-pair set and on tables already built (never evicted), so displaced configurations with
-the same plan (random finite differences) use the same path.
+grid when a pair needs more (old rows unchanged, results deterministic); interpolation
+error: docs/numerics.md, "Lubrication tables". The exact path
+(`lubrication_matrix_exact`, `pair_corrections_exact`) serves pairs whose lam has no
+table: a table is built for a lam only when a call has >= _MIN_PAIRS_FOR_TABLE pairs with
+it, and at most _MAX_TABLES tables are kept (continuous polydispersity then stays on the
+exact path); also for gaps outside [_XI_TABLE_MIN, _XI_TABLE_MAX]. The choice depends only
+on the pair set and on tables already built (never evicted), so displaced configurations
+with the same plan (random finite differences) use the same path.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ What is distributed, and what is not:
   copied back into a MATMPIDENSE (lower triangle, the strict upper part zeroed) and
   C z = L z is a distributed product, gathered to every rank. The Cholesky factor is
   unique, so F_B equals the `dense` backend's up to rounding (not necessarily bit for
-  bit: ScaLAPACK and LAPACK may block the factorisation differently; measured ~1e-16).
+  bit: ScaLAPACK and LAPACK may block the factorisation differently).
   PETSc refuses to convert a factored matrix, so the copy marks the factor unfactored,
   converts it and marks it factored again (MatSetFactorType through ctypes, as petsc4py
   3.18 does not wrap it; if that fails, R_FU is factorised a second time for the copy).
@@ -26,11 +26,9 @@ Inputs and outputs are replicated numpy arrays; every method is collective over 
 communicator (all its ranks must build the same solver and call the same methods in the
 same order, with the same arguments), and every rank gets the same result.
 
-PETSc here: Debian's PETSc 3.18 (python3-petsc4py) is built with ScaLAPACK, MUMPS and
-SuperLU_dist but not Elemental; ScaLAPACK is the parallel dense Cholesky (MUMPS and
-SuperLU_dist are sparse direct solvers and would treat the dense matrix as sparse, and
-neither exposes its factor for the Brownian product). Without petsc4py or without
-ScaLAPACK, building the backend raises `PetscUnavailable` saying what is missing.
+PETSc needs ScaLAPACK (the parallel dense Cholesky; docs/numerics.md, "PETSc dense"):
+without petsc4py or without ScaLAPACK, building the backend raises `PetscUnavailable`
+saying what is missing.
 
 petsc4py is found through PETSC_DIR (Debian's .pth file reads it when Python starts); if
 PETSC_DIR is unset, `load_petsc` sets it to the Debian default and adds its site

@@ -37,10 +37,10 @@ Speed: the window stencils of a configuration (wrapped grid indices, in-plane Ga
 z ranges and moments: `Stencils`) are computed once, not per product; spreading and
 interpolation run along grid rows in z, over a grid padded along z by the window width,
 so that no index wraps inside the loops (`_fold`, `_pad`); the grids and the FFT outputs
-are kept between products (scipy's pocketfft backend, which takes output arrays): fresh
-pages cost as much as the transforms; the transforms run one axis at a time, along y and
-x only on the lines that hold modes with |k| <= kmax (`_kept_modes`: 10-15% less FFT time
-at N = 1000 and 4096). bench/bench_spectral.py measures the parts.
+are kept between products (scipy's pocketfft backend, which takes output arrays); the
+transforms run one axis at a time, along y and x only on the lines that hold modes with
+|k| <= kmax (`_kept_modes`). Parameters, accuracy and measurements: docs/numerics.md,
+"Spectral Ewald"; bench/bench_spectral.py times the parts.
 """
 
 from __future__ import annotations

@@ -15,15 +15,9 @@ in Jeffrey & Onishi, J. Fluid Mech. 139, 261 (1984) [JO84] and Jeffrey, Phys. Fl
     G: pi (a_alpha + a_beta)^2      H: pi (a_alpha + a_beta)^3     M: (5/6) pi (a_alpha + a_beta)^3
 
 so that an isolated sphere has ``XA11 = YA11 = XC11 = YC11 = XM11 = YM11 = ZM11 = 1``
-(dimensional 6 pi a1, 8 pi a1^3, (20/3) pi a1^3) for every ``lam``; the couplings and the
-odd functions vanish as ``s -> inf``.  (In the "pair-scaled" form with prefactor
-``3 pi (a1 + a2)`` for every block one would get ``XA11 -> 2/(1 + lam)``; that form is not
-used here.)  NB: the B prefactor is ``pi (a_alpha+a_beta)^2`` -- *not* ``2 pi (...)^2`` --
-for the coefficients f_k used below (Townsend 2018 eq. 21, which carries an explicit
-factor 2); this is checked against the method of reflections (rotlet + Faxen) in the
-tests.  Block relations (JO84 eq. 1.8; J92): with ``lam -> 1/lam``,
-``X_22(lam) = X_11(1/lam)``, ``X_21(lam) = X_12(1/lam)``, with an extra minus sign for
-the functions odd in ``d`` (YB, XG, YG).
+for every ``lam``; the couplings and the odd functions vanish as ``s -> inf``. Block
+relations (JO84 eq. 1.8): ``X_22(lam) = X_11(1/lam)``, ``X_21(lam) = X_12(1/lam)``, with
+an extra minus sign for the functions odd in ``d`` (YB, XG, YG).
 
 Tensor forms (Kim & Karrila, *Microhydrodynamics* (1991) ch. 11; J92), same ``d`` for all
 four blocks::
@@ -45,77 +39,20 @@ generalised velocity ``U_a = (U_a - U_inf(x_a), Omega_a - Omega_inf, -E_inf)`` a
 generalised force ``F_a = (F_a, L_a, -S_a)`` where ``F, L`` are exerted by the particle
 ON the fluid and ``S`` is the particle stresslet (isolated sphere: ``S = (20/3) pi a^3 E``).
 That is the Kim-Karrila matrix above, unchanged.  Per particle 11 rows: 3 U, 3 Omega and
-5 strain components in the orthonormal basis of `sdmpi.hydro.basis`
-(``B1 = (xx-yy)/sqrt2, B2 = (2zz-xx-yy)/sqrt6, B3 = (xy+yx)/sqrt2, B4 = (xz+zx)/sqrt2,
-B5 = (yz+zy)/sqrt2``, ``s_m = S : B^m``); particle 1's 11 rows first.  ``R`` is
-symmetric positive definite.
+5 strain components in the orthonormal basis of `sdmpi.hydro.basis`; particle 1's 11 rows
+first.  ``R`` is symmetric positive definite.
 
 Method
 ------
-*Far-field coefficients.*  Each function except XC is a power series in ``t = 2/s``::
-
-    X_11 = sum_k f_k(lam) / (s (1+lam))^k,    X_12 = P_12(lam) sum_k f_k(lam) / (s (1+lam))^k
-
-(even or odd k only), ``f_k(lam) = c 2^k sum_q T_{n (k-q) q} lam^(q [+ k mod 2])`` where
-``T`` is one of the lam-independent multipole-reflection coefficients P, Q (and the
-auxiliary V) of the JO84 / J92 recurrences, run with the initial condition of the
-function:
-
-    XA: P^x(n0=1)_1             XG: (3/4) P^x(n0=1)_2        XM: P^x(n0=2)_2  [shift]
-    YA: P^y(P0=1)_1             YB: 2 Q^y(P0=1)_1            YG: (3/4) P^y(P0=1)_2
-    YC: Q^y(Q0=1)_1 [shift]     YH: -(3/8) P^y(Q0=1)_2 [shift]  YM: P^y(n0=2)_2 [shift]
-    ZM: P^z(n0=2)_2 [shift]
-
-The recurrences are JO84 (3.6)-(3.9), (4.6)-(4.11), (7.3)-(7.5) and J92 (58), (73)-(76)
-as corrected by A. K. Townsend, arXiv:1802.08226 (2018), eqs. (5)-(8), (18), (21), (29)
-(and Ichiki et al., J. Fluid Mech. 727, 2013); the low-order f_k reproduce the tables of
-K. Ichiki's libstokes (``XA.c``, ``YB.c``, ``YH.c``, ... generated independently) and
-JO84.  They are run once per process to order ``M = 200`` (numba; float64 is exact to
-~1e-15 relative, checked against rational arithmetic to order 60) and give, per
-distinct ``lam``, the coefficients (cached).
-
-*Whole-range form.*  Near contact the functions have the lubrication singularities
-``g1/xi + g2 log(1/xi) + g3 xi log(1/xi)`` (JO84, J92, coefficients as corrected by
-Townsend 2018: eqs. 10-12, J&O 4.16, 5.6, 7.10 with (30), J 19b, 27b, 35b, 48b, 64b, 79b).
-As in JO84 section 3, the singular parts are written *exactly* in ``s`` with functions of
-the same parity as the series,
-
-    even:  1/(1 - t^2),   -log(1 - t^2),        -(1 - t^2) log(1 - t^2)
-    odd :  t/(1 - t^2),   log((1 + t)/(1 - t)),  (1 - t^2) log((1 + t)/(1 - t))
-
-(``1 - t^2 = xi (4 + xi)/(2 + xi)^2``, ``(1-t) = xi/s``: no cancellation near contact),
-and their Taylor coefficients are subtracted from the series, so that one formula is
-used for all ``s > 2``: there is **no switch point**.  The remainder coefficients decay
-like ``m^-3`` (checked for every function and lam in the tests: this is also the proof
-that the g's match the f_k), so the truncation error is largest at contact.
-
-*XC* (rotation about the line of centres) is evaluated from the exact bispherical
-solution of Jeffery, Proc. Lond. Math. Soc. 14, 327 (1915) (Kim & Karrila 11.2; its
-contact limit is the zeta(3, lam/(1+lam)) of Townsend eq. 26), with
-``cosh(alpha) = (r^2 + a1^2 - a2^2)/(2 r a1)``, ``cosh(beta) = (r^2 + a2^2 - a1^2)/(2 r a2)``:
-
-    XC11 = sinh^3(alpha) sum_{n>=0} csch^3((n+1) alpha + n beta)
-    XC12 = -8/(1+lam)^3 sinh^3(alpha) sum_{n>=1} csch^3(n (alpha + beta))
-
-summed directly until the argument exceeds 3 and then in closed form
-(``csch^3 u = 8 sum_j C(j+2,2) exp(-(3+2j) u)``, geometric in n): machine precision for
-all ``s > 2``.
-
-Accuracy (measured, see tests)
-------------------------------
-* ``s >= 2.1`` (``xi >= 0.1``): all functions to ~1e-9 relative or better (~1e-15 for
-  ``xi >= 0.5``); XC to ~1e-14 everywhere.
-* ``xi -> 0``: the singular terms are exact; the O(1) part of every function carries a
-  truncation error of order 1e-6 .. 1e-5 (absolute, in the JO normalisation; e.g.
-  ``XA11 + XA12`` for equal spheres differs from Stimson & Jeffery (1926) by < 1e-5
-  relative for xi in [1e-6, 0.1] and < 1e-9 for xi >= 0.1).  Relative to the singular
-  functions themselves (``XA ~ 1/xi``, ``YA ~ log(1/xi)``) the error is much smaller.
-  This limit is intrinsic to the whole-range series at order 200 (the remainder
-  coefficients oscillate like m^-3, the accumulation of the complex singularities at
-  contact), and is far below the accuracy of any lubrication model built on it.
-* ``lam`` in [1/8, 8] is supported (tests use 1/4, 1, 4; remainder-decay checked at
-  1/8 and 8); the lam-polynomials are evaluated in ``lam/(1+lam)`` and ``1/(1+lam)``,
-  float-safe, but the near-contact truncation error grows with ``max(lam, 1/lam)``.
+Every function but XC is a power series in ``t = 2/s`` whose coefficients come from the
+multipole-reflection recurrences of JO84 and J92 as corrected by A. K. Townsend,
+arXiv:1802.08226 (2018) (run once per process to order 200, numba; coefficients cached
+per ``lam``), with the lubrication singularities ``g1/xi + g2 log(1/xi) + g3 xi log(1/xi)``
+written exactly in ``s`` and subtracted from the series: one formula for all ``s > 2``,
+no switch point. XC is Jeffery's exact bispherical sum (Proc. Lond. Math. Soc. 14, 327
+(1915)). The derivation, the table of initial conditions and the accuracy (all functions
+to ~1e-9 relative for ``xi >= 0.1``, the O(1) part near contact to ~1e-5, ``lam`` in
+[1/8, 8]) are in docs/numerics.md, "Two-sphere resistance functions".
 """
 
 from __future__ import annotations
