@@ -14,7 +14,7 @@ from sdmpi.config import JobError, enumerate_tasks
 from sdmpi.dynamics.checks import parse_job
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.integrators import EulerMaruyama
-from sdmpi.dynamics.models import hydrodynamic_model
+from sdmpi.dynamics.setup import hydrodynamic_model
 from sdmpi.dynamics.forces import (FORCE_UNIT, Combined, DoubleLayer, Repulsion, VanDerWaals,
                                    force_law, pair_forces)
 from sdmpi.hydro.lubrication import close_pairs

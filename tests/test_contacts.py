@@ -19,7 +19,7 @@ from sdmpi.cli import main
 from sdmpi.config import JobError, enumerate_tasks
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.checks import load_job, parse_job
-from sdmpi.dynamics.models import hydrodynamic_model
+from sdmpi.dynamics.setup import hydrodynamic_model
 from sdmpi.dynamics.contacts import (ContactLaw, CriticalLoadRepulsion, FrictionalContacts,
                                      contact_model, sliding_mobility, sliding_velocity, tangent)
 from sdmpi.dynamics.forces import FORCE_UNIT, force_law

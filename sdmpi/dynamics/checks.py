@@ -32,7 +32,8 @@ def _force_tails(job: Job) -> list[Problem]:
         return []
     from .forces import TAIL, tail_ratios
     problems = []
-    for path, (ratio, (a_i, a_j)) in tail_ratios(job).items():
+    for path, (ratio, (a_i, a_j)) in tail_ratios(inter.kind, inter.cap_gap, inter.debye_length, cutoff,
+                                                  job.system.class_radii).items():
         if ratio > TAIL:
             what = ("the van der Waals force at the cut-off" if path.endswith("cap_gap")
                     else "the double-layer force at the cut-off")

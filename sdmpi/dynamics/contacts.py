@@ -57,16 +57,17 @@ FORCE_UNIT of them), velocities in a/t_D.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
 
-from .forces import FORCE_UNIT, CriticalLoadRepulsion  # noqa: F401 (the repulsion of this model)
+from .forces import FORCE_UNIT, CriticalLoadRepulsion, Force, ForceSetting, ForceTerms, PairForce
+from .recorders import SampleFields, StateFields
 
 if TYPE_CHECKING:
-    from ..config.schema import Job
     from ..hydro.lubrication import PairList
 
 #: the normal relative mobility of touching unit spheres at minimum gap h_min is about
@@ -196,29 +197,53 @@ class ContactForces:
     n_sliding: int
 
 
-class FrictionalContacts:
-    """The contact springs of one realisation and their history (module docstring):
-    ``forces`` at the start of a step, then ``advance`` with the step's velocities."""
+class FrictionalContacts(Force):
+    """The contact springs of one realisation and their history (module docstring): a
+    `Force` whose ``terms`` are taken at the start of a step, then ``advance`` with the
+    step's velocities; its state is the history, its sample stress_contact, n_contacts and
+    n_sliding."""
 
-    def __init__(self, law, n_particles, max_contacts):
-        self.law = law
-        self.partners = np.full((n_particles, max_contacts), -1, dtype=np.int64)
-        self.stretch = np.zeros((n_particles, max_contacts, 3))
+    def __init__(self, law: ContactLaw, radii: np.ndarray, max_contacts: int):
+        self.law, self.radii = law, radii
+        self.partners = np.full((len(radii), max_contacts), -1, dtype=np.int64)
+        self.stretch = np.zeros((len(radii), max_contacts, 3))
         self._contacts = None
 
-    def forces(self, pairs: PairList, radii: np.ndarray) -> ContactForces:
+    def terms(self, pairs: PairList) -> ForceTerms:
+        contact = self.forces(pairs)
+        return ForceTerms(np.hstack([contact.forces, contact.torques]), contact.virial,
+                          {"n_contacts": contact.n_contacts, "n_sliding": contact.n_sliding})
+
+    def sample_fields(self, stress_unit: str) -> SampleFields:
+        return {"stress_contact": ((6,), "f8", stress_unit, "contact springs' part of stress_interparticle"),
+                "n_contacts": ((), "i4", "1", "touching pairs (gap < 0)"),
+                "n_sliding": ((), "i4", "1", "touching pairs at the Coulomb limit")}
+
+    def sample(self, terms: ForceTerms, stress: Callable[[ForceTerms], np.ndarray]) -> dict[str, Any]:
+        return {"stress_contact": stress(terms), **terms.counts}
+
+    def state_fields(self) -> StateFields:
+        return {"contact_partners": (self.partners.shape, "i8"), "contact_stretch": (self.stretch.shape, "f8")}
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {"contact_partners": self.partners.copy(), "contact_stretch": self.stretch.copy()}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.partners[:] = state["contact_partners"]
+        self.stretch[:] = state["contact_stretch"]
+
+    def forces(self, pairs: PairList) -> ContactForces:
         """Contact forces of the pairs with gap < 0 (a PairList: true gaps, dx = x_j +
         shift - x_i, possibly stretched to the minimum gap; only its direction is used).
 
         Args:
             pairs: the step's lubrication pair list.
-            radii: particle radii, shape (N,), in a.
 
         Returns:
             The `ContactForces`: forces and torques (N, 3) in eta_m a^2/t_D and
             eta_m a^3/t_D, virial (3, 3) in eta_m a^3/t_D, contact and sliding counts.
         """
-        n_particles = len(self.partners)
+        n_particles, radii = len(self.partners), self.radii
         touching = np.flatnonzero(pairs.gap < 0)
         i, j = pairs.i[touching], pairs.j[touching]
         n = pairs.dx[touching] / np.linalg.norm(pairs.dx[touching], axis=1)[:, None]
@@ -275,18 +300,25 @@ class FrictionalContacts:
                                "images: the box is too small for contact history")
 
 
-def contact_model(job: Job) -> FrictionalContacts | None:
-    """The contact springs of a job with interparticle.kind = "frictional" (a fresh
-    history for one realisation), else None. The repulsion is `forces.force_law`'s.
+def frictional(
+    setting: ForceSetting, *, mu: float, k_n: float, k_t: float, f_r0: float, repulsion_length: float,
+    max_contacts: int
+) -> list[Force]:
+    """interparticle.kind = "frictional": the critical-load repulsion on every pair, then the
+    contact springs (a fresh history), strengths in the job's force unit.
 
     Args:
-        job: the validated job.
+        setting: the realisation's spheres and cut-off.
+        mu: Coulomb friction coefficient.
+        k_n: normal stiffness (force unit / a).
+        k_t: tangential stiffness (force unit / a).
+        f_r0: the repulsion at contact (force unit).
+        repulsion_length: its decay length (a).
+        max_contacts: contacts stored per particle.
 
     Returns:
-        A fresh `FrictionalContacts`, or None for other interparticle kinds.
+        [the repulsion's `PairForce`, the `FrictionalContacts`], in that order.
     """
-    inter = job.interparticle
-    if inter.kind != "frictional":
-        return None
-    law = ContactLaw(inter.mu, FORCE_UNIT * inter.k_n, FORCE_UNIT * inter.k_t)
-    return FrictionalContacts(law, job.system.n_particles, inter.max_contacts)
+    repulsion = PairForce(CriticalLoadRepulsion(FORCE_UNIT * f_r0, repulsion_length), setting.radii)
+    law = ContactLaw(mu, FORCE_UNIT * k_n, FORCE_UNIT * k_t)
+    return [repulsion, FrictionalContacts(law, setting.radii, max_contacts)]

@@ -56,12 +56,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from .recorders import SampleFields, StateFields
+
 if TYPE_CHECKING:
-    from ..config.schema import Job
     from ..hydro.lubrication import PairList
 
 #: the job's force unit, 6 pi eta_m a^2 / (time unit), in Stokes units (eta_m = a = 1)
@@ -85,7 +87,7 @@ class PairLaw(Protocol):
             a_j: radii of the second spheres, scalar or (P,), in a.
 
         Returns:
-            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+            F(h), shaped like gap, in the law's force unit (Stokes units in `PairForce`).
         """
         raise NotImplementedError
 
@@ -257,58 +259,31 @@ class Combined:
         return sum(p.potential(gap, a_i, a_j) for p in self.parts)
 
 
-def force_law(job: Job) -> PairLaw | None:
-    """The pair force law of a job's [interparticle] section in Stokes units (strengths
-    times ``FORCE_UNIT``), truncated at the lubrication cut-off where it is algebraic or
-    shifted; None for hard spheres (kind "none").
-
-    Args:
-        job: the validated job.
-
-    Returns:
-        The law (forces in eta_m a^2/t_D, gaps in a), or None.
-
-    Raises:
-        ValueError: an unknown interparticle.kind.
-    """
-    inter = job.interparticle
-    cutoff = job.hydrodynamics.lubrication_cutoff
-    if inter.kind == "none":
-        return None
-    if inter.kind == "repulsion":
-        return Repulsion(FORCE_UNIT * inter.f0, inter.tau)
-    if inter.kind == "frictional":  # the repulsion; the contact springs: contacts.contact_model
-        return CriticalLoadRepulsion(FORCE_UNIT * inter.f_r0, inter.repulsion_length)
-    vdw = VanDerWaals(FORCE_UNIT * inter.hamaker, inter.cap_gap, cutoff)
-    if inter.kind == "vdw":
-        return vdw
-    if inter.kind == "dlvo":
-        layer = DoubleLayer(FORCE_UNIT * inter.surface_potential ** 2, inter.debye_length, cutoff)
-        return Combined((vdw, layer))
-    raise ValueError(f"unknown interparticle.kind {inter.kind!r}")
-
-
-def tail_ratios(job: Job) -> dict[str, tuple[float, tuple[float, float]]]:
-    """|F(cut-off)| / |F(contact)| of each truncated part of the job's law, for the pair
-    of size classes where it is largest (the cut-off gap is cut-off x the pair's mean
-    radius, the van der Waals cap a fixed gap, so the ratio depends on both radii):
+def tail_ratios(
+    kind: str, cap_gap: float | None, debye_length: float | None, cutoff: float, class_radii: tuple[float, ...]
+) -> dict[str, tuple[float, tuple[float, float]]]:
+    """|F(cut-off)| / |F(contact)| of each truncated part of a law, for the pair of size
+    classes where it is largest (the cut-off gap is cut-off x the pair's mean radius, the
+    van der Waals cap a fixed gap, so the ratio depends on both radii):
     {"interparticle.<key>": (ratio, (a_i, a_j))} for the job check against TAIL (`checks`).
 
     Args:
-        job: the validated job.
+        kind: interparticle.kind.
+        cap_gap: the van der Waals cap (a), used by "vdw" and "dlvo".
+        debye_length: the double layer's Debye length (a), used by "dlvo".
+        cutoff: the lubrication cut-off (mean radii).
+        class_radii: the radii of the size classes (a).
 
     Returns:
         Per truncated part, its largest ratio (dimensionless) and the radii (a) where it
         occurs; empty for laws without truncation.
     """
-    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    radii = job.system.class_radii
-    pairs = [(a, b) for k, a in enumerate(radii) for b in radii[k:]]
+    pairs = [(a, b) for k, a in enumerate(class_radii) for b in class_radii[k:]]
     laws = {}
-    if inter.kind in ("vdw", "dlvo"):
-        laws["interparticle.cap_gap"] = (VanDerWaals(1.0, inter.cap_gap), inter.cap_gap)
-    if inter.kind == "dlvo":
-        laws["interparticle.debye_length"] = (DoubleLayer(1.0, inter.debye_length), 0.0)
+    if kind in ("vdw", "dlvo"):
+        laws["interparticle.cap_gap"] = (VanDerWaals(1.0, cap_gap), cap_gap)
+    if kind == "dlvo":
+        laws["interparticle.debye_length"] = (DoubleLayer(1.0, debye_length), 0.0)
     out = {}
     for path, (law, contact) in laws.items():
         ratios = [(float(abs(law.magnitude(cutoff * 0.5 * (a + b), a, b)
@@ -326,7 +301,7 @@ def pair_forces(
     give each pair's a_i, a_j; None: each pair's mean radius (radii_sum / 2) for both.
 
     Args:
-        force_law: the pair law (`force_law`), or None for no forces.
+        force_law: the pair law, or None for no forces.
         pairs: the close pairs, P of them.
         n: number of particles N.
         radii: particle radii, shape (N,), in a, or None.
@@ -349,3 +324,179 @@ def pair_forces(
     # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j (true separations)
     virial = (pairs.distance[:, None] * unit).T @ f_on_j
     return forces, virial
+
+
+# --------------------------------------------------------------------------- forces on the step's pairs
+
+@dataclass(frozen=True)
+class ForceSetting:
+    """What every force of a realisation may need besides its own job keys.
+
+    Attributes:
+        n_particles: N.
+        radii: (N,) sphere radii, in a.
+        cutoff: the lubrication cut-off (mean radii), beyond which the step's pair list
+            ends: truncated laws vanish there.
+    """
+
+    n_particles: int
+    radii: np.ndarray
+    cutoff: float
+
+
+@dataclass(frozen=True)
+class ForceTerms:
+    """One force's forces and torques (N, 6) (eta_m a^2/t_D, eta_m a^3/t_D) and virial
+    sum over pairs of dx F_on_j (3, 3) (eta_m a^3/t_D), with its counts for the sample."""
+
+    forces: np.ndarray
+    virial: np.ndarray
+    counts: dict[str, int]
+
+
+class Force(Protocol):
+    """An interparticle force on the pairs of a step (the hydrodynamic evaluation's pair
+    list, `sdmpi.hydro.lubrication.PairList`), with its own sample fields and state.
+    Registered by interparticle.kind in `sdmpi.registry.FORCES` (docs/extending.md)."""
+
+    def terms(self, pairs: PairList) -> ForceTerms:
+        """The forces at the step's start.
+
+        Args:
+            pairs: the pairs within the cut-off, with true gaps (dx = x_j - x_i, a).
+
+        Returns:
+            Its `ForceTerms`.
+        """
+        raise NotImplementedError
+
+    def sample_fields(self, stress_unit: str) -> SampleFields:
+        """Its own fields of the sample stream (beyond stress_interparticle, which holds
+        every force's stress).
+
+        Args:
+            stress_unit: the job's stress unit (for stress fields).
+
+        Returns:
+            name -> (shape per sample, dtype, unit, description); empty for none.
+        """
+        raise NotImplementedError
+
+    def sample(self, terms: ForceTerms, stress: Callable[[ForceTerms], np.ndarray]) -> dict[str, Any]:
+        """Its sample of the step (the fields of sample_fields).
+
+        Args:
+            terms: what `terms` returned for the step.
+            stress: stress(terms) -> the 6-vector -(1/V) (sum R_SU R_FU^-1 F + sum x F)
+                of such terms (one more solve).
+
+        Returns:
+            name -> value.
+        """
+        raise NotImplementedError
+
+    def advance(self, velocities: np.ndarray, rate: float, dt: float) -> None:
+        """Advance its state over the step (after `terms`).
+
+        Args:
+            velocities: (U, Omega) relative to the imposed flow, (N, 6), a/t_D and 1/t_D.
+            rate: the step's shear rate (1/t_D).
+            dt: the step's duration (t_D).
+        """
+        raise NotImplementedError
+
+    def state_fields(self) -> StateFields:
+        """name -> (shape, dtype) of its state (empty: stateless)."""
+        raise NotImplementedError
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """Its state as arrays (copies), those of state_fields."""
+        raise NotImplementedError
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore its state from get_state (extra names ignored)."""
+        raise NotImplementedError
+
+
+class Stateless(Force):
+    """A `Force` without state or sample fields of its own: those members, empty."""
+
+    def sample_fields(self, stress_unit: str) -> SampleFields:
+        return {}
+
+    def sample(self, terms: ForceTerms, stress: Callable[[ForceTerms], np.ndarray]) -> dict[str, Any]:
+        return {}
+
+    def advance(self, velocities: np.ndarray, rate: float, dt: float) -> None:
+        pass
+
+    def state_fields(self) -> StateFields:
+        return {}
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        pass
+
+
+class PairForce(Stateless):
+    """The central pair forces of a law (`PairLaw`, Stokes units) on the step's pairs of
+    spheres of these radii (`pair_forces`); no torques."""
+
+    def __init__(self, law: PairLaw, radii: np.ndarray):
+        self.law, self.radii = law, radii
+
+    def terms(self, pairs: PairList) -> ForceTerms:
+        n = len(self.radii)
+        forces, virial = pair_forces(self.law, pairs, n, self.radii)
+        return ForceTerms(np.hstack([forces, np.zeros((n, 3))]), virial, {})
+
+
+def repulsion(setting: ForceSetting, *, f0: float, tau: float) -> list[Force]:
+    """interparticle.kind = "repulsion": `Repulsion` with F0 = f0 in the job's force unit.
+
+    Args:
+        setting: the realisation's spheres and cut-off.
+        f0: F0 (force unit x a).
+        tau: inverse range (1/a).
+
+    Returns:
+        The one pair force.
+    """
+    return [PairForce(Repulsion(FORCE_UNIT * f0, tau), setting.radii)]
+
+
+def van_der_waals(setting: ForceSetting, *, hamaker: float, cap_gap: float) -> list[Force]:
+    """interparticle.kind = "vdw": `VanDerWaals` truncated at the lubrication cut-off.
+
+    Args:
+        setting: the realisation's spheres and cut-off.
+        hamaker: Hamaker constant (energy unit).
+        cap_gap: gap below which the force is constant (a).
+
+    Returns:
+        The one pair force.
+    """
+    return [PairForce(VanDerWaals(FORCE_UNIT * hamaker, cap_gap, setting.cutoff), setting.radii)]
+
+
+def dlvo(
+    setting: ForceSetting, *, hamaker: float, cap_gap: float, surface_potential: float, debye_length: float
+) -> list[Force]:
+    """interparticle.kind = "dlvo": van der Waals plus `DoubleLayer`, both truncated at the
+    lubrication cut-off, as one `Combined` law.
+
+    Args:
+        setting: the realisation's spheres and cut-off.
+        hamaker: Hamaker constant (energy unit).
+        cap_gap: gap below which the van der Waals force is constant (a).
+        surface_potential: reduced surface potential psi (sqrt(energy unit / a)).
+        debye_length: Debye length (a).
+
+    Returns:
+        The one pair force.
+    """
+    vdw = VanDerWaals(FORCE_UNIT * hamaker, cap_gap, setting.cutoff)
+    layer = DoubleLayer(FORCE_UNIT * surface_potential ** 2, debye_length, setting.cutoff)
+    return [PairForce(Combined((vdw, layer)), setting.radii)]

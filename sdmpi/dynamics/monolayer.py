@@ -65,7 +65,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..hydro.lubrication import close_pairs
+from .collisions import Collisions
 from .initial import hard_disk_monolayer, square_side
+from .recorders import StateFields
+from .systems import Geometry
 
 if TYPE_CHECKING:
     from ..hydro.geometry import Lattice
@@ -76,31 +79,53 @@ MIRROR_ODD = (2, 3, 4)
 log = logging.getLogger(__name__)
 
 
-class Monolayer:
-    """The monolayer of one task: box, normalising volume, start, in-plane constraint,
-    overlap counting and the overlap stop (module docstring)."""
+class Monolayer(Geometry):
+    """The monolayer of one task (a `systems.Geometry`): box, normalising volume, start,
+    in-plane constraint, overlaps counted and kept, and the overlap stop (module docstring).
 
-    def __init__(self, job, phi_a):
-        n = job.system.n_particles
-        side = square_side(n, phi_a)
-        self.n_particles, self.phi_a = n, phi_a
-        self.box = np.array([side, side, job.system.layer_spacing * side])
+    Args:
+        n_particles: N.
+        phi_a: areal fraction (system.phi).
+        layer_spacing: Lz / L (system.layer_spacing).
+        overlap_stop: the deepest overlap (a) before the run stops (integration.overlap_stop).
+    """
+
+    corrects_overlaps = False
+
+    def __init__(self, n_particles: int, phi_a: float, layer_spacing: float, overlap_stop: float):
+        side = square_side(n_particles, phi_a)
+        self.n_particles, self.phi_a = n_particles, phi_a
+        self.box = np.array([side, side, layer_spacing * side])
         #: the layer's volume 2 a L^2 that normalises its stresses (Dratler & Schowalter's eq. 6)
         self.volume = 2.0 * side * side
-        self.overlap_stop = job.integration.overlap_stop
+        self.overlap_stop = overlap_stop
         #: the step at which the run stopped on an overlap, -1 while running
         self.stopped_at = -1
 
-    def start(self, rng: np.random.Generator) -> np.ndarray:
+    def start(self, rng: np.random.Generator, strain: float = 0.0) -> np.ndarray:
         """Random non-overlapping start in the plane z = Lz/2, (N, 3).
 
         Args:
             rng: the random stream of the start.
+            strain: unused (the start's disks do not overlap at any strain).
 
         Returns:
             Positions, shape (N, 3), in a.
         """
         return hard_disk_monolayer(self.n_particles, self.phi_a, rng, z=0.5 * self.box[2])[0]
+
+    def kept_overlaps(self, positions: np.ndarray, radii: np.ndarray, lattice: Lattice) -> Collisions:
+        """Overlaps counted and kept (Dratler & Schowalter 1996): their number and the deepest."""
+        return Collisions.none(*self.overlaps(positions, radii, lattice))
+
+    def state_fields(self) -> StateFields:
+        return {"stopped_at": ((1,), "i8")}
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {"stopped_at": np.array([self.stopped_at], dtype=np.int64)}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.stopped_at = int(state["stopped_at"][0])
 
     @staticmethod
     def in_plane(velocity: np.ndarray) -> np.ndarray:
@@ -149,18 +174,14 @@ class Monolayer:
                         f"(Dratler & Schowalter 1996); the remaining samples are NaN")
         return self.stopped_at >= 0
 
-    @staticmethod
     def stopped_sample(
-        fields: dict[str, tuple[tuple[int, ...], str, str, str]],
-        time: float,
-        strain: float,
-        rate: float,
+        self, fields: dict[str, tuple[tuple[int, ...], str, str, str]], time: float, strain: float, rate: float
     ) -> dict[str, Any]:
         """A sample after the stop: time, strain and rate, every other value NaN (-1 for
         counts).
 
         Args:
-            fields: the sample stream's fields (`realisation.sample_fields`).
+            fields: the sample stream's fields (`setup.sample_fields`).
             time: sample time (time unit).
             strain: strain at that time, dimensionless.
             rate: shear rate at that time (1/time unit).

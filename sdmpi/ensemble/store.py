@@ -341,7 +341,7 @@ def run_file_bytes(job: Job) -> float:
     Returns:
         The estimate, in bytes.
     """
-    from ..dynamics.realisation import sample_fields
+    from ..dynamics.setup import sample_fields
 
     row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
     per_task = TASK_OVERHEAD + 2 * STATE_PER_PARTICLE * job.system.n_particles
