@@ -1,5 +1,6 @@
-"""Extension is local: a solver backend and a hydrodynamic model defined outside the package
-(tests/extension_plugin.py, one module that registers both) run jobs through `sdmpi run`,
+"""Extension is local: a solver backend, a hydrodynamic model and an interparticle force
+defined outside the package (tests/extension_plugin.py, one module that registers them) run
+jobs through `sdmpi run`,
 and the job loader's choices, checks and estimates follow the registries
 (`sdmpi.registry`, docs/extending.md)."""
 
@@ -28,9 +29,9 @@ ONE_TASK = ["ensemble.realisations=1", "shear.omega=[25.132741228718345]", "inte
             "integration.discard_periods=0", "integration.steps_per_period=20"]
 
 
-def _run_with_plugin(tmp_path, sets):
+def _run_with_plugin(tmp_path, sets, state=False):
     """The samples of the one task of demo.toml with ``sets``, run by `sdmpi run` with the
-    plugin's registrations."""
+    plugin's registrations (state: and the state of its last checkpoint)."""
     out = tmp_path / "run.h5"
     cmd = [sys.executable, str(PLUGIN), "run", str(DEMO), "-o", str(out)]
     for item in sets:
@@ -38,7 +39,12 @@ def _run_with_plugin(tmp_path, sets):
     res = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=600)
     assert res.returncode == 0, res.stderr
     with h5py.File(out, "r") as f:
-        return {name: data[()] for name, data in f["tasks/000000/samples"].items()}
+        samples = {name: data[()] for name, data in f["tasks/000000/samples"].items()}
+        if not state:
+            return samples
+        ckpt = f["checkpoints/000000"]
+        slot = int(np.argmax(ckpt["slot_step"][()]))
+        return samples, {name: data[()] for name, data in ckpt[f"slot{slot}"].items()}
 
 
 def _api_samples(sets):
@@ -76,6 +82,22 @@ def test_registered_model_runs_a_job(tmp_path):
     assert np.array_equal(ours["stress_hydrodynamic"], 2.0 * plain["stress_hydrodynamic"])
     for name in ("strain", "min_gap", "stress_collision", "n_overlaps"):
         assert np.array_equal(ours[name], plain[name]), name
+
+
+def test_registered_force_runs_a_job(tmp_path):
+    """A force registered by the plugin (the repulsion as two exact halves, one of which
+    samples and checkpoints its own count) gives the samples of interparticle.kind =
+    "repulsion" bit for bit, reads the keys f0 and tau like it, and its own sample field
+    and state reach the run file."""
+    sets = [*ONE_TASK, "interparticle.f0=1.0", "interparticle.tau=300.0"]
+    ours, state = _run_with_plugin(tmp_path, [*sets, 'interparticle.kind="split-repulsion"'], state=True)
+    plain = _api_samples([*sets, 'interparticle.kind="repulsion"'])
+    assert set(ours) == set(plain) | {"pairs_seen"}
+    for name, values in plain.items():
+        assert np.array_equal(ours[name], values), name
+    assert np.abs(plain["stress_interparticle"]).max() > 0  # the force acted
+    seen = ours["pairs_seen"]
+    assert seen[0] > 0 and np.all(np.diff(seen) >= 0) and state["pairs_seen"][0] == seen[-1]
 
 
 @pytest.fixture

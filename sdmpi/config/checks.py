@@ -302,8 +302,8 @@ def _model(job):
                                 allowed=f'true (the default) with hydrodynamics.model = "{hyd.model}"'))
     for needed, why in ((job.system.geometry == "monolayer", "monolayers are simulated with full "
                          "Stokesian dynamics only"),
-                        (_has_contacts(job), f"the {job.interparticle.kind} force's contacts need "
-                         "the lubrication of a model with it")):
+                        (_has_contacts(job), f"{job.interparticle.kind} contacts need the lubrication "
+                         "of a model with it")):
         if needed and not model.lubrication:
             problems.append(Problem("hydrodynamics.model", why, hyd.model, allowed=quoted(with_lubrication)))
         elif needed and not hyd.lubrication:  # the stokesian model without it is the far field

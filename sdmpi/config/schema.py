@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from ..registry import (DRIFT_SCHEMES, FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, Registry,
@@ -195,9 +196,27 @@ STEADY_OR_NONE = ("shear", "protocol", ("steady", "none"))
 MAXWELL = ("medium", "kind", ("maxwell",))
 
 
-def _force_key(name: str) -> tuple[str, str, tuple[str, ...]]:
-    """only_if of an [interparticle] key: the kinds whose force reads it (`sdmpi.registry.FORCES`)."""
-    return ("interparticle", "kind", FORCES.names(lambda force: name in force.keys))
+class ForcesReading(Sequence):
+    """The interparticle.kind values whose force reads the [interparticle] key ``name``
+    (`sdmpi.registry.ForceSpec.keys`), read at every use, so that forces registered after
+    this module is imported count."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def _kinds(self) -> tuple[str, ...]:
+        return FORCES.names(lambda force: self.name in force.keys)
+
+    def __getitem__(self, index):
+        return self._kinds()[index]
+
+    def __len__(self) -> int:
+        return len(self._kinds())
+
+
+def _force_key(name: str) -> tuple[str, str, ForcesReading]:
+    """only_if of an [interparticle] key: the kinds whose force reads it."""
+    return ("interparticle", "kind", ForcesReading(name))
 
 
 BULK = ("system", "geometry", ("bulk",))

@@ -293,7 +293,7 @@ def tail_ratios(
 
 
 def pair_forces(
-    force_law: PairLaw | None, pairs: PairList, n: int, radii: np.ndarray | None = None
+    law: PairLaw, pairs: PairList, n: int, radii: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Forces (N, 3) on the particles and the virial sum_pairs dx F_ij (3, 3) for the
     close pairs (a PairList: dx = x_j - x_i, true gaps). The force on i is
@@ -301,7 +301,7 @@ def pair_forces(
     give each pair's a_i, a_j; None: each pair's mean radius (radii_sum / 2) for both.
 
     Args:
-        force_law: the pair law, or None for no forces.
+        law: the pair law.
         pairs: the close pairs, P of them.
         n: number of particles N.
         radii: particle radii, shape (N,), in a, or None.
@@ -311,14 +311,14 @@ def pair_forces(
     """
     forces = np.zeros((n, 3))
     virial = np.zeros((3, 3))
-    if force_law is None or len(pairs.i) == 0:
+    if len(pairs.i) == 0:
         return forces, virial
     if radii is None:
         a_i = a_j = 0.5 * pairs.radii_sum
     else:
         a_i, a_j = radii[pairs.i], radii[pairs.j]
     unit = pairs.dx / np.linalg.norm(pairs.dx, axis=1)[:, None]
-    f_on_j = force_law.magnitude(pairs.gap, a_i, a_j)[:, None] * unit
+    f_on_j = law.magnitude(pairs.gap, a_i, a_j)[:, None] * unit
     np.add.at(forces, pairs.j, f_on_j)
     np.add.at(forces, pairs.i, -f_on_j)
     # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j (true separations)
