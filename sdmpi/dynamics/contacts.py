@@ -1,57 +1,37 @@
 """Frictional contacts with a critical-load repulsion: the shear-thickening model of
 Seto, Mari, Morris & Denn, Phys. Rev. Lett. 111, 218301 (2013) and Mari, Seto, Morris &
-Denn, J. Rheol. 58, 1693 (2014), on top of SD's lubrication (minimum-gap rule).
+Denn, J. Rheol. 58, 1693 (2014), on top of SD's lubrication (minimum-gap rule); the
+forces of interparticle.kind = "frictional" (`frictional`, registered in
+`sdmpi.registry.FORCES`). The model, its units and its time-step limit: docs/physics.md,
+"Frictional contact".
 
 Pair i, j with radii a_i, a_j, n the unit vector from i to j, h = |x_j - x_i| - a_i - a_j
-the surface gap (in a; negative = overlap = contact). Forces on j (those on i are opposite):
+the surface gap (negative = overlap = contact). Forces on j (those on i are opposite):
 
-* repulsion (:class:`~sdmpi.dynamics.forces.CriticalLoadRepulsion`, electrostatic-like, the "critical load"):
-  F_R = F_R0 exp(-h/lambda) n for h > 0 and F_R0 n for h <= 0, with U = F_R0 lambda
-  exp(-h/lambda) (h > 0; continued linearly below) so that F_R = -dU/dh. It acts on every
-  lubrication pair (applied by `forces.pair_forces`), so lambda must decay to 1e-12 of
-  F_R0 within the lubrication cut-off.
-* normal spring (h < 0): F_n = k_n |h| n, U = k_n h^2 / 2.
-* tangential spring (h < 0): F_t = -k_t xi, with the tangential stretch xi integrated from
-  the sliding velocity of j's surface relative to i's at the contact point,
-      d xi/dt = u_s = (I - n n) [U_j - U_i - (l_i Omega_i + l_j Omega_j) x n],
-  (U, Omega total rigid-body velocities, the imposed flow included), kept tangent (turned
-  into the plane normal to the current n, its length kept) and reset to 0 when the pair
-  separates (h >= 0).
-* Coulomb friction: |F_t| <= mu |F_n| with F_n the spring's normal force (the repulsion
-  does not load the friction); where k_t |xi| > mu k_n |h| the stretch is scaled back to
-  mu k_n |h| / k_t (the contact slides). The stiffnesses do not depend on the radii.
-* torques: the tangential force acts at the contact point, l_i n from i's centre and
-  -l_j n from j's: T_i = l_i n x (k_t xi), T_j = l_j n x (k_t xi), with the lever arms
-  l = a r / (a_i + a_j) (r the centre distance) that divide the overlap in proportion to
-  the radii, so that l_i + l_j = r: the pair's forces and torques then carry no net
-  angular momentum, sum (x x F + T) = 0, and a rigid rotation of the pair does not slide.
+* repulsion (`forces.CriticalLoadRepulsion`, a `forces.PairForce` on every lubrication
+  pair): F_R = F_R0 exp(-h/lambda) n for h > 0, F_R0 n for h <= 0;
+* normal spring (h < 0): F_n = k_n |h| n;
+* tangential spring (h < 0): F_t = -k_t xi, the stretch xi integrated from the sliding
+  velocity of j's contact point relative to i's,
+      d xi/dt = u_s = (I - n n) [U_j - U_i - (l_i Omega_i + l_j Omega_j) x n]
+  (U, Omega total rigid-body velocities), kept tangent (turned into the plane normal to
+  the current n, its length kept) and reset to 0 when the pair separates;
+* Coulomb friction |F_t| <= mu |F_n|: where k_t |xi| > mu k_n |h| the stretch is scaled
+  back to mu k_n |h| / k_t (the contact slides);
+* torques at the contact point: T_i = l_i n x (k_t xi), T_j = l_j n x (k_t xi), lever arms
+  l = a r / (a_i + a_j) (r the centre distance), so that l_i + l_j = r and the pair's
+  forces and torques carry no net angular momentum.
 
-Stress: with the existing interparticle path, -(1/V) sum (x F + R_SU R_FU^-1 (F, T)), the
-virial summed over pairs as dx (F on j), dx = x_j - x_i (its symmetric part).
+Stress: that of every interparticle force, -(1/V) sum (x F + R_SU R_FU^-1 (F, T)), the
+virial summed over pairs as dx (F on j), dx = x_j - x_i.
 
-Units: the job's force unit 6 pi eta_m a^2 gamma_dot (non-Brownian steady shear, time
-1/gamma_dot), so the shear rate in the papers' unit F_R0/(6 pi eta_m a^2) is 1/f_r0 and
-a stress sigma in F_R0/a^2 is eta_r / (6 pi f_r0); stiffnesses in force unit / a. Here,
-as in `forces`, strengths are multiplied by FORCE_UNIT = 6 pi into Stokes units.
+History (`FrictionalContacts`, the force's state): per particle at most ``max_contacts``
+partners of larger index (partner -1 = empty slot) with their stretch as seen from the
+smaller index, fixed-shape arrays for the checkpoints; stretches are updated at the end of
+each step (`advance`, after the velocities are known) and turned tangent at the next.
 
-Time step (explicit Euler, as the rest of the step): a spring k between two spheres
-relaxes at the rate k m, m the pair's relative mobility along the spring; the step is
-stable for dt k m < 2 and free of overshoot for dt k m <= 1, which the job checks
-(`checks`) require of the touching pair of unit spheres at the minimum gap h_min (job units): normal
-m_n = SQUEEZE h_min (leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units),
-sliding m_t = :func:`sliding_mobility` (h_min), O(1) since tangential lubrication is only
-logarithmic (free spheres: 3.5 = 2 from translation + 1.5 from the rotation the torques
-cause). Many-contact networks can relax faster than one pair: watch min_gap (the deepest
-overlap) in the samples.
-
-History: contacts are stored per particle, at most ``max_contacts`` partners in the row
-of the smaller index (partner -1 = empty slot), with their stretch as seen from that
-particle (the larger index's contact point relative to the smaller's): fixed-shape
-arrays for the checkpointed state. A contact's stretch is updated at the end of each step
-(after the velocities are known) and turned tangent at the start of the next.
-
-Units: lengths in a, times in t_D, forces in eta_m a^2/t_D (Stokes units; kT/a is
-FORCE_UNIT of them), velocities in a/t_D.
+Units: strengths in the job's force unit multiplied by FORCE_UNIT = 6 pi into Stokes
+units; lengths in a, times in t_D, forces in eta_m a^2/t_D, velocities in a/t_D.
 """
 
 from __future__ import annotations

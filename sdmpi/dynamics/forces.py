@@ -1,55 +1,43 @@
-"""Interparticle forces between sphere pairs.
+"""Interparticle forces between sphere pairs: the `Force` interface, pair force laws and
+the forces of interparticle.kind (registered in `sdmpi.registry.FORCES`).
 
-Pair forces act along the line of centres; a force law gives the magnitude F(h) at
-surface gap h of a pair of radii a_i, a_j, positive when it pushes the spheres apart
-(repulsion) and negative when it pulls them together (attraction), with F = -dU/dh.
-Totals are summed over the pair list of the hydrodynamics (periodic images included),
-so a force must vanish beyond the lubrication cut-off: the repulsion decays there
-(checked by the loader), the algebraic van der Waals force and the double layer are
-shifted to vanish there (shifted-force truncation, below).
+A `Force` acts on the pairs of each step (the hydrodynamic evaluation's pair list within
+the lubrication cut-off, periodic images included), with its own sample fields and state;
+the step sums a realisation's forces in order (`sdmpi.dynamics.realisation`). A
+`PairForce` is the central force of a law (`PairLaw`): magnitude F(h) at surface gap h of
+a pair of radii a_i, a_j along the line of centres, positive when repulsive, F = -dU/dh.
+A force must vanish beyond the cut-off: the repulsion decays there (checked by the
+loader), the van der Waals force and the double layer are shifted to vanish there.
 
-Units. In the job file, forces are in the job's force unit 6 pi eta_m a^2 / (time unit):
-kT/a for Brownian jobs (kT = 6 pi in sdmpi's reduced units), 6 pi eta_m a^2 gamma_dot for
-non-Brownian steady shear (time unit 1/gamma_dot); energies (Hamaker constant) in force
-unit x a, i.e. kT or 6 pi eta_m a^3 gamma_dot; lengths in a. The hydrodynamics works in
-plain Stokes units (eta_m = 1, a = 1), where a force 1 moves an isolated sphere at 1/(6 pi),
-so :func:`force_law` multiplies every strength by ``FORCE_UNIT`` = 6 pi.
+Laws:
 
-Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
-
-* :class:`Repulsion` (Dratler & Schowalter 1996, eq. 9): F0 tau e^(-tau h)/(1 + e^(-tau h)).
-* :class:`VanDerWaals` (Finke et al. 2020, eqs. 4-5 = Hamaker, Physica 4, 1058 (1937), for
-  spheres of radii a_i, a_j at centre distance r = a_i + a_j + h):
+* `Repulsion` (Dratler & Schowalter, J. Fluid Mech. 325, 53 (1996), eq. 9):
+  F = F0 tau e^(-tau h)/(1 + e^(-tau h)), U = F0 ln(1 + e^(-tau h)).
+* `VanDerWaals` (Hamaker, Physica 4, 1058 (1937); Finke et al. 2020, eqs. 4-5), centre
+  distance r = a_i + a_j + h:
       U(h) = -(A/6) [2 a_i a_j/(h (2a_i + 2a_j + h)) + 2 a_i a_j/((2a_i + h)(2a_j + h))
                      + ln(h (2a_i + 2a_j + h)/((2a_i + h)(2a_j + h)))],
       F(h) = -(32/3) A a_i^3 a_j^3 (a_i + a_j + h) / (h^2 (2a_i + 2a_j + h)^2
                                                       ((2a_i + h)(2a_j + h))^2),
-  (the seed writes b for h, r for the radii; with r^2 - (a_i + a_j)^2 = h (2a_i + 2a_j + h)
-  and r^2 - (a_i - a_j)^2 = (2a_i + h)(2a_j + h) these are Hamaker's eqs.). Limits:
-  F -> -A R/(6 h^2) as h -> 0 (Derjaguin, R = a_i a_j/(a_i + a_j)); F -> -(32/3) A a_i^3
-  a_j^3 / r^7 (London) as h -> inf. Capped below ``cap_gap`` (Finke et al. 2020: 0.4 nm, the
-  minimum roughness): F(h < cap) = F(cap), U continued linearly, so overlapping or
-  touching spheres feel a finite attraction.
-* :class:`DoubleLayer` (DLVO electrostatic repulsion at constant, low surface potential
-  psi0, Derjaguin approximation; Hogg, Healy & Fuerstenau, Trans. Faraday Soc. 62, 1638
-  (1966); Russel, Saville & Schowalter, Colloidal Dispersions (1989) ch. 4):
-      U(h) = 4 pi eps eps0 psi0^2 R ln(1 + e^(-kappa h)),   R = a_i a_j/(a_i + a_j),
-  written in reduced units as U = psi^2 R ln(1 + e^(-h/lambda_D)) with lambda_D = 1/kappa
-  in a and the reduced surface potential psi, psi^2 = 4 pi eps eps0 a psi0^2 / E_unit
-  (= (e psi0/kT)^2 a / l_B for Brownian jobs, l_B the Bjerrum length). For equal spheres
-  it is the Dratler & Schowalter (1996) repulsion with F0 = psi^2/2, tau = 1/lambda_D; far away
-  it is the linear superposition form 4 pi eps eps0 psi0^2 R e^(-kappa h) (low potential). Valid for
-  kappa a >> 1, h << a, |e psi0/kT| <~ 2.
-* :class:`CriticalLoadRepulsion` (Mari, Seto, Morris & Denn, J. Rheol. 58 (2014)): the
-  repulsion of the frictional-contact model (sdmpi.dynamics.contacts), F0 exp(-h/lambda)
-  for h > 0 and F0 at contact.
-* :class:`Combined`: a sum of laws (DLVO = van der Waals + double layer).
+  held at F(cap_gap) below ``cap_gap`` (U continued linearly).
+* `DoubleLayer` (constant low surface potential, Derjaguin approximation; Hogg, Healy &
+  Fuerstenau, Trans. Faraday Soc. 62, 1638 (1966)): U = psi^2 R ln(1 + e^(-h/lambda_D)),
+  R = a_i a_j/(a_i + a_j).
+* `CriticalLoadRepulsion` (Mari, Seto, Morris & Denn, J. Rheol. 58 (2014)): F0 exp(-h/length)
+  for h > 0, F0 at contact (the frictional contacts' repulsion, `contacts`).
+* `Combined`: a sum of laws (DLVO = van der Waals + double layer).
 
-Shifted-force truncation (van der Waals, double layer): with h_c = cut-off x (a_i+a_j)/2,
-F_s(h) = F(h) - F(h_c) and U_s(h) = U(h) - U(h_c) + F(h_c) (h - h_c) for h < h_c, both 0
-beyond; F_s = -dU_s/dh still, and both are continuous at h_c. The job checks (`checks`)
-require |F(h_c)| <= ``TAIL`` |F(contact)| (contact: the cap for van der Waals, h = 0 for the
-double layer) so that the shift is negligible.
+Shifted-force truncation (van der Waals, double layer) at h_c = cut-off x (a_i + a_j)/2:
+F_s(h) = F(h) - F(h_c), U_s(h) = U(h) - U(h_c) + F(h_c) (h - h_c) for h < h_c, both 0
+beyond; the job checks (`checks`) require |F(h_c)| <= ``TAIL`` |F(contact)|.
+
+Limits, the reduced double-layer potential and the validity of each law: docs/physics.md,
+"Interparticle forces".
+
+Units: in the job file forces are in the job's force unit 6 pi eta_m a^2 / (time unit)
+(kT/a for Brownian jobs, 6 pi eta_m a^2 gamma_dot for non-Brownian steady shear),
+energies in force unit x a, lengths in a; the builders multiply every strength by
+``FORCE_UNIT`` = 6 pi into the Stokes units of the hydrodynamics (eta_m = a = 1).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Hydrodynamic models: what the integrator asks of the hydrodynamics at one configuration.
 
-A model (`HydrodynamicModel`, built by `sdmpi.dynamics.setup.hydrodynamic_model` from the entry of
-hydrodynamics.model in `sdmpi.registry.HYDRODYNAMIC_MODELS`) is evaluated at a
+A model (`HydrodynamicModel`, built from the job's keys in a `HydrodynamicSetting` by
+`sdmpi.dynamics.setup` from the entry of hydrodynamics.model in
+`sdmpi.registry.HYDRODYNAMIC_MODELS`) is evaluated at a
 configuration, ``model.at(positions, strain)``, which assembles and factorises whatever the
 model needs and returns an *evaluation* (`HydrodynamicEvaluation`) with
 
@@ -12,7 +13,7 @@ model needs and returns an *evaluation* (`HydrodynamicEvaluation`) with
   R_FU^-1 F_B + kT div R_FU^-1 (drift included; F_B of covariance 2 kT R_FU / dt) and an
   estimate of the Brownian stresslets -kT div(R_SU R_FU^-1) (Schaink et al. 2000, eq. 16);
 * ``pairs``: the pairs within the interparticle-force cut-off (`lubrication.PairList`,
-  true gaps), ``relative_mobility(pairs, mask)``: each pair's mobility of relative motion
+  true gaps), ``relative_mobility(i, j, e)``: each pair's mobility of relative motion
   along its line of centres (for the collision forces of `collisions`), ``stats()``: solver
   statistics of the evaluation.
 

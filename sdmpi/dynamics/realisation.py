@@ -1,51 +1,37 @@
-"""One SD realisation: Brownian hard spheres in a sheared periodic box, stepped in time.
+"""One SD realisation: Brownian spheres in a sheared periodic box, stepped in time.
 
-Overdamped Stokesian dynamics in configuration space (Schaink et al. 2000, eqs. 13, 32; Ito):
+Overdamped Stokesian dynamics in configuration space (Schaink et al., J. Rheol. 44 (2000),
+eqs. 13, 32; Ito):
 
     dx = [U_inf(x) + R_FU^-1 (F_P + R_FE e_inf) + kT div R_FU^-1] dt
-         + sqrt(2 kT dt) R_FU^-1/2 dW,
+         + sqrt(2 kT dt) R_FU^-1/2 dW.
 
-stepped by the integrator of integration.scheme (`integrators`, registered in
-`sdmpi.registry.INTEGRATORS`) with the hydrodynamics of a model
-(`models.hydrodynamic_model`: stokesian, far-field or free-draining) evaluated at the step's
-start x_k; by default explicitly (Euler-Maruyama),
+A realisation is built from the components of `setup.build` (the only reader of the job):
+a geometry (`systems.Bulk`, `monolayer.Monolayer`), a list of interparticle forces
+(`forces.Force`), a list of hydrodynamic-stress recorders (`recorders.StressRecorder`:
+Maxwell modes, per-particle stresslets), a hydrodynamic model (`models`) and an integrator
+(`integrators`). Each step, at the start x_k of t_k = k dt:
 
-    x_{k+1} = x_k + (gamma(t_{k+1}) - gamma(t_k)) y e_x + dt U(x_k),
+1. the model is evaluated at x_k; the imposed flow's velocities R_FU^-1 R_FE e_inf, at the
+   integrator's rate (the step's mean rate for Euler-Maruyama, `shear`), and its
+   stresslets S_H = (R_SE - R_SU R_FU^-1 R_FE) e_inf at gamma_dot(t_k);
+2. the forces' terms on the model's pairs are summed in order, F_P, and their velocities
+   R_FU^-1 F_P added; each force samples its own fields;
+3. with kT > 0 the model's Brownian velocities (drift included) and stresslets
+   (`drift`; Banchio & Brady, J. Chem. Phys. 118, 10323 (2003));
+4. the forces advance their state (the contacts' springs), the integrator moves the
+   spheres (in the geometry's plane) and corrects overlaps (`collisions`) unless the
+   geometry keeps them;
+5. the sample: stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz; the registry
+   `sdmpi.config.stresses`): hydrodynamic (1/V) sum S_H, Brownian (1/V) sum S_B,
+   interparticle -(1/V) sum (x F_P + R_SU R_FU^-1 F_P), collision (`collisions`), then the
+   forces' and the recorders' own fields.
 
-with the imposed flow's part of U, R_FU^-1 R_FE e_inf, taken at the step's mean rate
-<gamma_dot> = (gamma(t_{k+1}) - gamma(t_k))/dt (`shear`), of which the affine displacement
-is the exact integral. Both parts then belong to one flow: a pair whose relative velocity
-along its line of centres is (1 - A) times the affine one (A -> 1 near contact) closes with
-the step's own strain (with the start's rate gamma_dot(t_k) in the disturbance, it would be
-driven like the rate of A/(2(1 - A)) steps later). A Brownian force F_B = sqrt(2 kT/dt) C z
-with R_FU = C C^T and z ~ N(0, I), so <F_B F_B> = 2 kT R_FU / dt (fluctuation-dissipation),
-and the drift kT div R_FU^-1 and the Brownian stresslet -kT div(R_SU R_FU^-1) (Schaink et
-al. eq. 16) estimated by the model's drift scheme (`drift`: a random finite difference
-along the noise's directions, or Fixman's midpoint as in Banchio & Brady, J. Chem. Phys.
-118, 10323 (2003)).
+Why the step's mean rate, and each stream's sample time: docs/physics.md, "Dynamics".
 
-Stresses (bulk, per volume V, 6-vectors xx yy zz xy xz yz, units eta_m/t_D = kT/(6 pi a^3);
-the registry `config.stresses`): hydrodynamic (1/V) sum S_H with S_H = (R_SE - R_SU R_FU^-1
-R_FE) e_inf; Brownian (1/V) sum S_B; interparticle -(1/V) sum (x F_P + R_SU R_FU^-1 F_P);
-collision (`collisions`), the stress of the overlap correction's impulses. Maxwell media filter
-S_H by their modes (`media`). Units: a = 1, eta_m = 1, D0 = kT/(6 pi eta_m a) = 1, so
-kT = 6 pi and time is in t_D = a^2/D0; non-Brownian runs use the same code with kT = 0.
-
-Size classes (`job.system.size_classes`): every particle has its own radius a_i (in units
-of the largest, a = 1); the hydrodynamics, the overlap correction and the pair forces use
-them, and a, kT = 6 pi and t_D keep their meaning (those of the largest spheres).
-
-Hard spheres: lubrication keeps overlaps rare; pairs brought into contact by a finite step
-are counted and corrected at the end of the step by the potential-free correction of
-`collisions` (Schaink et al. 2000, sec. III, Bossis & Brady 1984): separated, or, with the
-rule ``reflect``, separated after the step's deterministic part and reflected after its
-Brownian part, both by contact impulses acting through the step's mobility R_FU^-1
-(``hydrodynamics.collisions``, `collisions.default_rule`). An optional pair
-repulsion (`forces.Repulsion`, Dratler & Schowalter 1996) adds F_P.
-
-Frictional contacts (`contacts`, interparticle.kind = "frictional", non-Brownian): overlaps
-are contacts, not corrected; their spring forces and torques join F_P (and its stress),
-their stress is also sampled alone, and their tangential stretches are state.
+Units: a = 1 (the largest radius), eta_m = 1, D0 = kT/(6 pi eta_m a) = 1, so kT = 6 pi and
+time is in t_D = a^2/D0; stresses in eta_m/t_D = kT/(6 pi a^3); non-Brownian runs use the
+same code with kT = 0 (time unit 1/gamma_dot under steady shear).
 """
 
 from __future__ import annotations
