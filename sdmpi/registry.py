@@ -8,13 +8,13 @@ the checks, the resource estimates, the command line and the key reference need 
 of an implementation, and where the implementation is (the class itself, or
 ``"module:Class"``, imported on first use). Every list of choices users see is read from
 here. This module uses only the standard library, so that `sdmpi.config` derives its
-choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`,
-`sdmpi.dynamics.models` and `sdmpi.dynamics.realisation` build the implementations it names.
+choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`
+and `sdmpi.dynamics.setup` build the implementations it names.
 
 Adding an implementation: docs/extending.md. In short, one module with the class
 (`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`,
-`sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`,
-`sdmpi.dynamics.forces.Force`) and one
+`sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`, or a builder
+of `sdmpi.dynamics.forces.Force` objects) and one
 ``register``: an entry below for those shipped with sdmpi, or a call of
 ``SOLVER_BACKENDS.register(BackendSpec(...))`` in the user's own module before the job is
 loaded.

@@ -44,8 +44,8 @@ from typing import TYPE_CHECKING, Any
 import numba
 import numpy as np
 
+from .component import SampleFields, StateFields
 from .forces import FORCE_UNIT, CriticalLoadRepulsion, Force, ForceSetting, ForceTerms, PairForce
-from .recorders import SampleFields, StateFields
 
 if TYPE_CHECKING:
     from ..hydro.lubrication import PairList

@@ -43,13 +43,13 @@ energies in force unit x a, lengths in a; the builders multiply every strength b
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from .recorders import SampleFields, StateFields
+from .component import NoState, SampleFields, Stateful
 
 if TYPE_CHECKING:
     from ..hydro.lubrication import PairList
@@ -342,7 +342,7 @@ class ForceTerms:
     counts: dict[str, int]
 
 
-class Force(Protocol):
+class Force(Stateful, Protocol):
     """An interparticle force on the pairs of a step (the hydrodynamic evaluation's pair
     list, `sdmpi.hydro.lubrication.PairList`), with its own sample fields and state.
     Registered by interparticle.kind in `sdmpi.registry.FORCES` (docs/extending.md)."""
@@ -393,20 +393,8 @@ class Force(Protocol):
         """
         raise NotImplementedError
 
-    def state_fields(self) -> StateFields:
-        """name -> (shape, dtype) of its state (empty: stateless)."""
-        raise NotImplementedError
 
-    def get_state(self) -> dict[str, np.ndarray]:
-        """Its state as arrays (copies), those of state_fields."""
-        raise NotImplementedError
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Restore its state from get_state (extra names ignored)."""
-        raise NotImplementedError
-
-
-class Stateless(Force):
+class Stateless(NoState, Force):
     """A `Force` without state or sample fields of its own: those members, empty."""
 
     def sample_fields(self, stress_unit: str) -> SampleFields:
@@ -416,15 +404,6 @@ class Stateless(Force):
         return {}
 
     def advance(self, velocities: np.ndarray, rate: float, dt: float) -> None:
-        pass
-
-    def state_fields(self) -> StateFields:
-        return {}
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
         pass
 
 

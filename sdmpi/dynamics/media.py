@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from .recorders import SampleFields, StateFields, StressRecorder, bulk_stress
+from .component import SampleFields, StateFields
+from .recorders import StressRecorder, bulk_stress
 
 
 @dataclass(frozen=True)

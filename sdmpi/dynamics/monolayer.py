@@ -38,8 +38,8 @@ import numpy as np
 
 from ..hydro.lubrication import close_pairs
 from .collisions import Collisions
+from .component import StateFields
 from .initial import hard_disk_monolayer, square_side
-from .recorders import StateFields
 from .systems import Geometry
 
 if TYPE_CHECKING:

@@ -111,9 +111,9 @@ class Realisation:
         """name -> (shape per sample, dtype, unit, description) of the sample stream.
 
         Returns:
-            `setup.sample_fields` of this realisation's job.
+            `setup.sample_fields` of this realisation's job (a copy).
         """
-        return self.fields
+        return dict(self.fields)
 
     def _components(self):
         """The components with state of their own, in state order."""

@@ -15,16 +15,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..hydro.basis import BASIS
+from .component import NoState, SampleFields, Stateful
 
 #: stress component order of the 6-vectors
 SIX_VECTOR_INDICES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 #: the 6-vector components (SIX_VECTOR_INDICES) of the basis tensors: (6, 5), BASIS[m][a, b]
 _SIX_OF_FIVE = np.array([[BASIS[m, a, b] for m in range(5)] for a, b in SIX_VECTOR_INDICES])
-
-#: name -> (shape per sample, dtype, unit, description) of sample fields
-SampleFields = dict[str, tuple[tuple[int, ...], str, str, str]]
-#: name -> (shape, dtype) of state fields
-StateFields = dict[str, tuple[tuple[int, ...], str]]
 
 
 def bulk_stress(tensors: np.ndarray, volume: float) -> np.ndarray:
@@ -53,7 +49,7 @@ def symmetric_six(matrix: np.ndarray) -> np.ndarray:
     return np.array([sym[a, b] for a, b in SIX_VECTOR_INDICES])
 
 
-class StressRecorder(Protocol):
+class StressRecorder(Stateful, Protocol):
     """A component that samples each step's hydrodynamic stresslets, with its own sample
     fields and state."""
 
@@ -81,20 +77,8 @@ class StressRecorder(Protocol):
         """
         raise NotImplementedError
 
-    def state_fields(self) -> StateFields:
-        """name -> (shape, dtype) of its state (empty: none)."""
-        raise NotImplementedError
 
-    def get_state(self) -> dict[str, np.ndarray]:
-        """Its state as arrays (copies)."""
-        raise NotImplementedError
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Restore its state from get_state (extra names ignored)."""
-        raise NotImplementedError
-
-
-class PerParticleStresslets(StressRecorder):
+class PerParticleStresslets(NoState, StressRecorder):
     """output.per_particle: each step's S_H of the N spheres, in the 5-basis."""
 
     def __init__(self, n_particles: int):
@@ -105,12 +89,3 @@ class PerParticleStresslets(StressRecorder):
 
     def sample(self, step: int, stresslets: np.ndarray, volume: float) -> dict[str, Any]:
         return {"stresslets": stresslets}
-
-    def state_fields(self) -> StateFields:
-        return {}
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        pass

@@ -21,11 +21,12 @@ import numpy as np
 from ..config.stresses import CONTRIBUTIONS
 from ..registry import FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, NO_FORCE, backend_for
 from .collisions import default_rule
+from .component import SampleFields
 from .forces import Force, ForceSetting
 from .media import MaxwellStress
 from .models import HydrodynamicModel, HydrodynamicSetting
 from .monolayer import Monolayer
-from .recorders import PerParticleStresslets, SampleFields, StressRecorder
+from .recorders import PerParticleStresslets, StressRecorder
 from .shear import NoShear, Oscillatory, Steady
 from .systems import Bulk, Geometry
 
@@ -233,7 +234,7 @@ def sample_fields(job: Job) -> SampleFields:
         "solver_residual": ((), "f8", "1", "largest relative residual of the step's iterative solves"),
         "lanczos_iterations": ((), "i4", "1", "Lanczos iterations of the step's Brownian forces"),
     }
-    for part in (*forces_of(job), *recorders_of(job, 1.0)):
+    for part in (*forces_of(job), *recorders_of(job, 1.0)):  # their fields do not depend on dt
         fields.update(part.sample_fields(su))
     return fields
 

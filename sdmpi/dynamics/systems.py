@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from .collisions import Collisions
+from .component import NoState, Stateful
 from .initial import hard_sphere_fluid
-from .recorders import StateFields
 
 if TYPE_CHECKING:
     from ..hydro.geometry import Lattice
 
-class Geometry(Protocol):
+class Geometry(Stateful, Protocol):
     """A realisation's geometry. ``box`` (3,) (a) and ``volume`` (a^3, the volume that
     normalises the bulk stresses) are set by `start`; ``corrects_overlaps``: whether
     overlapping pairs are corrected at the end of each step (`collisions`) or kept."""
@@ -76,20 +76,8 @@ class Geometry(Protocol):
         """The velocities (N, 6) the geometry allows (the same array where all are)."""
         raise NotImplementedError
 
-    def state_fields(self) -> StateFields:
-        """name -> (shape, dtype) of its state (empty: none)."""
-        raise NotImplementedError
 
-    def get_state(self) -> dict[str, np.ndarray]:
-        """Its state as arrays (copies)."""
-        raise NotImplementedError
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Restore its state from get_state (extra names ignored)."""
-        raise NotImplementedError
-
-
-class Bulk(Geometry):
+class Bulk(NoState, Geometry):
     """N spheres of radii ``radii`` (a) at volume fraction ``phi`` in a periodic cube with
     Lees-Edwards images, started as an equilibrium hard-sphere fluid of ``sweeps`` Monte
     Carlo sweeps (`initial.hard_sphere_fluid`); overlapping pairs are corrected unless
@@ -120,12 +108,3 @@ class Bulk(Geometry):
 
     def in_plane(self, velocity: np.ndarray) -> np.ndarray:
         return velocity
-
-    def state_fields(self) -> StateFields:
-        return {}
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        pass
