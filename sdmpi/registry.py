@@ -146,8 +146,8 @@ class IntegratorSpec(Spec):
         summary: what it is, one phrase (the key reference).
         implementation: a `sdmpi.dynamics.integrators.Integrator` class, or "module:Class".
         brownian: it integrates Brownian motion (False: brownian.enabled = true is refused).
-        contacts: it integrates frictional contacts (interparticle.kind = "frictional",
-            whose tangential springs are state advanced by each step's velocities).
+        contacts: it integrates the forces with contacts (`ForceSpec.contacts`, the frictional
+            ones: their tangential springs are state advanced by each step's velocities).
     """
 
     brownian: bool = True

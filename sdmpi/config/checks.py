@@ -354,7 +354,7 @@ def _far_field_refresh(job):
 
 def _integrator(job):
     """What the integrator supports (`sdmpi.registry.IntegratorSpec`): Brownian motion,
-    frictional contacts."""
+    forces with contacts (`sdmpi.registry.ForceSpec.contacts`)."""
     spec, problems = INTEGRATORS[job.integration.scheme], []
     able = INTEGRATORS.names(lambda i: i.brownian)
     if job.brownian.enabled and not spec.brownian:
@@ -362,8 +362,8 @@ def _integrator(job):
                                 "velocity), not Brownian motion", spec.name,
                                 allowed=f"{quoted(able)}, or brownian.enabled = false"))
     if _has_contacts(job) and not spec.contacts:
-        problems.append(Problem("integration.scheme", "does not integrate the frictional contacts' "
-                                "tangential springs (non-smooth in time)", spec.name,
+        problems.append(Problem("integration.scheme", f"does not integrate the history of the "
+                                f"{job.interparticle.kind} contacts (non-smooth in time)", spec.name,
                                 allowed=quoted(INTEGRATORS.names(lambda i: i.contacts))))
     return problems
 
