@@ -16,8 +16,8 @@ import sdmpi
 from sdmpi.cli import main
 from sdmpi.config import JobError, parse_job, resources
 from sdmpi.dynamics.drift import BrownianTerms
-from sdmpi.registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, BackendSpec,
-                            DriftSpec, IntegratorSpec, ModelSpec)
+from sdmpi.registry import (DRIFT_SCHEMES, FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, BackendSpec,
+                            DriftSpec, ForceSpec, IntegratorSpec, ModelSpec)
 
 from .runs import child_env, fresh_lubrication_tables
 
@@ -130,10 +130,46 @@ def test_loader_follows_the_registries(registered, capsys):
         parse_job('[hydrodynamics]\nmodel = "far-field"\nlubrication = false\n')
 
 
+@pytest.fixture
+def registered_force():
+    """A non-Brownian force with contacts that reads interparticle.mu and may act in
+    monolayers, registered for one test."""
+    force = FORCES.register(ForceSpec("test-force", "a test force", "nowhere:build", keys=("mu",),
+                                      brownian=False, monolayer=True, contacts=True))
+    yield force
+    FORCES.unregister(force.name)
+
+
+def test_loader_follows_the_force_registry(registered_force):
+    """A registered force is an interparticle.kind choice whose keys apply, and the checks read
+    its spec (never its builder, which is nowhere): Brownian jobs refused, monolayers
+    allowed, contacts need lubrication and an integrator that integrates them."""
+    steady = '[brownian]\nenabled = false\n[shear]\nprotocol = "steady"\nrate = 1.0\n'
+    job = parse_job(steady + '[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+    assert job.interparticle.mu == 0.5
+    with pytest.raises(JobError, match="interparticle.mu.* required"):
+        parse_job(steady + '[interparticle]\nkind = "test-force"\n')
+    with pytest.raises(JobError, match='brownian.enabled = true: the test-force force is a non-Brownian model'):
+        parse_job('[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+    monolayer = ('[system]\ngeometry = "monolayer"\nn_particles = 25\nphi = [0.4]\n'
+                 '[integration]\ndt = 0.01\nn_steps = 10\ndiscard_steps = 0\n')
+    with pytest.raises(JobError) as err:
+        parse_job(steady + monolayer + '[interparticle]\nkind = "vdw"\nhamaker = 1.0\ncap_gap = 0.01\n')
+    assert '"none", "repulsion" or "test-force"' in str(err.value)
+    with pytest.raises(JobError, match="test-force contacts need the lubrication"):
+        parse_job(steady + '[hydrodynamics]\nmodel = "far-field"\n[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+    with pytest.raises(JobError, match="does not integrate the history of the test-force contacts"):
+        parse_job(steady + '[integration]\nscheme = "adams-bashforth-4"\ndt = 0.01\nn_steps = 10\n'
+                  'discard_steps = 0\n[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+
+
 def test_unregistered_names_are_refused():
     with pytest.raises(JobError, match='solver.backend = "test-gpu": not a valid choice.*'
                                        'one of "dense", "petsc-dense", "petsc-krylov", "auto"'):
         parse_job('[solver]\nbackend = "test-gpu"\n')
+    with pytest.raises(JobError, match='interparticle.kind = "test-force": not a valid choice.*'
+                                       'one of "repulsion", "vdw", "dlvo", "frictional", "none"'):
+        parse_job('[interparticle]\nkind = "test-force"\n')
     with pytest.raises(ValueError, match="registered already"):
         SOLVER_BACKENDS.register(BackendSpec("dense", "again", "nowhere:Solver"))
 
