@@ -321,13 +321,11 @@ class ForceSetting:
     """What every force of a realisation may need besides its own job keys.
 
     Attributes:
-        n_particles: N.
         radii: (N,) sphere radii, in a.
         cutoff: the lubrication cut-off (mean radii), beyond which the step's pair list
             ends: truncated laws vanish there.
     """
 
-    n_particles: int
     radii: np.ndarray
     cutoff: float
 

@@ -113,8 +113,7 @@ def forces_of(job: Job) -> list[Force]:
     if inter.kind == NO_FORCE:
         return []
     spec = FORCES[inter.kind]
-    setting = ForceSetting(job.system.n_particles, np.array(job.system.radii, dtype=float),
-                           job.hydrodynamics.lubrication_cutoff)
+    setting = ForceSetting(np.array(job.system.radii, dtype=float), job.hydrodynamics.lubrication_cutoff)
     return list(spec.load()(setting, **{key: getattr(inter, key) for key in spec.keys}))
 
 
