@@ -234,8 +234,10 @@ def _size_classes(job):
 
 
 def _repulsion_range(job):
+    """interparticle.tau (of whichever force reads it): the repulsion of range 1/tau decays
+    to 1e-12 within the lubrication cut-off."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    if inter.kind == "repulsion" and 12 * math.log(10) / inter.tau > cutoff:
+    if inter.tau is not None and 12 * math.log(10) / inter.tau > cutoff:
         need = 12 * math.log(10) / cutoff
         return [Problem("interparticle.tau", "the repulsion must decay (to 1e-12) within the "
                         f"lubrication cut-off (= {cutoff:g}), whose pairs it acts on", inter.tau,
@@ -244,11 +246,11 @@ def _repulsion_range(job):
 
 
 def _force_range(job):
-    """vdw / dlvo: the van der Waals cap inside the cut-off gap of the smallest pair (the
-    force laws' truncation at the cut-off is checked with them,
+    """interparticle.cap_gap (vdw, dlvo): the van der Waals cap inside the cut-off gap of the
+    smallest pair (the force laws' truncation at the cut-off is checked with them,
     `sdmpi.dynamics.checks`)."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    if inter.kind not in ("vdw", "dlvo"):
+    if inter.cap_gap is None:
         return []
     smallest = min(job.system.class_radii)  # the cut-off gap is cut-off x mean radius
     if inter.cap_gap >= cutoff * smallest:
@@ -269,12 +271,12 @@ def _force_brownian(job):
                     allowed=f'false with interparticle.kind = "{kind}"')]
 
 
-def _frictional(job):
-    """Frictional contacts (sdmpi.dynamics.contacts): the repulsion decayed within the
-    lubrication cut-off (the contact springs' stability at the time step is checked with
-    them, `sdmpi.dynamics.checks`)."""
+def _repulsion_length(job):
+    """interparticle.repulsion_length (frictional contacts, sdmpi.dynamics.contacts): the
+    critical-load repulsion decayed to 1e-12 within the lubrication cut-off (the contact
+    springs' stability at the time step is checked with them, `sdmpi.dynamics.checks`)."""
     inter, hyd = job.interparticle, job.hydrodynamics
-    if inter.kind != "frictional":
+    if inter.repulsion_length is None:
         return []
     problems = []
     reach = 12 * math.log(10) * inter.repulsion_length
@@ -414,7 +416,8 @@ CROSS_CHECKS: tuple[CrossCheck, ...] = (
     (("hydrodynamics.model", "hydrodynamics.lubrication", "system.geometry", "interparticle.kind",
       "ensemble.ranks_per_task", "brownian.scheme", "solver.backend"), _model),
     (("interparticle.kind", "brownian.enabled"), _force_brownian),
-    (("interparticle.kind", "interparticle.repulsion_length", "hydrodynamics.lubrication_cutoff"), _frictional),
+    (("interparticle.kind", "interparticle.repulsion_length", "hydrodynamics.lubrication_cutoff"),
+     _repulsion_length),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
     (("integration.scheme", "brownian.enabled", "interparticle.kind"), _integrator),
     (("hydrodynamics.far_field_refresh", "hydrodynamics.model", "brownian.enabled", "solver.backend"),

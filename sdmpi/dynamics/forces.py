@@ -248,7 +248,7 @@ class Combined:
 
 
 def tail_ratios(
-    kind: str, cap_gap: float | None, debye_length: float | None, cutoff: float, class_radii: tuple[float, ...]
+    cap_gap: float | None, debye_length: float | None, cutoff: float, class_radii: tuple[float, ...]
 ) -> dict[str, tuple[float, tuple[float, float]]]:
     """|F(cut-off)| / |F(contact)| of each truncated part of a law, for the pair of size
     classes where it is largest (the cut-off gap is cut-off x the pair's mean radius, the
@@ -256,9 +256,8 @@ def tail_ratios(
     {"interparticle.<key>": (ratio, (a_i, a_j))} for the job check against TAIL (`checks`).
 
     Args:
-        kind: interparticle.kind.
-        cap_gap: the van der Waals cap (a), used by "vdw" and "dlvo".
-        debye_length: the double layer's Debye length (a), used by "dlvo".
+        cap_gap: the van der Waals cap (a), or None without van der Waals force.
+        debye_length: the double layer's Debye length (a), or None without double layer.
         cutoff: the lubrication cut-off (mean radii).
         class_radii: the radii of the size classes (a).
 
@@ -268,9 +267,9 @@ def tail_ratios(
     """
     pairs = [(a, b) for k, a in enumerate(class_radii) for b in class_radii[k:]]
     laws = {}
-    if kind in ("vdw", "dlvo"):
+    if cap_gap is not None:
         laws["interparticle.cap_gap"] = (VanDerWaals(1.0, cap_gap), cap_gap)
-    if kind == "dlvo":
+    if debye_length is not None:
         laws["interparticle.debye_length"] = (DoubleLayer(1.0, debye_length), 0.0)
     out = {}
     for path, (law, contact) in laws.items():
