@@ -43,7 +43,7 @@ def run(scheme, refresh, dt):
     overlaps = samples["n_overlaps"][kept]
     shear = samples["stress_hydrodynamic"][kept, 3]
     return {"scheme": scheme, "far_field_refresh": refresh, "dt": dt, "steps": steps,
-            "stopped_at": int(real.monolayer.stopped_at), "ms_per_step": 1e3 * elapsed / steps,
+            "stopped_at": int(real.geometry.stopped_at), "ms_per_step": 1e3 * elapsed / steps,
             "mean_overlaps": float(overlaps.mean()), "steps_with_overlaps": float((overlaps > 0).mean()),
             "deepest_gap": float(np.nanmin(samples["min_gap"])),
             "mean_shear_stress_second_half": float(shear[len(shear) // 2:].mean())}

@@ -24,7 +24,7 @@ import numpy as np
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics.initial import hard_sphere_fluid
 from sdmpi.dynamics.drift import rfd_length
-from sdmpi.dynamics.models import hydrodynamic_model
+from sdmpi.dynamics.setup import hydrodynamic_model
 from sdmpi.dynamics.realisation import KT_REDUCED
 
 JOB = "jobs/schaink2000_newtonian.toml"

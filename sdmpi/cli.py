@@ -89,7 +89,7 @@ def _add_validate(subparsers) -> None:
 def _validate(args) -> int:
     from .config import resources
     from .config.checks import scheme_problems
-    from .dynamics.models import job_backend
+    from .dynamics.setup import job_backend
 
     try:
         job = job_from_args(args)
@@ -137,7 +137,7 @@ def resource_text(job, ranks: int, output) -> str:
     from pathlib import Path
 
     from .config import resources
-    from .dynamics.models import job_backend
+    from .dynamics.setup import job_backend
     from .ensemble.store import run_file_bytes
 
     gib = resources.gib
@@ -257,7 +257,7 @@ def _backend(job) -> str:
     """The solver backend as `run` uses it ("auto" resolved), its far field if it is
     matrix-free, and whether PETSc, where the backend needs it, can be imported here
     (`run` refuses the job otherwise)."""
-    from .dynamics.models import job_backend
+    from .dynamics.setup import job_backend
     from .hydro.krylov import far_field_kind
     from .hydro.petsc_dense import PetscUnavailable, import_petsc4py
     from .registry import SOLVER_BACKENDS

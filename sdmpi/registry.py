@@ -1,21 +1,20 @@
 """The registries of sdmpi's extension points: solver backends, hydrodynamic models, drift
-schemes, integrators and the writers of the run file.
+schemes, integrators, interparticle forces and the writers of the run file.
 
 A registry maps a name, as a job file spells it (``solver.backend``,
-``hydrodynamics.model``, ``brownian.scheme``, ``integration.scheme``; a writer's own
-name), to an entry: a frozen spec that declares what the job loader,
+``hydrodynamics.model``, ``brownian.scheme``, ``integration.scheme``,
+``interparticle.kind``; a writer's own name), to an entry: a frozen spec that declares what the job loader,
 the checks, the resource estimates, the command line and the key reference need to know
 of an implementation, and where the implementation is (the class itself, or
 ``"module:Class"``, imported on first use). Every list of choices users see is read from
 here. This module uses only the standard library, so that `sdmpi.config` derives its
 choices and checks from it without importing the numerical packages; `sdmpi.hydro.solvers`,
-`sdmpi.dynamics.models`, `sdmpi.dynamics.realisation` and `sdmpi.ensemble.writers` build
-the implementations it names.
+`sdmpi.dynamics.setup` and `sdmpi.ensemble.writers` build the implementations it names.
 
 Adding an implementation: docs/extending.md. In short, one module with the class
 (`sdmpi.hydro.backend.SolverBackend`, `sdmpi.dynamics.models.HydrodynamicModel`,
 `sdmpi.dynamics.drift.DriftScheme`, `sdmpi.dynamics.integrators.Integrator`,
-`sdmpi.ensemble.writers.Writer`) and one
+`sdmpi.ensemble.writers.Writer`, or a builder of `sdmpi.dynamics.forces.Force` objects) and one
 ``register``: an entry below for those shipped with sdmpi, or a call of
 ``SOLVER_BACKENDS.register(BackendSpec(...))`` in the user's own module before the job is
 loaded.
@@ -151,12 +150,38 @@ class IntegratorSpec(Spec):
         summary: what it is, one phrase (the key reference).
         implementation: a `sdmpi.dynamics.integrators.Integrator` class, or "module:Class".
         brownian: it integrates Brownian motion (False: brownian.enabled = true is refused).
-        contacts: it integrates frictional contacts (interparticle.kind = "frictional",
-            whose tangential springs are state advanced by each step's velocities).
+        contacts: it integrates the forces with contacts (`ForceSpec.contacts`, the frictional
+            ones: their tangential springs are state advanced by each step's velocities).
     """
 
     brownian: bool = True
     contacts: bool = True
+
+
+@dataclass(frozen=True)
+class ForceSpec(Spec):
+    """An interparticle force (interparticle.kind), as sdmpi's job checks know it.
+
+    Attributes:
+        name: its interparticle.kind value.
+        summary: what it is, one phrase (the key reference).
+        implementation: a builder, ``build(setting, **keys) -> list of
+            sdmpi.dynamics.forces.Force`` (``setting`` a `sdmpi.dynamics.forces.ForceSetting`,
+            ``keys`` the values of the [interparticle] keys named in ``keys``, in the job's
+            units), or "module:function".
+        keys: the [interparticle] keys it reads, passed to the builder by name.
+        brownian: it may act in Brownian jobs (False: brownian.enabled = true is refused).
+        monolayer: it may act in monolayers (system.geometry = "monolayer").
+        contacts: overlapping pairs are its contacts, with a history that each step's
+            velocities advance: overlaps are kept (not corrected), the model needs
+            lubrication and the integrator must integrate contacts
+            (`IntegratorSpec.contacts`).
+    """
+
+    keys: tuple[str, ...] = ()
+    brownian: bool = True
+    monolayer: bool = False
+    contacts: bool = False
 
 
 E = TypeVar("E", bound=Spec)
@@ -314,6 +339,33 @@ INTEGRATORS.register(IntegratorSpec(
     "adams-bashforth-4", "fourth-order Adams-Bashforth (non-Brownian jobs; Dratler & Schowalter "
     "1996), started by three classical Runge-Kutta steps", "sdmpi.dynamics.integrators:AdamsBashforth4",
     brownian=False, contacts=False))
+
+
+# --------------------------------------------------------------------------- interparticle forces
+
+NO_FORCE = "none"
+#: interparticle.kind = "none": hard spheres, no force of this registry
+FORCES: Registry[ForceSpec] = Registry("interparticle.kind", {
+    NO_FORCE: "hard spheres (lubrication and the potential-free overlap correction)"})
+FORCES.register(ForceSpec(
+    "repulsion", "f0 tau exp(-tau h)/(1 + exp(-tau h)) along the line of centres (Dratler & Schowalter 1996)",
+    "sdmpi.dynamics.forces:repulsion", keys=("f0", "tau"), monolayer=True))
+FORCES.register(ForceSpec(
+    "vdw", "Hamaker's van der Waals attraction, constant below cap_gap (Finke et al. 2020)",
+    "sdmpi.dynamics.forces:van_der_waals", keys=("hamaker", "cap_gap")))
+FORCES.register(ForceSpec(
+    "dlvo", "vdw plus the double-layer repulsion psi^2 R ln(1 + exp(-h/debye_length))",
+    "sdmpi.dynamics.forces:dlvo", keys=("hamaker", "cap_gap", "surface_potential", "debye_length")))
+FORCES.register(ForceSpec(
+    "frictional", "contact springs with Coulomb friction and the critical-load repulsion (Mari et al. 2014)",
+    "sdmpi.dynamics.contacts:frictional", keys=("mu", "k_n", "k_t", "f_r0", "repulsion_length", "max_contacts"),
+    brownian=False, contacts=True))
+
+
+def force_kinds(where: Callable[[ForceSpec], bool]) -> tuple[str, ...]:
+    """The interparticle.kind values for which ``where(spec)`` holds, "none" (hard spheres,
+    which every combination allows) first."""
+    return (NO_FORCE, *FORCES.names(where))
 
 
 # --------------------------------------------------------------------------- writers

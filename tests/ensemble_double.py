@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from sdmpi.dynamics.realisation import sample_fields
+from sdmpi.dynamics.setup import sample_fields
 
 SLEEP = float(os.environ.get("SDMPI_DOUBLE_SLEEP", "0"))
 

@@ -1,5 +1,5 @@
-"""A solver backend, a hydrodynamic model and a writer defined outside sdmpi, registered by
-this module, and `sdmpi` run with them (tests/test_extension.py):
+"""A solver backend, a hydrodynamic model, an interparticle force and a writer defined
+outside sdmpi, registered by this module, and `sdmpi` run with them (tests/test_extension.py):
 python tests/extension_plugin.py run JOB.toml -o RUN.h5 [--set ...]
 
 * solver.backend = "numpy-cholesky": R_FU = L L^T by numpy's Cholesky, solves by two
@@ -11,6 +11,12 @@ python tests/extension_plugin.py run JOB.toml -o RUN.h5 [--set ...]
   that of "free-draining" and its motion the same.
 * writer "step-times": ``extra/NNNNNN/time``, the time of every step's sample, one row per
   step (a toy output that a test compares with the sample stream's ``time``).
+* interparticle.kind = "split-repulsion" (keys f0, tau): the repulsion of Dratler &
+  Schowalter (1996), F(h) = f0 tau e^(-tau h)/(1 + e^(-tau h)), written here as two forces
+  of half its strength each (`HalfRepulsion`, a pair law of its own), the second of which
+  also samples ``pairs_seen``, the pairs it has seen within the cut-off so far, and keeps
+  that count as its state. Halving is exact in floating point, so the two halves sum to
+  the samples of "repulsion" bit for bit.
 """
 
 import sys
@@ -21,11 +27,12 @@ import numpy as np  # noqa: E402
 from scipy.linalg import solve_triangular  # noqa: E402
 
 from sdmpi.config import enumerate_tasks  # noqa: E402
+from sdmpi.dynamics.forces import FORCE_UNIT, ForceTerms, PairForce, pair_forces  # noqa: E402
 from sdmpi.dynamics.models import BrownianTerms, FreeDrainingModel  # noqa: E402
 from sdmpi.ensemble.h5 import new_dataset  # noqa: E402
 from sdmpi.hydro.backend import SolverBackend  # noqa: E402
-from sdmpi.registry import (HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, WRITERS, BackendSpec, ModelSpec,  # noqa: E402
-                            Spec)
+from sdmpi.registry import (FORCES, HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, WRITERS, BackendSpec,  # noqa: E402
+                            ForceSpec, ModelSpec, Spec)
 
 #: the medium's viscosity over the job's (eta_m)
 VISCOSITY = 2.0
@@ -123,11 +130,62 @@ class StepTimesRecorder:
         self.start, self.rows = stop, []
 
 
+class HalfRepulsion:
+    """Half of F(h) = F0 tau e^(-tau h)/(1 + e^(-tau h)) (a `sdmpi.dynamics.forces.PairLaw`;
+    the potential is not needed to step)."""
+
+    def __init__(self, f0, tau):
+        self.f0, self.tau = 0.5 * f0, tau
+
+    def magnitude(self, gap, a_i=1.0, a_j=1.0):
+        e = np.exp(-self.tau * np.maximum(gap, 0.0))
+        return self.f0 * self.tau * e / (1.0 + e)
+
+
+class CountingPairForce:
+    """The pair forces of a law (a `sdmpi.dynamics.forces.Force` written out), sampling
+    ``pairs_seen``: the pairs within the cut-off summed over the steps so far (state)."""
+
+    def __init__(self, law, radii):
+        self.law, self.radii, self.seen = law, radii, 0
+
+    def terms(self, pairs):
+        n = len(self.radii)
+        forces, virial = pair_forces(self.law, pairs, n, self.radii)
+        return ForceTerms(np.hstack([forces, np.zeros((n, 3))]), virial, {"pairs": len(pairs.i)})
+
+    def sample_fields(self, stress_unit):
+        return {"pairs_seen": ((), "i8", "1", "pairs within the cut-off, summed over the steps so far")}
+
+    def sample(self, terms, stress):
+        self.seen += terms.counts["pairs"]
+        return {"pairs_seen": self.seen}
+
+    def advance(self, velocities, rate, dt):
+        pass
+
+    def state_fields(self):
+        return {"pairs_seen": ((1,), "i8")}
+
+    def get_state(self):
+        return {"pairs_seen": np.array([self.seen], dtype=np.int64)}
+
+    def set_state(self, state):
+        self.seen = int(state["pairs_seen"][0])
+
+
+def split_repulsion(setting, *, f0, tau):
+    """The forces of interparticle.kind = "split-repulsion": two halves of the repulsion."""
+    law = HalfRepulsion(FORCE_UNIT * f0, tau)
+    return [PairForce(law, setting.radii), CountingPairForce(law, setting.radii)]
+
+
 SOLVER_BACKENDS.register(BackendSpec("numpy-cholesky", "numpy Cholesky on one rank", NumpyCholeskySolver,
                                      dense_matrices=4))
 HYDRODYNAMIC_MODELS.register(ModelSpec("viscous-free-draining", "free draining, twice as viscous",
                                        ViscousFreeDraining, solves=False))
 WRITERS.register(Spec("step-times", "the time of every step", StepTimes))
+FORCES.register(ForceSpec("split-repulsion", "the repulsion as two halves", split_repulsion, keys=("f0", "tau")))
 
 if __name__ == "__main__":
     sys.exit(cli.main(sys.argv[1:]))

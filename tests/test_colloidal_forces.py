@@ -14,9 +14,8 @@ from sdmpi.config import JobError, enumerate_tasks
 from sdmpi.dynamics.checks import parse_job
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.integrators import EulerMaruyama
-from sdmpi.dynamics.models import hydrodynamic_model
-from sdmpi.dynamics.forces import (FORCE_UNIT, Combined, DoubleLayer, Repulsion, VanDerWaals,
-                                   force_law, pair_forces)
+from sdmpi.dynamics.forces import FORCE_UNIT, Combined, DoubleLayer, PairForce, Repulsion, VanDerWaals, pair_forces
+from sdmpi.dynamics.setup import forces_of, hydrodynamic_model
 from sdmpi.hydro.lubrication import close_pairs
 from sdmpi.hydro.two_sphere import resistance_scalars
 
@@ -123,13 +122,13 @@ BASE = '[shear]\nprotocol = "steady"\nrate = 1.0\n[brownian]\nenabled = false\n'
 def test_force_law_from_job_in_force_units():
     job = parse_job(BASE + '[interparticle]\nkind = "dlvo"\nhamaker = 0.5\ncap_gap = 0.01\n'
                     'debye_length = 0.05\nsurface_potential = 4.0\n')
-    law = force_law(job)
-    vdw, dl = law.parts
+    (force,) = forces_of(job)
+    vdw, dl = force.law.parts
     assert vdw == VanDerWaals(FORCE_UNIT * 0.5, 0.01, 2.0)
     assert dl == DoubleLayer(FORCE_UNIT * 16.0, 0.05, 2.0)
-    rep = force_law(parse_job(BASE + '[interparticle]\nkind = "repulsion"\nf0 = 0.5\ntau = 100.0\n'))
-    assert rep == Repulsion(FORCE_UNIT * 0.5, 100.0)
-    assert force_law(parse_job(BASE)) is None
+    (rep,) = forces_of(parse_job(BASE + '[interparticle]\nkind = "repulsion"\nf0 = 0.5\ntau = 100.0\n'))
+    assert rep.law == Repulsion(FORCE_UNIT * 0.5, 100.0)
+    assert forces_of(parse_job(BASE)) == []
 
 
 @pytest.mark.parametrize("extra,fragments", [
@@ -197,6 +196,8 @@ def sd_gaps(inter, h0, dt, t_end):
     real.n_particles, real.radii = 2, np.ones(2)
     real.box, real.volume = np.full(3, BOX), BOX ** 3
     real.model = hydrodynamic_model(job, real.radii, real.box)
+    (force,) = real.forces
+    real.forces = [PairForce(force.law, real.radii)]
     real.integrator = EulerMaruyama(dataclasses.replace(real.integrator.motion, n_particles=2, box=real.box))
     c = BOX / 2
     real.positions = np.array([[c, c, c - 1 - h0 / 2], [c, c, c + 1 + h0 / 2]])
@@ -207,7 +208,7 @@ def sd_gaps(inter, h0, dt, t_end):
         d -= BOX * np.round(d / BOX)
         assert abs(d[0]) < 1e-12 and abs(d[1]) < 1e-12
         gaps.append(np.linalg.norm(d) - 2.0)
-    return np.array(gaps), force_law(job)
+    return np.array(gaps), force.law
 
 
 @pytest.mark.parametrize("inter,h0,t_end", [

@@ -19,11 +19,11 @@ from sdmpi.cli import main
 from sdmpi.config import JobError, enumerate_tasks
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.checks import load_job, parse_job
-from sdmpi.dynamics.models import hydrodynamic_model
-from sdmpi.dynamics.contacts import (ContactLaw, CriticalLoadRepulsion, FrictionalContacts,
-                                     contact_model, sliding_mobility, sliding_velocity, tangent)
-from sdmpi.dynamics.forces import FORCE_UNIT, force_law
+from sdmpi.dynamics.contacts import (ContactLaw, CriticalLoadRepulsion, FrictionalContacts, sliding_mobility,
+                                     sliding_velocity, tangent)
+from sdmpi.dynamics.forces import FORCE_UNIT, PairForce
 from sdmpi.dynamics.integrators import EulerMaruyama
+from sdmpi.dynamics.setup import forces_of, hydrodynamic_model
 from sdmpi.hydro import solve_mobility
 from sdmpi.hydro.basis import to_five
 from sdmpi.hydro.lubrication import close_pairs
@@ -72,8 +72,8 @@ def test_repulsion_is_minus_gradient_with_critical_load_at_contact():
     assert law.magnitude(0.05) == pytest.approx(2.0 / math.e, rel=1e-15)
     assert law.magnitude(law.reach) == pytest.approx(2e-12, rel=1e-9)
     job = frictional_job(f_r0=0.3)
-    assert force_law(job) == CriticalLoadRepulsion(FORCE_UNIT * 0.3, 0.05)
-    model = contact_model(job)
+    repulsion, model = forces_of(job)
+    assert repulsion.law == CriticalLoadRepulsion(FORCE_UNIT * 0.3, 0.05)
     assert model.law == ContactLaw(0.5, FORCE_UNIT * 1000.0, FORCE_UNIT * 500.0)
     assert model.partners.shape == (27, 12)
 
@@ -88,7 +88,7 @@ def test_normal_springs_are_minus_gradient_of_the_contact_energy():
         return 0.5 * law.k_n * np.sum(np.minimum(pairs.gap, 0.0) ** 2)
 
     pairs = close_pairs(pos, radii, None, cutoff=0.1)
-    got = FrictionalContacts(law, len(pos), 12).forces(pairs, radii)
+    got = FrictionalContacts(law, radii, 12).forces(pairs)
     assert got.n_contacts >= len(pos) - 1
     num = np.zeros_like(pos)
     for k in range(len(pos)):
@@ -106,7 +106,7 @@ def test_third_law_torque_balance_virial_and_coulomb_limit():
     pos, radii = cluster(rng, n=7)
     law = ContactLaw(0.4, 50.0, 20.0)
     pairs = close_pairs(pos, radii, None, cutoff=0.1)
-    model = FrictionalContacts(law, len(pos), 12)
+    model = FrictionalContacts(law, radii, 12)
     touching = pairs.gap < 0
     lo = np.minimum(pairs.i, pairs.j)[touching]
     hi = np.maximum(pairs.i, pairs.j)[touching]
@@ -114,7 +114,7 @@ def test_third_law_torque_balance_virial_and_coulomb_limit():
         slot = np.count_nonzero(model.partners[a] >= 0)
         model.partners[a, slot] = b
         model.stretch[a, slot] = rng.normal(0, 1e-5 if k % 2 else 0.05, 3)
-    got = model.forces(pairs, radii)
+    got = model.forces(pairs)
     assert 0 < got.n_sliding < got.n_contacts
     assert np.allclose(got.forces.sum(axis=0), 0.0, atol=1e-12)
     # angular momentum: sum (x x F + T) = 0 (tangential forces act at the contact points)
@@ -163,9 +163,9 @@ def test_history_sign_reset_and_overflow():
     law = ContactLaw(1.0, 100.0, 10.0)
     radii = np.ones(3)
     pos = np.array([[0.0, 0.0, 0.0], [1.99, 0.0, 0.0], [0.0, 1.99, 0.0]])
-    model = FrictionalContacts(law, 3, 2)
+    model = FrictionalContacts(law, radii, 2)
     pairs = close_pairs(pos, radii, None, cutoff=0.1)
-    model.forces(pairs, radii)
+    model.forces(pairs)
     vel = np.zeros((3, 6))
     vel[1, 2] = 1.0   # particle 1 moves along z: slides on 0
     model.advance(vel, 0.0, 0.01)
@@ -176,16 +176,16 @@ def test_history_sign_reset_and_overflow():
     # on particle 1 is still -k_t xi
     swapped = close_pairs(pos, radii, None, cutoff=0.1)
     swapped.i, swapped.j, swapped.dx = swapped.j.copy(), swapped.i.copy(), -swapped.dx
-    got = model.forces(swapped, radii)
+    got = model.forces(swapped)
     assert got.forces[1, 2] == pytest.approx(-law.k_t * 0.01, rel=1e-12)
     # separation resets: particle 2 leaves
     pos[2, 1] = 2.5
-    model.forces(close_pairs(pos, radii, None, cutoff=0.1), radii)
+    model.forces(close_pairs(pos, radii, None, cutoff=0.1))
     model.advance(np.zeros((3, 6)), 0.0, 0.01)
     assert list(model.partners[0]).count(2) == 0 and list(model.partners[0]).count(1) == 1
-    small = FrictionalContacts(law, 3, 1)
+    small = FrictionalContacts(law, radii, 1)
     pos[2, 1] = 1.99
-    small.forces(close_pairs(pos, radii, None, cutoff=0.1), radii)
+    small.forces(close_pairs(pos, radii, None, cutoff=0.1))
     with pytest.raises(RuntimeError, match="interparticle.max_contacts = 1"):
         small.advance(np.zeros((3, 6)), 0.0, 0.01)
 
@@ -267,16 +267,18 @@ def sd_contact(dt, t_end):
     real.box, real.volume = np.full(3, BOX), BOX ** 3
     real.model = hydrodynamic_model(job, real.radii, real.box)
     real.integrator = EulerMaruyama(dataclasses.replace(real.integrator.motion, n_particles=2, box=real.box))
-    real.contacts = FrictionalContacts(real.contacts.law, 2, 4)
-    real.contacts.partners[0, 0] = 1
-    real.contacts.stretch[0, 0] = [XI0, 0.0, 0.0]
+    repulsion, contacts = real.forces
+    contacts = FrictionalContacts(contacts.law, real.radii, 4)
+    real.forces = [PairForce(repulsion.law, real.radii), contacts]
+    contacts.partners[0, 0] = 1
+    contacts.stretch[0, 0] = [XI0, 0.0, 0.0]
     c = BOX / 2
     real.positions = np.array([[c, c, c - 1 - H0 / 2], [c, c, c + 1 + H0 / 2]])
     xi, gaps = [XI0], [H0]
     for _ in range(n):
         out = real.advance(1)
         assert out["n_contacts"][0] == 1 and out["n_sliding"][0] == 0   # sticks throughout
-        xi.append(real.contacts.stretch[0, 0, 0])
+        xi.append(contacts.stretch[0, 0, 0])
         d = real.positions[1] - real.positions[0]
         gaps.append(np.linalg.norm(d - BOX * np.round(d / BOX)) - 2.0)
     return dt * np.arange(n + 1), np.array(xi), np.array(gaps)

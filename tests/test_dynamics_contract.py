@@ -32,7 +32,7 @@ import pytest
 
 import sdmpi
 from sdmpi.dynamics.integrators import Motion, Step
-from sdmpi.dynamics.models import hydrodynamic_model
+from sdmpi.dynamics.setup import hydrodynamic_model
 from sdmpi.dynamics.shear import Oscillatory
 from sdmpi.hydro.geometry import Lattice
 from sdmpi.hydro.resistance import grand_resistance, mobility_divergence

@@ -1,5 +1,6 @@
-"""Extension is local: a solver backend, a hydrodynamic model and a writer defined outside the
-package (tests/extension_plugin.py, one module that registers them) run jobs through `sdmpi run`,
+"""Extension is local: a solver backend, a hydrodynamic model, an interparticle force and a
+writer defined outside the package (tests/extension_plugin.py, one module that registers them)
+run jobs through `sdmpi run`,
 and the job loader's choices, checks and estimates follow the registries
 (`sdmpi.registry`, docs/extending.md)."""
 
@@ -15,8 +16,8 @@ import sdmpi
 from sdmpi.cli import main
 from sdmpi.config import JobError, parse_job, resources
 from sdmpi.dynamics.drift import BrownianTerms
-from sdmpi.registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, WRITERS,
-                            BackendSpec, DriftSpec, IntegratorSpec, ModelSpec, Spec)
+from sdmpi.registry import (DRIFT_SCHEMES, FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS,
+                            WRITERS, BackendSpec, DriftSpec, ForceSpec, IntegratorSpec, ModelSpec, Spec)
 
 from .runs import child_env, fresh_lubrication_tables
 
@@ -36,14 +37,19 @@ def _plugin(out, sets, *flags, env=None):
     return subprocess.run(cmd, capture_output=True, text=True, env=child_env(env), timeout=600)
 
 
-def _run_with_plugin(tmp_path, sets):
+def _run_with_plugin(tmp_path, sets, state=False):
     """The samples of the one task of demo.toml with ``sets``, run by `sdmpi run` with the
-    plugin's registrations."""
+    plugin's registrations (state: and the state of its last checkpoint)."""
     out = tmp_path / "run.h5"
     res = _plugin(out, sets)
     assert res.returncode == 0, res.stderr
     with h5py.File(out, "r") as f:
-        return {name: data[()] for name, data in f["tasks/000000/samples"].items()}
+        samples = {name: data[()] for name, data in f["tasks/000000/samples"].items()}
+        if not state:
+            return samples
+        ckpt = f["checkpoints/000000"]
+        slot = int(np.argmax(ckpt["slot_step"][()]))
+        return samples, {name: data[()] for name, data in ckpt[f"slot{slot}"].items()}
 
 
 def _api_samples(sets):
@@ -127,6 +133,22 @@ def test_the_size_estimate_counts_every_registered_writer():
         WRITERS.unregister("test-sized")
 
 
+def test_registered_force_runs_a_job(tmp_path):
+    """A force registered by the plugin (the repulsion as two exact halves, one of which
+    samples and checkpoints its own count) gives the samples of interparticle.kind =
+    "repulsion" bit for bit, reads the keys f0 and tau like it, and its own sample field
+    and state reach the run file."""
+    sets = [*ONE_TASK, "interparticle.f0=1.0", "interparticle.tau=300.0"]
+    ours, state = _run_with_plugin(tmp_path, [*sets, 'interparticle.kind="split-repulsion"'], state=True)
+    plain = _api_samples([*sets, 'interparticle.kind="repulsion"'])
+    assert set(ours) == set(plain) | {"pairs_seen"}
+    for name, values in plain.items():
+        assert np.array_equal(ours[name], values), name
+    assert np.abs(plain["stress_interparticle"]).max() > 0  # the force acted
+    seen = ours["pairs_seen"]
+    assert seen[0] > 0 and np.all(np.diff(seen) >= 0) and state["pairs_seen"][0] == seen[-1]
+
+
 @pytest.fixture
 def registered():
     """A backend that solves on several ranks without dense matrices, and a model with
@@ -157,10 +179,46 @@ def test_loader_follows_the_registries(registered, capsys):
         parse_job('[hydrodynamics]\nmodel = "far-field"\nlubrication = false\n')
 
 
+@pytest.fixture
+def registered_force():
+    """A non-Brownian force with contacts that reads interparticle.mu and may act in
+    monolayers, registered for one test."""
+    force = FORCES.register(ForceSpec("test-force", "a test force", "nowhere:build", keys=("mu",),
+                                      brownian=False, monolayer=True, contacts=True))
+    yield force
+    FORCES.unregister(force.name)
+
+
+def test_loader_follows_the_force_registry(registered_force):
+    """A registered force is an interparticle.kind choice whose keys apply, and the checks read
+    its spec (never its builder, which is nowhere): Brownian jobs refused, monolayers
+    allowed, contacts need lubrication and an integrator that integrates them."""
+    steady = '[brownian]\nenabled = false\n[shear]\nprotocol = "steady"\nrate = 1.0\n'
+    job = parse_job(steady + '[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+    assert job.interparticle.mu == 0.5
+    with pytest.raises(JobError, match="interparticle.mu.* required"):
+        parse_job(steady + '[interparticle]\nkind = "test-force"\n')
+    with pytest.raises(JobError, match='brownian.enabled = true: the test-force force is a non-Brownian model'):
+        parse_job('[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+    monolayer = ('[system]\ngeometry = "monolayer"\nn_particles = 25\nphi = [0.4]\n'
+                 '[integration]\ndt = 0.01\nn_steps = 10\ndiscard_steps = 0\n')
+    with pytest.raises(JobError) as err:
+        parse_job(steady + monolayer + '[interparticle]\nkind = "vdw"\nhamaker = 1.0\ncap_gap = 0.01\n')
+    assert '"none", "repulsion" or "test-force"' in str(err.value)
+    with pytest.raises(JobError, match="test-force contacts need the lubrication"):
+        parse_job(steady + '[hydrodynamics]\nmodel = "far-field"\n[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+    with pytest.raises(JobError, match="does not integrate the history of the test-force contacts"):
+        parse_job(steady + '[integration]\nscheme = "adams-bashforth-4"\ndt = 0.01\nn_steps = 10\n'
+                  'discard_steps = 0\n[interparticle]\nkind = "test-force"\nmu = 0.5\n')
+
+
 def test_unregistered_names_are_refused():
     with pytest.raises(JobError, match='solver.backend = "test-gpu": not a valid choice.*'
                                        'one of "dense", "petsc-dense", "petsc-krylov", "auto"'):
         parse_job('[solver]\nbackend = "test-gpu"\n')
+    with pytest.raises(JobError, match='interparticle.kind = "test-force": not a valid choice.*'
+                                       'one of "repulsion", "vdw", "dlvo", "frictional", "none"'):
+        parse_job('[interparticle]\nkind = "test-force"\n')
     with pytest.raises(ValueError, match="registered already"):
         SOLVER_BACKENDS.register(BackendSpec("dense", "again", "nowhere:Solver"))
 

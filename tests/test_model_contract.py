@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import sdmpi
-from sdmpi.dynamics.models import hydrodynamic_model
+from sdmpi.dynamics.setup import hydrodynamic_model
 from sdmpi.registry import HYDRODYNAMIC_MODELS
 
 from .test_backend_contract import BOX, POSITIONS, STRAIN

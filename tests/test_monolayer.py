@@ -168,7 +168,7 @@ def test_overlaps_are_counted_and_kept_below_the_stop():
     assert np.isfinite(sample["stress_hydrodynamic"]).all()
     # not separated: the pair on the flow axis (y equal) moves with the flow, still overlapping
     gap = np.linalg.norm(real.positions[1] - real.positions[0]) - 2.0
-    assert -0.011 < gap < -0.009 and real.monolayer.stopped_at == -1
+    assert -0.011 < gap < -0.009 and real.geometry.stopped_at == -1
 
 
 def test_an_overlap_past_the_threshold_stops_the_realisation(caplog):
@@ -179,10 +179,10 @@ def test_an_overlap_past_the_threshold_stops_the_realisation(caplog):
     assert "overlap by 0.03 a > integration.overlap_stop = 0.02" in caplog.text
     assert np.isnan(sample["stress_hydrodynamic"]).all() and np.all(sample["n_overlaps"] == -1)
     assert np.array_equal(sample["time"], [0.0, 0.002]) and real.step == 2
-    assert np.array_equal(real.positions, before) and real.monolayer.stopped_at == 0
+    assert np.array_equal(real.positions, before) and real.geometry.stopped_at == 0
     again = four_spheres(0.0)
     again.set_state(real.get_state())           # the stop is part of the state
-    assert again.monolayer.stopped_at == 0 and np.isnan(again.advance(1)["min_gap"][0])
+    assert again.geometry.stopped_at == 0 and np.isnan(again.advance(1)["min_gap"][0])
 
 
 def test_reduce_uses_a_stopped_realisation_up_to_its_stop(tmp_path):

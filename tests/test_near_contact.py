@@ -256,7 +256,8 @@ def test_free_draining_and_far_field_models_at_a_configuration():
     """Free draining: Stokes' laws per sphere. Far field: the velocities of
     solve_mobility without lubrication (the same M_inf^-1), and a pair-force job runs
     (the force pairs are the model's own list, not the lubrication's)."""
-    from sdmpi.dynamics.models import FreeDrainingModel, hydrodynamic_model
+    from sdmpi.dynamics.models import FreeDrainingModel
+    from sdmpi.dynamics.setup import hydrodynamic_model
     from sdmpi.hydro import solve_mobility
     pos = np.array([[1.0, 1.2, 0.8], [3.05, 1.2, 0.8], [2.0, 3.9, 3.5]])
     box, radii = np.full(3, 7.0), np.array([1.0, 0.5, 0.8])

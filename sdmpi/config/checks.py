@@ -13,8 +13,8 @@ import dataclasses
 import math
 from collections.abc import Callable
 
-from ..registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, backend_for,
-                        drift_schemes_for, several_rank_choices)
+from ..registry import (DRIFT_SCHEMES, FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, NO_FORCE, SOLVER_BACKENDS,
+                        backend_for, drift_schemes_for, force_kinds, several_rank_choices)
 from .problems import Problem
 from .schema import START_PHI_LIMIT, TWO_PI, Job, quoted
 
@@ -182,7 +182,8 @@ def _monolayer(job):
             ("system.size_classes", system.size_classes, system.size_classes is None,
              "absent (equal spheres)"),
             ("interparticle.kind", job.interparticle.kind,
-             job.interparticle.kind in ("none", "repulsion"), '"none" or "repulsion"')):
+             job.interparticle.kind in force_kinds(lambda f: f.monolayer),
+             quoted(force_kinds(lambda f: f.monolayer)))):
         if not ok:
             problems.append(Problem(path, why, value, allowed=f'{allowed}, or system.geometry = "bulk"'))
     cutoff = job.hydrodynamics.lubrication_cutoff
@@ -233,8 +234,10 @@ def _size_classes(job):
 
 
 def _repulsion_range(job):
+    """interparticle.tau (of whichever force reads it): the repulsion of range 1/tau decays
+    to 1e-12 within the lubrication cut-off."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    if inter.kind == "repulsion" and 12 * math.log(10) / inter.tau > cutoff:
+    if inter.tau is not None and 12 * math.log(10) / inter.tau > cutoff:
         need = 12 * math.log(10) / cutoff
         return [Problem("interparticle.tau", "the repulsion must decay (to 1e-12) within the "
                         f"lubrication cut-off (= {cutoff:g}), whose pairs it acts on", inter.tau,
@@ -243,11 +246,11 @@ def _repulsion_range(job):
 
 
 def _force_range(job):
-    """vdw / dlvo: the van der Waals cap inside the cut-off gap of the smallest pair (the
-    force laws' truncation at the cut-off is checked with them,
+    """interparticle.cap_gap (vdw, dlvo): the van der Waals cap inside the cut-off gap of the
+    smallest pair (the force laws' truncation at the cut-off is checked with them,
     `sdmpi.dynamics.checks`)."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    if inter.kind not in ("vdw", "dlvo"):
+    if inter.cap_gap is None:
         return []
     smallest = min(job.system.class_radii)  # the cut-off gap is cut-off x mean radius
     if inter.cap_gap >= cutoff * smallest:
@@ -258,18 +261,24 @@ def _force_range(job):
     return []
 
 
-def _frictional(job):
-    """Frictional contacts (sdmpi.dynamics.contacts): non-Brownian, and the repulsion
-    decayed within the lubrication cut-off (the contact springs' stability at the time
-    step is checked with them, `sdmpi.dynamics.checks`)."""
+def _force_brownian(job):
+    """A force that may not act in Brownian jobs (`sdmpi.registry.ForceSpec.brownian`: the
+    frictional contacts, whose springs the Brownian midpoint would cross)."""
+    kind = job.interparticle.kind
+    if kind == NO_FORCE or FORCES[kind].brownian or not job.brownian.enabled:
+        return []
+    return [Problem("brownian.enabled", f"the {kind} force is a non-Brownian model", True,
+                    allowed=f'false with interparticle.kind = "{kind}"')]
+
+
+def _repulsion_length(job):
+    """interparticle.repulsion_length (frictional contacts, sdmpi.dynamics.contacts): the
+    critical-load repulsion decayed to 1e-12 within the lubrication cut-off (the contact
+    springs' stability at the time step is checked with them, `sdmpi.dynamics.checks`)."""
     inter, hyd = job.interparticle, job.hydrodynamics
-    if inter.kind != "frictional":
+    if inter.repulsion_length is None:
         return []
     problems = []
-    if job.brownian.enabled:
-        problems.append(Problem("brownian.enabled", "frictional contacts are a non-Brownian "
-                                "model (the Brownian midpoint would cross the contact springs)",
-                                True, allowed='false with interparticle.kind = "frictional"'))
     reach = 12 * math.log(10) * inter.repulsion_length
     if reach > hyd.lubrication_cutoff:
         problems.append(Problem("interparticle.repulsion_length", "the repulsion must decay "
@@ -295,8 +304,8 @@ def _model(job):
                                 allowed=f'true (the default) with hydrodynamics.model = "{hyd.model}"'))
     for needed, why in ((job.system.geometry == "monolayer", "monolayers are simulated with full "
                          "Stokesian dynamics only"),
-                        (job.interparticle.kind == "frictional", "frictional contacts need the "
-                         "lubrication of the stokesian model")):
+                        (_has_contacts(job), f"{job.interparticle.kind} contacts need the lubrication "
+                         "of a model with it")):
         if needed and not model.lubrication:
             problems.append(Problem("hydrodynamics.model", why, hyd.model, allowed=quoted(with_lubrication)))
         elif needed and not hyd.lubrication:  # the stokesian model without it is the far field
@@ -347,27 +356,33 @@ def _far_field_refresh(job):
 
 def _integrator(job):
     """What the integrator supports (`sdmpi.registry.IntegratorSpec`): Brownian motion,
-    frictional contacts."""
+    forces with contacts (`sdmpi.registry.ForceSpec.contacts`)."""
     spec, problems = INTEGRATORS[job.integration.scheme], []
     able = INTEGRATORS.names(lambda i: i.brownian)
     if job.brownian.enabled and not spec.brownian:
         problems.append(Problem("integration.scheme", "integrates deterministic motion only (a smooth "
                                 "velocity), not Brownian motion", spec.name,
                                 allowed=f"{quoted(able)}, or brownian.enabled = false"))
-    if job.interparticle.kind == "frictional" and not spec.contacts:
-        problems.append(Problem("integration.scheme", "does not integrate the frictional contacts' "
-                                "tangential springs (non-smooth in time)", spec.name,
+    if _has_contacts(job) and not spec.contacts:
+        problems.append(Problem("integration.scheme", f"does not integrate the history of the "
+                                f"{job.interparticle.kind} contacts (non-smooth in time)", spec.name,
                                 allowed=quoted(INTEGRATORS.names(lambda i: i.contacts))))
     return problems
+
+
+def _has_contacts(job):
+    """Whether the job's force keeps overlaps as contacts (`sdmpi.registry.ForceSpec.contacts`)."""
+    kind = job.interparticle.kind
+    return kind != NO_FORCE and FORCES[kind].contacts
 
 
 def _maxwell_forces(job):
     """Schaink et al. (2000) cover hard spheres in a Maxwell medium: the viscoelastic response of the
     force-induced stresslets is not modelled, so the combination is refused."""
-    if job.medium.kind == "maxwell" and job.interparticle.kind != "none":
+    if job.medium.kind == "maxwell" and job.interparticle.kind != NO_FORCE:
         return [Problem("interparticle.kind", "interparticle forces in a Maxwell medium are not "
                         "modelled (their stresslets would need the medium's memory too)",
-                        job.interparticle.kind, allowed='"none" with medium.kind = "maxwell"')]
+                        job.interparticle.kind, allowed=f'"{NO_FORCE}" with medium.kind = "maxwell"')]
     return []
 
 
@@ -400,8 +415,9 @@ CROSS_CHECKS: tuple[CrossCheck, ...] = (
       "system.size_classes"), _force_range),
     (("hydrodynamics.model", "hydrodynamics.lubrication", "system.geometry", "interparticle.kind",
       "ensemble.ranks_per_task", "brownian.scheme", "solver.backend"), _model),
-    (("interparticle.kind", "interparticle.repulsion_length", "brownian.enabled",
-      "hydrodynamics.lubrication_cutoff"), _frictional),
+    (("interparticle.kind", "brownian.enabled"), _force_brownian),
+    (("interparticle.kind", "interparticle.repulsion_length", "hydrodynamics.lubrication_cutoff"),
+     _repulsion_length),
     (("medium.kind", "interparticle.kind"), _maxwell_forces),
     (("integration.scheme", "brownian.enabled", "interparticle.kind"), _integrator),
     (("hydrodynamics.far_field_refresh", "hydrodynamics.model", "brownian.enabled", "solver.backend"),

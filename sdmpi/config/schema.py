@@ -21,9 +21,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from ..registry import (DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, Registry,
+from ..registry import (DRIFT_SCHEMES, FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS, Registry,
                         default_drift_scheme, several_rank_choices)
 
 TWO_PI = 2.0 * math.pi
@@ -193,10 +194,31 @@ OSCILLATORY = ("shear", "protocol", ("oscillatory",))
 STEADY = ("shear", "protocol", ("steady",))
 STEADY_OR_NONE = ("shear", "protocol", ("steady", "none"))
 MAXWELL = ("medium", "kind", ("maxwell",))
-REPULSION = ("interparticle", "kind", ("repulsion",))
-VDW_OR_DLVO = ("interparticle", "kind", ("vdw", "dlvo"))
-DLVO = ("interparticle", "kind", ("dlvo",))
-FRICTIONAL = ("interparticle", "kind", ("frictional",))
+
+
+class ForcesReading(Sequence):
+    """The interparticle.kind values whose force reads the [interparticle] key ``name``
+    (`sdmpi.registry.ForceSpec.keys`), read at every use, so that forces registered after
+    this module is imported count."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def _kinds(self) -> tuple[str, ...]:
+        return FORCES.names(lambda force: self.name in force.keys)
+
+    def __getitem__(self, index):
+        return self._kinds()[index]
+
+    def __len__(self) -> int:
+        return len(self._kinds())
+
+
+def _force_key(name: str) -> tuple[str, str, ForcesReading]:
+    """only_if of an [interparticle] key: the kinds whose force reads it."""
+    return ("interparticle", "kind", ForcesReading(name))
+
+
 BULK = ("system", "geometry", ("bulk",))
 MONOLAYER = ("system", "geometry", ("monolayer",))
 START_FILE = ("system", "start", ("file",))
@@ -456,58 +478,57 @@ class Interparticle:
     6 pi eta_m a^2 gamma_dot (non-Brownian steady shear); energy unit = force unit x a
     (kT, or 6 pi eta_m a^3 gamma_dot). See sdmpi.dynamics.forces."""
 
-    kind: str = key("none", "str", "interparticle force",
-                    allowed=Choice(("none", "repulsion", "vdw", "dlvo", "frictional")),
+    kind: str = key("none", "str", "interparticle force: " + FORCES.summaries(), allowed=Choice(FORCES),
                     controls="interparticle.kind")
     f0: float | None = key(None, "float", "force scale F0 (F(0) = F0 tau / 2); Dratler & Schowalter 1996: "
                            "F0 = 1/(2 gamma*) in non-Brownian jobs",
                            unit="force unit x a", allowed=Range(0.0, None, lo_open=True),
-                           only_if=REPULSION, example=1.0)
+                           only_if=_force_key("f0"), example=1.0)
     tau: float | None = key(None, "float", "inverse range tau of the repulsion; 1/tau must "
                             "be below the lubrication cut-off / 12", unit="1/a",
-                            allowed=Range(0.0, None, lo_open=True), only_if=REPULSION, example=1000.0)
+                            allowed=Range(0.0, None, lo_open=True), only_if=_force_key("tau"), example=1000.0)
     hamaker: float | None = key(None, "float", "Hamaker constant A (Finke et al. 2020, eq. 4; "
                                 "e.g. A/kT = 1.8 for 7.5e-21 J at 300 K)", unit="energy unit",
-                                allowed=Range(0.0, None, lo_open=True), only_if=VDW_OR_DLVO,
+                                allowed=Range(0.0, None, lo_open=True), only_if=_force_key("hamaker"),
                                 example=1.0)
     cap_gap: float | None = key(None, "float", "gap below which the van der Waals force is "
                                 "held constant (Finke et al. 2020: 0.4 nm); F(cut-off) <= 1e-3 F(cap) "
                                 "is required", unit="a",
-                                allowed=Range(0.0, 1.0, lo_open=True), only_if=VDW_OR_DLVO,
+                                allowed=Range(0.0, 1.0, lo_open=True), only_if=_force_key("cap_gap"),
                                 example=0.01)
     debye_length: float | None = key(None, "float", "Debye screening length 1/kappa of the "
                                      "double layer; F(cut-off) <= 1e-3 F(0) is required",
                                      unit="a", allowed=Range(0.0, None, lo_open=True),
-                                     only_if=DLVO, example=0.05)
+                                     only_if=_force_key("debye_length"), example=0.05)
     surface_potential: float | None = key(
         None, "float", "reduced surface potential psi, psi^2 = 4 pi eps eps0 a psi0^2 / "
         "energy unit (= (e psi0/kT)^2 a/l_B in a Brownian job, l_B the Bjerrum length)",
-        unit="sqrt(energy unit / a)", allowed=Range(0.0, None, lo_open=True), only_if=DLVO,
-        example=10.0)
+        unit="sqrt(energy unit / a)", allowed=Range(0.0, None, lo_open=True),
+        only_if=_force_key("surface_potential"), example=10.0)
     mu: float | None = key(None, "float", "Coulomb friction coefficient of the contacts, "
                            "|F_t| <= mu |F_n| (0: frictionless contacts)",
-                           allowed=Range(0.0, None), only_if=FRICTIONAL, example=0.5)
+                           allowed=Range(0.0, None), only_if=_force_key("mu"), example=0.5)
     k_n: float | None = key(None, "float", "normal contact stiffness (overlap ~ contact "
                             "force / k_n; keep it below ~0.02 a)", unit="force unit / a",
-                            allowed=Range(0.0, None, lo_open=True), only_if=FRICTIONAL,
+                            allowed=Range(0.0, None, lo_open=True), only_if=_force_key("k_n"),
                             example=1000.0)
     k_t: float | None = key(None, "float", "tangential contact stiffness; the explicit step "
                             "needs k_t dt m_t <= 1, m_t ~ 0.7 (sliding mobility at "
                             "min_gap 1e-3)", unit="force unit / a",
-                            allowed=Range(0.0, None, lo_open=True), only_if=FRICTIONAL,
+                            allowed=Range(0.0, None, lo_open=True), only_if=_force_key("k_t"),
                             example=500.0)
     f_r0: float | None = key(None, "float", "critical load: the repulsion at contact; the "
                              "shear rate in units of f_r0 / (6 pi eta_m a^2) is 1/f_r0",
                              unit="force unit", allowed=Range(0.0, None, lo_open=True),
-                             only_if=FRICTIONAL, example=1.0)
+                             only_if=_force_key("f_r0"), example=1.0)
     repulsion_length: float | None = key(None, "float", "decay length lambda of the "
                                          "repulsion f_r0 exp(-h/lambda); 27.6 lambda must be "
                                          "below the lubrication cut-off", unit="a",
                                          allowed=Range(0.0, None, lo_open=True),
-                                         only_if=FRICTIONAL, example=0.05)
+                                         only_if=_force_key("repulsion_length"), example=0.05)
     max_contacts: int | None = key(12, "int", "contacts stored per particle (checkpointed "
                                    "history; a particle's contacts with larger-numbered ones)",
-                                   allowed=Range(1, 64), only_if=FRICTIONAL)
+                                   allowed=Range(1, 64), only_if=_force_key("max_contacts"))
 
 
 @dataclass(frozen=True)

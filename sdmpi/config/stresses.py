@@ -1,5 +1,5 @@
 """The registry of particle-stress contributions: one entry per sampled stress, used by the
-sample stream (`sdmpi.dynamics.realisation.sample_fields`), the store (its datasets and
+sample stream (`sdmpi.dynamics.setup.sample_fields`), the store (its datasets and
 their attributes), the reducer (the rows of moduli.csv and viscosity.csv, between the
 medium and the total) and the manual (docs/store.md, docs/reduce.md).
 

@@ -28,11 +28,12 @@ def _force_tails(job: Job) -> list[Problem]:
     classes (`forces.tail_ratios`)."""
     inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
     # a cap beyond the smallest pair's cut-off gap is reported by sdmpi.config.checks
-    if inter.kind not in ("vdw", "dlvo") or inter.cap_gap >= cutoff * min(job.system.class_radii):
+    if inter.cap_gap is None or inter.cap_gap >= cutoff * min(job.system.class_radii):
         return []
     from .forces import TAIL, tail_ratios
     problems = []
-    for path, (ratio, (a_i, a_j)) in tail_ratios(job).items():
+    for path, (ratio, (a_i, a_j)) in tail_ratios(inter.cap_gap, inter.debye_length, cutoff,
+                                                  job.system.class_radii).items():
         if ratio > TAIL:
             what = ("the van der Waals force at the cut-off" if path.endswith("cap_gap")
                     else "the double-layer force at the cut-off")
@@ -51,7 +52,7 @@ def _contact_springs(job: Job) -> list[Problem]:
     """Frictional contacts: a time step the explicit contact springs allow, dt k m <= 1
     with m the touching pair's mobility at hydrodynamics.min_gap (`contacts` docstring)."""
     inter, hyd = job.interparticle, job.hydrodynamics
-    if inter.kind != "frictional":
+    if inter.k_n is None or inter.k_t is None:
         return []
     from .contacts import SQUEEZE, sliding_mobility
     problems = []

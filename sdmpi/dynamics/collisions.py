@@ -1,88 +1,38 @@
 """Hard-sphere collisions: the potential-free overlap correction and the stress it implies.
 
 A pair is in contact when its surface gap is below the lubrication's floor ``min_gap``
-(mean radii; below it the lubrication is that of the floor, so the model cannot tell such
-a pair from touching spheres): the hard-sphere surface of the correction is the gap
-min_gap. After each time step the pairs in contact, overlapping pairs included, are moved
-apart along their lines of centres, by one of two rules (``hydrodynamics.collisions``), and
-the correction is repeated while it brings other pairs into contact:
+(mean radii): the hard-sphere surface of the correction is the gap min_gap. After each
+time step the pairs in contact, overlapping pairs included, are moved apart along their
+lines of centres by one of two rules (``hydrodynamics.collisions``), and the correction is
+repeated while it brings other pairs into contact:
 
 * ``separate`` (Bossis & Brady, J. Chem. Phys. 80, 5141 (1984); Heyes & Melrose, J.
   Non-Newtonian Fluid Mech. 46, 1 (1993)): the two spheres are moved apart symmetrically
-  to a gap of SEPARATION x min_gap, twice the floor, so that a pair just separated still
-  sees the gradient of its lubrication (`models`, the rfd drift). The default of the
-  stokesian model, whose lubrication keeps pairs from contact in continuous time.
-* ``reflect``: the step is split into its deterministic part (imposed flow, interparticle
-  forces), after which pairs in contact are separated to SEPARATION x min_gap, and its
-  Brownian part, after which they are reflected at the hard-sphere surface, gap ->
-  2 min_gap - gap. Both corrections are the displacement of a contact impulse acting
-  through the model's mobility M = R_FU^-1 of the step (`through_mobility`): an impulse
-  lambda_p along the pair's unit pair force f_p (e_p on j, -e_p on i) moves the particles
-  by lambda_p M f_p, with lambda_p = s_p/G_p, G_p = f_p.M.f_p, for its separation change
-  s_p. The default of the far-field and free-draining models, whose relative mobility
-  stays finite at contact.
+  to a gap of SEPARATION x min_gap. The default of the stokesian model.
+* ``reflect``: pairs in contact after the step's deterministic part are separated to
+  SEPARATION x min_gap, and after its Brownian part reflected at the hard-sphere surface,
+  gap -> 2 min_gap - gap (Strating, Phys. Rev. E 59, 2175 (1999)). Both corrections are
+  contact impulses acting through the step's mobility M = R_FU^-1 (`through_mobility`): an
+  impulse lambda_p along the unit pair force f_p (e_p on j, -e_p on i) moves the particles
+  by lambda_p M f_p, lambda_p = s_p/G_p, G_p = f_p.M.f_p, for a separation change s_p;
+  pairs in contact at once each get their own impulse, the sweep repeated while pairs are
+  left in contact. The default of the far-field and free-draining models.
 
-Why reflect, and why through M. For diffusion of a pair's gap x >= 0 against a hard wall,
-the reflected Gaussian p(y) = G(y - x) + G(y + x) is the exact transition density (the
-method of images; Smoluchowski 1917; Strating, Phys. Rev. E 59, 2175 (1999), resolves the
-Brownian displacement's collisions elastically), so the pair density stays flat up to
-contact; placing diffusing pairs at contact instead deposits them there and depletes the
-gaps beyond (Heyes & Melrose's algorithm converges only like dt^1/2). The direction of the
-reflection matters as soon as the mobility is not a multiple of the identity. The
-Fokker-Planck flux of dx = kT div M dt + (2 kT)^1/2 M^1/2 dW is J = -kT M grad p, so the
-hard-sphere wall (normal n in configuration space) asks for n.M grad p = 0: the conormal
-condition, which the equilibrium (uniform) density satisfies. A diffusion reflected along a
-direction g has the generator's boundary condition g.grad f = 0, and the uniform density is
-stationary only if the boundary term of int p L f, the surface integral of n.M grad f,
-vanishes for every such f, i.e. g parallel to M n (oblique reflection: Lions & Sznitman,
-Comm. Pure Appl. Math. 37, 511 (1984)). Over one step M is frozen, and in the coordinates
-y = M^-1/2 x the noise is isotropic and the displacement along M n is the mirror reflection
-at the wall, so the method of images is again exact; for one pair it is the impulse
-lambda = s/G with G = f.M.f, which changes the gap by s. Moving only the two spheres, by
-s/2 each along e, is that reflection only where M f is parallel to f: free draining of
-equal spheres, or two equal spheres alone in a box (by symmetry). In a suspension with
-hydrodynamic interactions M f also moves the pair's neighbours and turns the pair (far
-field, N = 27, phi = 0.45: the part of M f off f is ~0.8 of the part along it), and the
-symmetric move is an oblique reflection that does not keep the equilibrium: pairs gather
-near contact (far field, N = 27, phi = 0.45: g 1.4-1.8 times its equilibrium value below
-gaps of 1e-2 at dt = 5e-4, still 1.3-1.4 times at dt = 1e-4, so not a time-step error;
-through the mobility it is the equilibrium value within errors; docs/physics.md). The
-deterministic part is separated through M for the same reason: a contact force acts on the
-suspension through its mobility. Pairs in contact at once each get their own impulse and
-the displacements are added, the sweep repeated while pairs are left in contact, as for the
-symmetric move (`through_mobility`). Solving the pairs' joint constraint instead (the
-displacement of least M^-1 norm that gives every pair exactly its s_p) under-fills the
-gaps 1e-4 ... 3e-4 next to the floor: free draining, N = 27, phi = 0.45, four seeds, g =
-3.8-4.3 against 4.4-4.9 with the sweeps and 4.69 +- 0.07 by Monte Carlo.
+Why the reflection keeps the equilibrium and why it acts through M (oblique reflection,
+Lions & Sznitman, Comm. Pure Appl. Math. 37, 511 (1984)), the contact theorem and the
+measurements: docs/physics.md, "Hard-sphere collisions".
 
 Collision stress (Heyes & Melrose 1993; Strating 1999; Foss & Brady, J. Fluid Mech. 407,
-167 (2000)). A correction that changes a pair's separation by s along its unit line of
-centres e within a step dt is the displacement that a pair force f e on j (and -f e on i)
-acting over dt would produce through the pair's relative mobility
-G = e.(M_jj + M_ii - M_ij - M_ji).e:
-
-    f = s / (G dt),
-
-(free draining: G = 1/(6 pi a_i) + 1/(6 pi a_j), the hard-sphere impulse of Brownian
-dynamics); a correction through the mobility records its impulses, f = lambda/dt (the
-same, summed over the sweeps of a correction). Its stress is that of any interparticle force (Batchelor 1977; `realisation`):
+167 (2000)): a correction that changes a pair's separation by s along e within dt is the
+displacement of the pair force f = s/(G dt) (G = e.(M_jj + M_ii - M_ij - M_ji).e; through
+the mobility f = lambda/dt, summed over the sweeps), whose stress is that of any
+interparticle force (Batchelor 1977; `realisation`),
 
     Sigma_C = -(1/V) [sum_pairs r f e + sum_i R_SU R_FU^-1 F_C],
 
-r the pair's separation after the correction (at contact), F_C the collision forces on the
-particles. Free draining, this is the hard-sphere collision stress whose trace gives the
-contact value of the osmotic pressure, Pi - n kT = -(1/3) tr Sigma_C = n kT 4 phi g(2).
-With reflection it holds at any dt for a flat contact: pairs of density rho per unit
-separation at contact, each diffusing with D = kT G over a step of variance
-sigma^2 = 2 D dt, are reflected by s = 2 max(0, -(x + sigma z)), whose sum per step is
-2 rho int_0^inf <max(0, -x - sigma z)> dx = rho sigma^2/2 = rho D dt, so sum f = rho kT:
-the contact theorem. With placement it converges from below like dt^1/2 (Strating 1999).
-With lubrication the pair's relative mobility vanishes at contact, and the stresslet the
-contact force induces cancels its r f e term as the gap closes; Sigma_C then measures the
-floor min_gap and the time step: as dt -> 0 it tends to a limit that falls with min_gap
-(measured: docs/physics.md, bench/collision_convergence.py).
+r the pair's separation after the correction, F_C the collision forces on the particles.
 
-Lengths are in particle radii a, times in t_D, forces in eta_m a^2/t_D, mobilities in
+Units: lengths in particle radii a, times in t_D, forces in eta_m a^2/t_D, mobilities in
 1/(eta_m a).
 """
 

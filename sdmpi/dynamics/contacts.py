@@ -1,72 +1,53 @@
 """Frictional contacts with a critical-load repulsion: the shear-thickening model of
 Seto, Mari, Morris & Denn, Phys. Rev. Lett. 111, 218301 (2013) and Mari, Seto, Morris &
-Denn, J. Rheol. 58, 1693 (2014), on top of SD's lubrication (minimum-gap rule).
+Denn, J. Rheol. 58, 1693 (2014), on top of SD's lubrication (minimum-gap rule); the
+forces of interparticle.kind = "frictional" (`frictional`, registered in
+`sdmpi.registry.FORCES`). The model, its units and its time-step limit: docs/physics.md,
+"Frictional contact".
 
 Pair i, j with radii a_i, a_j, n the unit vector from i to j, h = |x_j - x_i| - a_i - a_j
-the surface gap (in a; negative = overlap = contact). Forces on j (those on i are opposite):
+the surface gap (negative = overlap = contact). Forces on j (those on i are opposite):
 
-* repulsion (:class:`~sdmpi.dynamics.forces.CriticalLoadRepulsion`, electrostatic-like, the "critical load"):
-  F_R = F_R0 exp(-h/lambda) n for h > 0 and F_R0 n for h <= 0, with U = F_R0 lambda
-  exp(-h/lambda) (h > 0; continued linearly below) so that F_R = -dU/dh. It acts on every
-  lubrication pair (applied by `forces.pair_forces`), so lambda must decay to 1e-12 of
-  F_R0 within the lubrication cut-off.
-* normal spring (h < 0): F_n = k_n |h| n, U = k_n h^2 / 2.
-* tangential spring (h < 0): F_t = -k_t xi, with the tangential stretch xi integrated from
-  the sliding velocity of j's surface relative to i's at the contact point,
-      d xi/dt = u_s = (I - n n) [U_j - U_i - (l_i Omega_i + l_j Omega_j) x n],
-  (U, Omega total rigid-body velocities, the imposed flow included), kept tangent (turned
-  into the plane normal to the current n, its length kept) and reset to 0 when the pair
-  separates (h >= 0).
-* Coulomb friction: |F_t| <= mu |F_n| with F_n the spring's normal force (the repulsion
-  does not load the friction); where k_t |xi| > mu k_n |h| the stretch is scaled back to
-  mu k_n |h| / k_t (the contact slides). The stiffnesses do not depend on the radii.
-* torques: the tangential force acts at the contact point, l_i n from i's centre and
-  -l_j n from j's: T_i = l_i n x (k_t xi), T_j = l_j n x (k_t xi), with the lever arms
-  l = a r / (a_i + a_j) (r the centre distance) that divide the overlap in proportion to
-  the radii, so that l_i + l_j = r: the pair's forces and torques then carry no net
-  angular momentum, sum (x x F + T) = 0, and a rigid rotation of the pair does not slide.
+* repulsion (`forces.CriticalLoadRepulsion`, a `forces.PairForce` on every lubrication
+  pair): F_R = F_R0 exp(-h/lambda) n for h > 0, F_R0 n for h <= 0;
+* normal spring (h < 0): F_n = k_n |h| n;
+* tangential spring (h < 0): F_t = -k_t xi, the stretch xi integrated from the sliding
+  velocity of j's contact point relative to i's,
+      d xi/dt = u_s = (I - n n) [U_j - U_i - (l_i Omega_i + l_j Omega_j) x n]
+  (U, Omega total rigid-body velocities), kept tangent (turned into the plane normal to
+  the current n, its length kept) and reset to 0 when the pair separates;
+* Coulomb friction |F_t| <= mu |F_n|: where k_t |xi| > mu k_n |h| the stretch is scaled
+  back to mu k_n |h| / k_t (the contact slides);
+* torques at the contact point: T_i = l_i n x (k_t xi), T_j = l_j n x (k_t xi), lever arms
+  l = a r / (a_i + a_j) (r the centre distance), so that l_i + l_j = r and the pair's
+  forces and torques carry no net angular momentum.
 
-Stress: with the existing interparticle path, -(1/V) sum (x F + R_SU R_FU^-1 (F, T)), the
-virial summed over pairs as dx (F on j), dx = x_j - x_i (its symmetric part).
+Stress: that of every interparticle force, -(1/V) sum (x F + R_SU R_FU^-1 (F, T)), the
+virial summed over pairs as dx (F on j), dx = x_j - x_i.
 
-Units: the job's force unit 6 pi eta_m a^2 gamma_dot (non-Brownian steady shear, time
-1/gamma_dot), so the shear rate in the papers' unit F_R0/(6 pi eta_m a^2) is 1/f_r0 and
-a stress sigma in F_R0/a^2 is eta_r / (6 pi f_r0); stiffnesses in force unit / a. Here,
-as in `forces`, strengths are multiplied by FORCE_UNIT = 6 pi into Stokes units.
+History (`FrictionalContacts`, the force's state): per particle at most ``max_contacts``
+partners of larger index (partner -1 = empty slot) with their stretch as seen from the
+smaller index, fixed-shape arrays for the checkpoints; stretches are updated at the end of
+each step (`advance`, after the velocities are known) and turned tangent at the next.
 
-Time step (explicit Euler, as the rest of the step): a spring k between two spheres
-relaxes at the rate k m, m the pair's relative mobility along the spring; the step is
-stable for dt k m < 2 and free of overshoot for dt k m <= 1, which the job checks
-(`checks`) require of the touching pair of unit spheres at the minimum gap h_min (job units): normal
-m_n = SQUEEZE h_min (leading lubrication term, dh/dt = 2 F h / (3 pi) in Stokes units),
-sliding m_t = :func:`sliding_mobility` (h_min), O(1) since tangential lubrication is only
-logarithmic (free spheres: 3.5 = 2 from translation + 1.5 from the rotation the torques
-cause). Many-contact networks can relax faster than one pair: watch min_gap (the deepest
-overlap) in the samples.
-
-History: contacts are stored per particle, at most ``max_contacts`` partners in the row
-of the smaller index (partner -1 = empty slot), with their stretch as seen from that
-particle (the larger index's contact point relative to the smaller's): fixed-shape
-arrays for the checkpointed state. A contact's stretch is updated at the end of each step
-(after the velocities are known) and turned tangent at the start of the next.
-
-Units: lengths in a, times in t_D, forces in eta_m a^2/t_D (Stokes units; kT/a is
-FORCE_UNIT of them), velocities in a/t_D.
+Units: strengths in the job's force unit multiplied by FORCE_UNIT = 6 pi into Stokes
+units; lengths in a, times in t_D, forces in eta_m a^2/t_D, velocities in a/t_D.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
 
-from .forces import FORCE_UNIT, CriticalLoadRepulsion  # noqa: F401 (the repulsion of this model)
+from .component import SampleFields, StateFields
+from .forces import FORCE_UNIT, CriticalLoadRepulsion, Force, ForceSetting, ForceTerms, PairForce
 
 if TYPE_CHECKING:
-    from ..config.schema import Job
     from ..hydro.lubrication import PairList
 
 #: the normal relative mobility of touching unit spheres at minimum gap h_min is about
@@ -196,29 +177,53 @@ class ContactForces:
     n_sliding: int
 
 
-class FrictionalContacts:
-    """The contact springs of one realisation and their history (module docstring):
-    ``forces`` at the start of a step, then ``advance`` with the step's velocities."""
+class FrictionalContacts(Force):
+    """The contact springs of one realisation and their history (module docstring): a
+    `Force` whose ``terms`` are taken at the start of a step, then ``advance`` with the
+    step's velocities; its state is the history, its sample stress_contact, n_contacts and
+    n_sliding."""
 
-    def __init__(self, law, n_particles, max_contacts):
-        self.law = law
-        self.partners = np.full((n_particles, max_contacts), -1, dtype=np.int64)
-        self.stretch = np.zeros((n_particles, max_contacts, 3))
+    def __init__(self, law: ContactLaw, radii: np.ndarray, max_contacts: int):
+        self.law, self.radii = law, radii
+        self.partners = np.full((len(radii), max_contacts), -1, dtype=np.int64)
+        self.stretch = np.zeros((len(radii), max_contacts, 3))
         self._contacts = None
 
-    def forces(self, pairs: PairList, radii: np.ndarray) -> ContactForces:
+    def terms(self, pairs: PairList) -> ForceTerms:
+        contact = self.forces(pairs)
+        return ForceTerms(np.hstack([contact.forces, contact.torques]), contact.virial,
+                          {"n_contacts": contact.n_contacts, "n_sliding": contact.n_sliding})
+
+    def sample_fields(self, stress_unit: str) -> SampleFields:
+        return {"stress_contact": ((6,), "f8", stress_unit, "contact springs' part of stress_interparticle"),
+                "n_contacts": ((), "i4", "1", "touching pairs (gap < 0)"),
+                "n_sliding": ((), "i4", "1", "touching pairs at the Coulomb limit")}
+
+    def sample(self, terms: ForceTerms, stress: Callable[[ForceTerms], np.ndarray]) -> dict[str, Any]:
+        return {"stress_contact": stress(terms), **terms.counts}
+
+    def state_fields(self) -> StateFields:
+        return {"contact_partners": (self.partners.shape, "i8"), "contact_stretch": (self.stretch.shape, "f8")}
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {"contact_partners": self.partners.copy(), "contact_stretch": self.stretch.copy()}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.partners[:] = state["contact_partners"]
+        self.stretch[:] = state["contact_stretch"]
+
+    def forces(self, pairs: PairList) -> ContactForces:
         """Contact forces of the pairs with gap < 0 (a PairList: true gaps, dx = x_j +
         shift - x_i, possibly stretched to the minimum gap; only its direction is used).
 
         Args:
             pairs: the step's lubrication pair list.
-            radii: particle radii, shape (N,), in a.
 
         Returns:
             The `ContactForces`: forces and torques (N, 3) in eta_m a^2/t_D and
             eta_m a^3/t_D, virial (3, 3) in eta_m a^3/t_D, contact and sliding counts.
         """
-        n_particles = len(self.partners)
+        n_particles, radii = len(self.partners), self.radii
         touching = np.flatnonzero(pairs.gap < 0)
         i, j = pairs.i[touching], pairs.j[touching]
         n = pairs.dx[touching] / np.linalg.norm(pairs.dx[touching], axis=1)[:, None]
@@ -275,18 +280,25 @@ class FrictionalContacts:
                                "images: the box is too small for contact history")
 
 
-def contact_model(job: Job) -> FrictionalContacts | None:
-    """The contact springs of a job with interparticle.kind = "frictional" (a fresh
-    history for one realisation), else None. The repulsion is `forces.force_law`'s.
+def frictional(
+    setting: ForceSetting, *, mu: float, k_n: float, k_t: float, f_r0: float, repulsion_length: float,
+    max_contacts: int
+) -> list[Force]:
+    """interparticle.kind = "frictional": the critical-load repulsion on every pair, then the
+    contact springs (a fresh history), strengths in the job's force unit.
 
     Args:
-        job: the validated job.
+        setting: the realisation's spheres and cut-off.
+        mu: Coulomb friction coefficient.
+        k_n: normal stiffness (force unit / a).
+        k_t: tangential stiffness (force unit / a).
+        f_r0: the repulsion at contact (force unit).
+        repulsion_length: its decay length (a).
+        max_contacts: contacts stored per particle.
 
     Returns:
-        A fresh `FrictionalContacts`, or None for other interparticle kinds.
+        [the repulsion's `PairForce`, the `FrictionalContacts`], in that order.
     """
-    inter = job.interparticle
-    if inter.kind != "frictional":
-        return None
-    law = ContactLaw(inter.mu, FORCE_UNIT * inter.k_n, FORCE_UNIT * inter.k_t)
-    return FrictionalContacts(law, job.system.n_particles, inter.max_contacts)
+    repulsion = PairForce(CriticalLoadRepulsion(FORCE_UNIT * f_r0, repulsion_length), setting.radii)
+    law = ContactLaw(mu, FORCE_UNIT * k_n, FORCE_UNIT * k_t)
+    return [repulsion, FrictionalContacts(law, setting.radii, max_contacts)]

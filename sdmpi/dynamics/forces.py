@@ -1,67 +1,57 @@
-"""Interparticle forces between sphere pairs.
+"""Interparticle forces between sphere pairs: the `Force` interface, pair force laws and
+the forces of interparticle.kind (registered in `sdmpi.registry.FORCES`).
 
-Pair forces act along the line of centres; a force law gives the magnitude F(h) at
-surface gap h of a pair of radii a_i, a_j, positive when it pushes the spheres apart
-(repulsion) and negative when it pulls them together (attraction), with F = -dU/dh.
-Totals are summed over the pair list of the hydrodynamics (periodic images included),
-so a force must vanish beyond the lubrication cut-off: the repulsion decays there
-(checked by the loader), the algebraic van der Waals force and the double layer are
-shifted to vanish there (shifted-force truncation, below).
+A `Force` acts on the pairs of each step (the hydrodynamic evaluation's pair list within
+the lubrication cut-off, periodic images included), with its own sample fields and state;
+the step sums a realisation's forces in order (`sdmpi.dynamics.realisation`). A
+`PairForce` is the central force of a law (`PairLaw`): magnitude F(h) at surface gap h of
+a pair of radii a_i, a_j along the line of centres, positive when repulsive, F = -dU/dh.
+A force must vanish beyond the cut-off: the repulsion decays there (checked by the
+loader), the van der Waals force and the double layer are shifted to vanish there.
 
-Units. In the job file, forces are in the job's force unit 6 pi eta_m a^2 / (time unit):
-kT/a for Brownian jobs (kT = 6 pi in sdmpi's reduced units), 6 pi eta_m a^2 gamma_dot for
-non-Brownian steady shear (time unit 1/gamma_dot); energies (Hamaker constant) in force
-unit x a, i.e. kT or 6 pi eta_m a^3 gamma_dot; lengths in a. The hydrodynamics works in
-plain Stokes units (eta_m = 1, a = 1), where a force 1 moves an isolated sphere at 1/(6 pi),
-so :func:`force_law` multiplies every strength by ``FORCE_UNIT`` = 6 pi.
+Laws:
 
-Laws (all with ``magnitude(gap, a_i, a_j)`` and ``potential(gap, a_i, a_j)``):
-
-* :class:`Repulsion` (Dratler & Schowalter 1996, eq. 9): F0 tau e^(-tau h)/(1 + e^(-tau h)).
-* :class:`VanDerWaals` (Finke et al. 2020, eqs. 4-5 = Hamaker, Physica 4, 1058 (1937), for
-  spheres of radii a_i, a_j at centre distance r = a_i + a_j + h):
+* `Repulsion` (Dratler & Schowalter, J. Fluid Mech. 325, 53 (1996), eq. 9):
+  F = F0 tau e^(-tau h)/(1 + e^(-tau h)), U = F0 ln(1 + e^(-tau h)).
+* `VanDerWaals` (Hamaker, Physica 4, 1058 (1937); Finke et al. 2020, eqs. 4-5), centre
+  distance r = a_i + a_j + h:
       U(h) = -(A/6) [2 a_i a_j/(h (2a_i + 2a_j + h)) + 2 a_i a_j/((2a_i + h)(2a_j + h))
                      + ln(h (2a_i + 2a_j + h)/((2a_i + h)(2a_j + h)))],
       F(h) = -(32/3) A a_i^3 a_j^3 (a_i + a_j + h) / (h^2 (2a_i + 2a_j + h)^2
                                                       ((2a_i + h)(2a_j + h))^2),
-  (the seed writes b for h, r for the radii; with r^2 - (a_i + a_j)^2 = h (2a_i + 2a_j + h)
-  and r^2 - (a_i - a_j)^2 = (2a_i + h)(2a_j + h) these are Hamaker's eqs.). Limits:
-  F -> -A R/(6 h^2) as h -> 0 (Derjaguin, R = a_i a_j/(a_i + a_j)); F -> -(32/3) A a_i^3
-  a_j^3 / r^7 (London) as h -> inf. Capped below ``cap_gap`` (Finke et al. 2020: 0.4 nm, the
-  minimum roughness): F(h < cap) = F(cap), U continued linearly, so overlapping or
-  touching spheres feel a finite attraction.
-* :class:`DoubleLayer` (DLVO electrostatic repulsion at constant, low surface potential
-  psi0, Derjaguin approximation; Hogg, Healy & Fuerstenau, Trans. Faraday Soc. 62, 1638
-  (1966); Russel, Saville & Schowalter, Colloidal Dispersions (1989) ch. 4):
-      U(h) = 4 pi eps eps0 psi0^2 R ln(1 + e^(-kappa h)),   R = a_i a_j/(a_i + a_j),
-  written in reduced units as U = psi^2 R ln(1 + e^(-h/lambda_D)) with lambda_D = 1/kappa
-  in a and the reduced surface potential psi, psi^2 = 4 pi eps eps0 a psi0^2 / E_unit
-  (= (e psi0/kT)^2 a / l_B for Brownian jobs, l_B the Bjerrum length). For equal spheres
-  it is the Dratler & Schowalter (1996) repulsion with F0 = psi^2/2, tau = 1/lambda_D; far away
-  it is the linear superposition form 4 pi eps eps0 psi0^2 R e^(-kappa h) (low potential). Valid for
-  kappa a >> 1, h << a, |e psi0/kT| <~ 2.
-* :class:`CriticalLoadRepulsion` (Mari, Seto, Morris & Denn, J. Rheol. 58 (2014)): the
-  repulsion of the frictional-contact model (sdmpi.dynamics.contacts), F0 exp(-h/lambda)
-  for h > 0 and F0 at contact.
-* :class:`Combined`: a sum of laws (DLVO = van der Waals + double layer).
+  held at F(cap_gap) below ``cap_gap`` (U continued linearly).
+* `DoubleLayer` (constant low surface potential, Derjaguin approximation; Hogg, Healy &
+  Fuerstenau, Trans. Faraday Soc. 62, 1638 (1966)): U = psi^2 R ln(1 + e^(-h/lambda_D)),
+  R = a_i a_j/(a_i + a_j).
+* `CriticalLoadRepulsion` (Mari, Seto, Morris & Denn, J. Rheol. 58 (2014)): F0 exp(-h/length)
+  for h > 0, F0 at contact (the frictional contacts' repulsion, `contacts`).
+* `Combined`: a sum of laws (DLVO = van der Waals + double layer).
 
-Shifted-force truncation (van der Waals, double layer): with h_c = cut-off x (a_i+a_j)/2,
-F_s(h) = F(h) - F(h_c) and U_s(h) = U(h) - U(h_c) + F(h_c) (h - h_c) for h < h_c, both 0
-beyond; F_s = -dU_s/dh still, and both are continuous at h_c. The job checks (`checks`)
-require |F(h_c)| <= ``TAIL`` |F(contact)| (contact: the cap for van der Waals, h = 0 for the
-double layer) so that the shift is negligible.
+Shifted-force truncation (van der Waals, double layer) at h_c = cut-off x (a_i + a_j)/2:
+F_s(h) = F(h) - F(h_c), U_s(h) = U(h) - U(h_c) + F(h_c) (h - h_c) for h < h_c, both 0
+beyond; the job checks (`checks`) require |F(h_c)| <= ``TAIL`` |F(contact)|.
+
+Limits, the reduced double-layer potential and the validity of each law: docs/physics.md,
+"Interparticle forces".
+
+Units: in the job file forces are in the job's force unit 6 pi eta_m a^2 / (time unit)
+(kT/a for Brownian jobs, 6 pi eta_m a^2 gamma_dot for non-Brownian steady shear),
+energies in force unit x a, lengths in a; the builders multiply every strength by
+``FORCE_UNIT`` = 6 pi into the Stokes units of the hydrodynamics (eta_m = a = 1).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from .component import NoState, SampleFields, Stateful
+
 if TYPE_CHECKING:
-    from ..config.schema import Job
     from ..hydro.lubrication import PairList
 
 #: the job's force unit, 6 pi eta_m a^2 / (time unit), in Stokes units (eta_m = a = 1)
@@ -85,7 +75,7 @@ class PairLaw(Protocol):
             a_j: radii of the second spheres, scalar or (P,), in a.
 
         Returns:
-            F(h), shaped like gap, in the law's force unit (Stokes units from `force_law`).
+            F(h), shaped like gap, in the law's force unit (Stokes units in `PairForce`).
         """
         raise NotImplementedError
 
@@ -257,58 +247,30 @@ class Combined:
         return sum(p.potential(gap, a_i, a_j) for p in self.parts)
 
 
-def force_law(job: Job) -> PairLaw | None:
-    """The pair force law of a job's [interparticle] section in Stokes units (strengths
-    times ``FORCE_UNIT``), truncated at the lubrication cut-off where it is algebraic or
-    shifted; None for hard spheres (kind "none").
-
-    Args:
-        job: the validated job.
-
-    Returns:
-        The law (forces in eta_m a^2/t_D, gaps in a), or None.
-
-    Raises:
-        ValueError: an unknown interparticle.kind.
-    """
-    inter = job.interparticle
-    cutoff = job.hydrodynamics.lubrication_cutoff
-    if inter.kind == "none":
-        return None
-    if inter.kind == "repulsion":
-        return Repulsion(FORCE_UNIT * inter.f0, inter.tau)
-    if inter.kind == "frictional":  # the repulsion; the contact springs: contacts.contact_model
-        return CriticalLoadRepulsion(FORCE_UNIT * inter.f_r0, inter.repulsion_length)
-    vdw = VanDerWaals(FORCE_UNIT * inter.hamaker, inter.cap_gap, cutoff)
-    if inter.kind == "vdw":
-        return vdw
-    if inter.kind == "dlvo":
-        layer = DoubleLayer(FORCE_UNIT * inter.surface_potential ** 2, inter.debye_length, cutoff)
-        return Combined((vdw, layer))
-    raise ValueError(f"unknown interparticle.kind {inter.kind!r}")
-
-
-def tail_ratios(job: Job) -> dict[str, tuple[float, tuple[float, float]]]:
-    """|F(cut-off)| / |F(contact)| of each truncated part of the job's law, for the pair
-    of size classes where it is largest (the cut-off gap is cut-off x the pair's mean
-    radius, the van der Waals cap a fixed gap, so the ratio depends on both radii):
+def tail_ratios(
+    cap_gap: float | None, debye_length: float | None, cutoff: float, class_radii: tuple[float, ...]
+) -> dict[str, tuple[float, tuple[float, float]]]:
+    """|F(cut-off)| / |F(contact)| of each truncated part of a law, for the pair of size
+    classes where it is largest (the cut-off gap is cut-off x the pair's mean radius, the
+    van der Waals cap a fixed gap, so the ratio depends on both radii):
     {"interparticle.<key>": (ratio, (a_i, a_j))} for the job check against TAIL (`checks`).
 
     Args:
-        job: the validated job.
+        cap_gap: the van der Waals cap (a), or None without van der Waals force.
+        debye_length: the double layer's Debye length (a), or None without double layer.
+        cutoff: the lubrication cut-off (mean radii).
+        class_radii: the radii of the size classes (a).
 
     Returns:
         Per truncated part, its largest ratio (dimensionless) and the radii (a) where it
         occurs; empty for laws without truncation.
     """
-    inter, cutoff = job.interparticle, job.hydrodynamics.lubrication_cutoff
-    radii = job.system.class_radii
-    pairs = [(a, b) for k, a in enumerate(radii) for b in radii[k:]]
+    pairs = [(a, b) for k, a in enumerate(class_radii) for b in class_radii[k:]]
     laws = {}
-    if inter.kind in ("vdw", "dlvo"):
-        laws["interparticle.cap_gap"] = (VanDerWaals(1.0, inter.cap_gap), inter.cap_gap)
-    if inter.kind == "dlvo":
-        laws["interparticle.debye_length"] = (DoubleLayer(1.0, inter.debye_length), 0.0)
+    if cap_gap is not None:
+        laws["interparticle.cap_gap"] = (VanDerWaals(1.0, cap_gap), cap_gap)
+    if debye_length is not None:
+        laws["interparticle.debye_length"] = (DoubleLayer(1.0, debye_length), 0.0)
     out = {}
     for path, (law, contact) in laws.items():
         ratios = [(float(abs(law.magnitude(cutoff * 0.5 * (a + b), a, b)
@@ -318,7 +280,7 @@ def tail_ratios(job: Job) -> dict[str, tuple[float, tuple[float, float]]]:
 
 
 def pair_forces(
-    force_law: PairLaw | None, pairs: PairList, n: int, radii: np.ndarray | None = None
+    law: PairLaw, pairs: PairList, n: int, radii: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Forces (N, 3) on the particles and the virial sum_pairs dx F_ij (3, 3) for the
     close pairs (a PairList: dx = x_j - x_i, true gaps). The force on i is
@@ -326,7 +288,7 @@ def pair_forces(
     give each pair's a_i, a_j; None: each pair's mean radius (radii_sum / 2) for both.
 
     Args:
-        force_law: the pair law (`force_law`), or None for no forces.
+        law: the pair law.
         pairs: the close pairs, P of them.
         n: number of particles N.
         radii: particle radii, shape (N,), in a, or None.
@@ -336,16 +298,169 @@ def pair_forces(
     """
     forces = np.zeros((n, 3))
     virial = np.zeros((3, 3))
-    if force_law is None or len(pairs.i) == 0:
+    if len(pairs.i) == 0:
         return forces, virial
     if radii is None:
         a_i = a_j = 0.5 * pairs.radii_sum
     else:
         a_i, a_j = radii[pairs.i], radii[pairs.j]
     unit = pairs.dx / np.linalg.norm(pairs.dx, axis=1)[:, None]
-    f_on_j = force_law.magnitude(pairs.gap, a_i, a_j)[:, None] * unit
+    f_on_j = law.magnitude(pairs.gap, a_i, a_j)[:, None] * unit
     np.add.at(forces, pairs.j, f_on_j)
     np.add.at(forces, pairs.i, -f_on_j)
     # sum over particles of x F = sum over pairs of (x_j - x_i) F_on_j (true separations)
     virial = (pairs.distance[:, None] * unit).T @ f_on_j
     return forces, virial
+
+
+# --------------------------------------------------------------------------- forces on the step's pairs
+
+@dataclass(frozen=True)
+class ForceSetting:
+    """What every force of a realisation may need besides its own job keys.
+
+    Attributes:
+        radii: (N,) sphere radii, in a.
+        cutoff: the lubrication cut-off (mean radii), beyond which the step's pair list
+            ends: truncated laws vanish there.
+    """
+
+    radii: np.ndarray
+    cutoff: float
+
+
+@dataclass(frozen=True)
+class ForceTerms:
+    """One force's forces and torques (N, 6) (eta_m a^2/t_D, eta_m a^3/t_D) and virial
+    sum over pairs of dx F_on_j (3, 3) (eta_m a^3/t_D), with its counts for the sample."""
+
+    forces: np.ndarray
+    virial: np.ndarray
+    counts: dict[str, int]
+
+
+class Force(Stateful, Protocol):
+    """An interparticle force on the pairs of a step (the hydrodynamic evaluation's pair
+    list, `sdmpi.hydro.lubrication.PairList`), with its own sample fields and state.
+    Registered by interparticle.kind in `sdmpi.registry.FORCES` (docs/extending.md)."""
+
+    def terms(self, pairs: PairList) -> ForceTerms:
+        """The forces at the step's start.
+
+        Args:
+            pairs: the pairs within the cut-off, with true gaps (dx = x_j - x_i, a).
+
+        Returns:
+            Its `ForceTerms`.
+        """
+        raise NotImplementedError
+
+    def sample_fields(self, stress_unit: str) -> SampleFields:
+        """Its own fields of the sample stream (beyond stress_interparticle, which holds
+        every force's stress).
+
+        Args:
+            stress_unit: the job's stress unit (for stress fields).
+
+        Returns:
+            name -> (shape per sample, dtype, unit, description); empty for none.
+        """
+        raise NotImplementedError
+
+    def sample(self, terms: ForceTerms, stress: Callable[[ForceTerms], np.ndarray]) -> dict[str, Any]:
+        """Its sample of the step (the fields of sample_fields).
+
+        Args:
+            terms: what `terms` returned for the step.
+            stress: stress(terms) -> the 6-vector -(1/V) (sum R_SU R_FU^-1 F + sum x F)
+                of such terms (one more solve).
+
+        Returns:
+            name -> value.
+        """
+        raise NotImplementedError
+
+    def advance(self, velocities: np.ndarray, rate: float, dt: float) -> None:
+        """Advance its state over the step (after `terms`).
+
+        Args:
+            velocities: (U, Omega) relative to the imposed flow, (N, 6), a/t_D and 1/t_D.
+            rate: the step's shear rate (1/t_D).
+            dt: the step's duration (t_D).
+        """
+        raise NotImplementedError
+
+
+class Stateless(NoState, Force):
+    """A `Force` without state or sample fields of its own: those members, empty."""
+
+    def sample_fields(self, stress_unit: str) -> SampleFields:
+        return {}
+
+    def sample(self, terms: ForceTerms, stress: Callable[[ForceTerms], np.ndarray]) -> dict[str, Any]:
+        return {}
+
+    def advance(self, velocities: np.ndarray, rate: float, dt: float) -> None:
+        pass
+
+
+class PairForce(Stateless):
+    """The central pair forces of a law (`PairLaw`, Stokes units) on the step's pairs of
+    spheres of these radii (`pair_forces`); no torques."""
+
+    def __init__(self, law: PairLaw, radii: np.ndarray):
+        self.law, self.radii = law, radii
+
+    def terms(self, pairs: PairList) -> ForceTerms:
+        n = len(self.radii)
+        forces, virial = pair_forces(self.law, pairs, n, self.radii)
+        return ForceTerms(np.hstack([forces, np.zeros((n, 3))]), virial, {})
+
+
+def repulsion(setting: ForceSetting, *, f0: float, tau: float) -> list[Force]:
+    """interparticle.kind = "repulsion": `Repulsion` with F0 = f0 in the job's force unit.
+
+    Args:
+        setting: the realisation's spheres and cut-off.
+        f0: F0 (force unit x a).
+        tau: inverse range (1/a).
+
+    Returns:
+        The one pair force.
+    """
+    return [PairForce(Repulsion(FORCE_UNIT * f0, tau), setting.radii)]
+
+
+def van_der_waals(setting: ForceSetting, *, hamaker: float, cap_gap: float) -> list[Force]:
+    """interparticle.kind = "vdw": `VanDerWaals` truncated at the lubrication cut-off.
+
+    Args:
+        setting: the realisation's spheres and cut-off.
+        hamaker: Hamaker constant (energy unit).
+        cap_gap: gap below which the force is constant (a).
+
+    Returns:
+        The one pair force.
+    """
+    return [PairForce(VanDerWaals(FORCE_UNIT * hamaker, cap_gap, setting.cutoff), setting.radii)]
+
+
+def dlvo(
+    setting: ForceSetting, *, hamaker: float, cap_gap: float, surface_potential: float, debye_length: float
+) -> list[Force]:
+    """interparticle.kind = "dlvo": van der Waals plus `DoubleLayer`, both truncated at the
+    lubrication cut-off, as one `Combined` law.
+
+    Args:
+        setting: the realisation's spheres and cut-off.
+        hamaker: Hamaker constant (energy unit).
+        cap_gap: gap below which the van der Waals force is constant (a).
+        surface_potential: reduced surface potential psi (sqrt(energy unit / a)).
+        debye_length: Debye length (a).
+
+    Returns:
+        The one pair force.
+    """
+    vdw = VanDerWaals(FORCE_UNIT * hamaker, cap_gap, setting.cutoff)
+    layer = DoubleLayer(FORCE_UNIT * surface_potential ** 2, debye_length, setting.cutoff)
+    return [PairForce(Combined((vdw, layer)), setting.radii)]

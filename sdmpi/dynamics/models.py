@@ -1,7 +1,8 @@
 """Hydrodynamic models: what the integrator asks of the hydrodynamics at one configuration.
 
-A model (`HydrodynamicModel`, built by `hydrodynamic_model(job, ...)` from the entry of
-hydrodynamics.model in `sdmpi.registry.HYDRODYNAMIC_MODELS`) is evaluated at a
+A model (`HydrodynamicModel`, built from the job's keys in a `HydrodynamicSetting` by
+`sdmpi.dynamics.setup` from the entry of hydrodynamics.model in
+`sdmpi.registry.HYDRODYNAMIC_MODELS`) is evaluated at a
 configuration, ``model.at(positions, strain)``, which assembles and factorises whatever the
 model needs and returns an *evaluation* (`HydrodynamicEvaluation`) with
 
@@ -12,7 +13,7 @@ model needs and returns an *evaluation* (`HydrodynamicEvaluation`) with
   R_FU^-1 F_B + kT div R_FU^-1 (drift included; F_B of covariance 2 kT R_FU / dt) and an
   estimate of the Brownian stresslets -kT div(R_SU R_FU^-1) (Schaink et al. 2000, eq. 16);
 * ``pairs``: the pairs within the interparticle-force cut-off (`lubrication.PairList`,
-  true gaps), ``relative_mobility(pairs, mask)``: each pair's mobility of relative motion
+  true gaps), ``relative_mobility(i, j, e)``: each pair's mobility of relative motion
   along its line of centres (for the collision forces of `collisions`), ``stats()``: solver
   statistics of the evaluation.
 
@@ -36,7 +37,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -44,11 +46,37 @@ from ..hydro.geometry import Lattice
 from ..hydro.lubrication import PairList, close_pairs
 from ..hydro.resistance import resistance_change
 from ..hydro.solvers import assemble, make_solver, resolve_backend
-from ..registry import DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, backend_for, default_drift_scheme
+from ..registry import DRIFT_SCHEMES, SOLVER_BACKENDS, default_drift_scheme
 from .drift import BrownianTerms, near_contact_velocities, unit_pair_forces
 
-if TYPE_CHECKING:
-    from ..config.schema import Job
+
+@dataclass(frozen=True)
+class HydrodynamicSetting:
+    """The job's keys a hydrodynamic model may read (built by `sdmpi.dynamics.setup`).
+
+    Attributes:
+        lubrication: pairwise lubrication on (the model has it and
+            hydrodynamics.lubrication is true).
+        ewald_tolerance: the Ewald sums' tolerance (hydrodynamics.ewald_tolerance or its
+            default).
+        cutoff: the lubrication and force cut-off (hydrodynamics.lubrication_cutoff, mean radii).
+        min_gap: the lubrication's floor (hydrodynamics.min_gap, mean radii).
+        backend: solver.backend (a name, or "auto").
+        far_field: solver.far_field (the matrix-free backends' far field).
+        tolerance: solver.tolerance, or None.
+        lanczos_tolerance: solver.lanczos_tolerance, or None.
+        scheme: brownian.scheme, or None for the backend's default.
+    """
+
+    lubrication: bool
+    ewald_tolerance: float
+    cutoff: float
+    min_gap: float
+    backend: str = "dense"
+    far_field: str | None = None
+    tolerance: float | None = None
+    lanczos_tolerance: float | None = None
+    scheme: str | None = None
 
 
 class HydrodynamicEvaluation(Protocol):
@@ -133,12 +161,12 @@ class HydrodynamicModel(Protocol):
     `sdmpi.registry.HYDRODYNAMIC_MODELS` (docs/extending.md)."""
 
     @classmethod
-    def from_job(cls, job: Any, radii: np.ndarray, box: np.ndarray, comm: Any = None,
-                 separate: Callable | None = None, on_error: Callable | None = None) -> HydrodynamicModel:
-        """The model of ``job`` (`hydrodynamic_model`).
+    def build(cls, setting: HydrodynamicSetting, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+              separate: Callable | None = None, on_error: Callable | None = None) -> HydrodynamicModel:
+        """The model for these spheres (built by `sdmpi.dynamics.setup.hydrodynamic_model`).
 
         Args:
-            job: the validated job.
+            setting: the job's hydrodynamic keys (`HydrodynamicSetting`).
             radii: sphere radii, shape (N,), in a.
             box: box sides (3,), in a.
             comm: the MPI communicator of the ranks that solve together, or None.
@@ -305,16 +333,14 @@ class ResistanceModel(HydrodynamicModel):
         self._held_blocks = None  # its far-field blocks, computed on first use
 
     @classmethod
-    def from_job(cls, job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
-                 separate: Callable | None = None, on_error: Callable | None = None) -> ResistanceModel:
-        """The model of job.hydrodynamics.model, with lubrication when the model has it
-        (`sdmpi.registry.ModelSpec`) and hydrodynamics.lubrication is on."""
-        hyd = job.hydrodynamics
-        return cls(radii, box, lubrication=HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication,
-                   ewald_tol=job.ewald_tolerance, cutoff=hyd.lubrication_cutoff, min_gap=hyd.min_gap,
-                   backend=job.solver.backend, far_field=job.solver.far_field, comm=comm,
-                   tolerance=job.solver.tolerance, lanczos_tolerance=job.solver.lanczos_tolerance,
-                   scheme=job.brownian.scheme, separate=separate, on_error=on_error)
+    def build(cls, setting: HydrodynamicSetting, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+              separate: Callable | None = None, on_error: Callable | None = None) -> ResistanceModel:
+        """The model with the setting's lubrication, Ewald sums, solver backend and drift scheme."""
+        return cls(radii, box, lubrication=setting.lubrication, ewald_tol=setting.ewald_tolerance,
+                   cutoff=setting.cutoff, min_gap=setting.min_gap, backend=setting.backend,
+                   far_field=setting.far_field, comm=comm, tolerance=setting.tolerance,
+                   lanczos_tolerance=setting.lanczos_tolerance, scheme=setting.scheme, separate=separate,
+                   on_error=on_error)
 
     def _guarded(self, build, *args, **kwargs):
         """build(*args, **kwargs), its LinAlgError (a matrix not positive definite) turned
@@ -427,11 +453,11 @@ class FreeDrainingModel(HydrodynamicModel):
         self.radii, self.box, self.cutoff, self.min_gap = radii, box, cutoff, min_gap
 
     @classmethod
-    def from_job(cls, job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
-                 separate: Callable | None = None, on_error: Callable | None = None) -> FreeDrainingModel:
-        """The model for the job's cut-off and minimum gap (it solves nothing: comm,
+    def build(cls, setting: HydrodynamicSetting, radii: np.ndarray, box: np.ndarray, comm: Any = None,
+              separate: Callable | None = None, on_error: Callable | None = None) -> FreeDrainingModel:
+        """The model for the setting's cut-off and minimum gap (it solves nothing: comm,
         separate and on_error do not apply)."""
-        return cls(radii, box, cutoff=job.hydrodynamics.lubrication_cutoff, min_gap=job.hydrodynamics.min_gap)
+        return cls(radii, box, cutoff=setting.cutoff, min_gap=setting.min_gap)
 
     def at(self, positions: np.ndarray, strain: float) -> FreeDrainingEvaluation:
         """The spheres at ``positions`` (N, 3), wrapped, with their force pairs, box at ``strain``."""
@@ -439,40 +465,3 @@ class FreeDrainingModel(HydrodynamicModel):
         pos = lattice.wrap(positions)
         return FreeDrainingEvaluation(self.radii, pos, close_pairs(pos, self.radii, lattice, self.cutoff,
                                                                    self.min_gap))
-
-
-def job_backend(job: Job) -> str:
-    """The backend a job's tasks solve on: job.solver.backend, or what "auto" stands for at
-    its N on ensemble.ranks_per_task ranks (`sdmpi.registry.backend_for`).
-
-    Args:
-        job: the validated job.
-
-    Returns:
-        A registered solver backend name (`sdmpi.registry.SOLVER_BACKENDS`).
-    """
-    return backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
-
-
-def hydrodynamic_model(job: Job, radii: np.ndarray, box: np.ndarray, comm: Any = None,
-                       separate: Callable | None = None, on_error: Callable | None = None) -> HydrodynamicModel:
-    """The model of job.hydrodynamics.model (its `sdmpi.registry.HYDRODYNAMIC_MODELS` entry)
-    for spheres of these radii in this box (comm: the ranks that solve together;
-    separate(positions, strain) -> (positions, overlaps): the overlap correction the
-    midpoint scheme applies at its half step; on_error(LinAlgError) -> the exception raised
-    when M_inf or R_FU is not positive definite).
-
-    Args:
-        job: the validated job.
-        radii: sphere radii, shape (N,), in a.
-        box: box sides (3,), in a.
-        comm: the MPI communicator of the ranks that solve together, or None.
-        separate: separate(positions, strain) -> (positions, overlaps), the midpoint
-            overlap correction, or None.
-        on_error: on_error(LinAlgError) -> the exception to raise, or None.
-
-    Returns:
-        The model.
-    """
-    model = HYDRODYNAMIC_MODELS[job.hydrodynamics.model].load()
-    return model.from_job(job, radii, box, comm=comm, separate=separate, on_error=on_error)

@@ -51,7 +51,7 @@ from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumer
                       extension_hash, parse_job, resources, resume_hash)
 from ..config.checks import scheme_problems
 from ..dynamics.checks import load_job
-from ..dynamics.models import job_backend
+from ..dynamics.setup import job_backend
 from ..dynamics.realisation import RealisationFailed
 from ..registry import SOLVER_BACKENDS
 from . import extension, start_file, store, writers

@@ -58,7 +58,7 @@ class SampleStream:
 
     def file_bytes(self, job: Job) -> float:
         """n_steps rows of every sample field, summed over the tasks."""
-        from ..dynamics.realisation import sample_fields
+        from ..dynamics.setup import sample_fields
 
         row = sum(np.dtype(d).itemsize * math.prod(s) for s, d, _, _ in sample_fields(job).values())
         return float(sum(t.n_steps * row for t in enumerate_tasks(job)))

@@ -218,7 +218,7 @@ class Recorder:
     def __init__(self, job, task, box, write):
         """``write(path, rows, values)`` puts values into rows of the run file's dataset
         at ``path`` (sdmpi.ensemble.store.RunFile.write)."""
-        from ..dynamics.realisation import protocol_of
+        from ..dynamics.setup import protocol_of
 
         self.every = job.output.trajectory_every
         self.dt, self.box = task.dt, np.asarray(box, dtype=float)
