@@ -309,7 +309,8 @@ DRIFT_SCHEMES.register(DriftSpec(
     why_not=_RFD_ON_ITERATIVE))
 DRIFT_SCHEMES.register(DriftSpec(
     "rfd-split", "rfd, the Brownian stresslets from a random finite difference along a draw of their "
-    "own (independent of the step's displacement: for Green-Kubo at rest; one more solve per step)",
+    "own, independent of the step's displacement (a control for stress correlations at rest; one "
+    "more solve per step)",
     "sdmpi.dynamics.drift:SplitRandomFiniteDifference", matrix_free=False,
     why_not=_RFD_ON_ITERATIVE, stress_draw=True))
 DRIFT_SCHEMES.register(DriftSpec(

@@ -369,7 +369,6 @@ def hydrodynamic_settings(job):
     solver backend), or a str saying why none do: solve_mobility applies lubrication with
     the default cut-off and minimum gap of :mod:`sdmpi.hydro.lubrication` only."""
     from ..hydro.lubrication import DEFAULT_CUTOFF, DEFAULT_MIN_GAP
-    from ..registry import HYDRODYNAMIC_MODELS
     hyd = job.hydrodynamics
     lubrication = HYDRODYNAMIC_MODELS[hyd.model].lubrication and hyd.lubrication
     if lubrication and (hyd.lubrication_cutoff, hyd.min_gap) != (DEFAULT_CUTOFF,
@@ -406,7 +405,6 @@ def hydrodynamic_factor(job, phi, frames) -> Hydrodynamic:
     hydrodynamic interactions the ensemble average of :func:`frame_viscosities` over the
     realisations ``frames`` ((path, task, box) each), NaN with the reason when
     there are no frames or :func:`hydrodynamic_settings` has none."""
-    from ..registry import HYDRODYNAMIC_MODELS
     from .errors import ensemble_average
     if not HYDRODYNAMIC_MODELS[job.hydrodynamics.model].solves:
         return Hydrodynamic(EINSTEIN * phi, 0.0, 0, "5/2 phi (free draining, exact)")

@@ -140,10 +140,9 @@ class SplitRandomFiniteDifference:
     direction m = R_FU^-1 C z, as ``rfd``, and the Brownian stresslets by a second one along
     m' = R_FU^-1 C z_stress of an independent draw (`rfd_terms`). The estimator noise of the
     stresslets is then independent of the step's displacement and of every later
-    configuration, so that the sampled Brownian stress's time correlation at lags >= 1 is
-    that of -kT div(R_SU R_FU^-1) itself (Green-Kubo at rest, docs/reduce.md); with ``rfd``
-    it is correlated with the displacement at second order in z. One more resistance change
-    and solve per step than ``rfd``."""
+    configuration (with ``rfd`` both are functions of z), a control for the stress
+    autocorrelation at rest (docs/numerics.md). One more resistance change and solve per
+    step than ``rfd``."""
 
     def brownian(self, evaluation: SolverEvaluation, z: np.ndarray, kT: float, dt: float,
                  near: Callable[[np.ndarray], Any], z_stress: np.ndarray | None = None) -> BrownianTerms:
