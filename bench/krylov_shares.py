@@ -9,8 +9,9 @@ outermost wrapped call; calls made inside another part count for that part) and 
 far-field product (`KrylovSolver.far_rows`) counted for the part that asked for it:
 
 * GMRES solves: the mixed-form solves of velocities (`KrylovSolver.velocities`);
-* collision relative mobilities: f.R_FU^-1.f of each pair an overlap correction moved
-  (`SolverBackend.mobility_forms`, one GMRES solve per pair), for the collision stress;
+* collision relative mobilities: f.R_FU^-1.f of the pairs an overlap correction moved
+  (`KrylovSolver.mobility_forms`: one GMRES solve for each group of pairs far apart), for
+  the collision stress;
 * stresslets of velocities not from the last solve (`KrylovSolver.stresslets`: a CG
   solve M lambda = V, e.g. the start's Brownian stresslets of the midpoint scheme);
 * Brownian far-field forces (`KrylovSolver.brownian_forces`: the Lanczos iteration);
@@ -42,14 +43,14 @@ from bench_step import cholesky_ms  # bench/ is on sys.path when run as a script
 from sdmpi.config import enumerate_tasks
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.checks import load_job
-from sdmpi.hydro import backend, krylov, solvers, spectral
+from sdmpi.hydro import krylov, solvers, spectral
 from sdmpi.hydro.geometry import Lattice
 
 #: part -> the (owner, method) calls it owns
 PARTS = {
     "GMRES solves (velocities)": [(krylov.KrylovSolver, "velocities")],
-    "collision relative mobilities (a GMRES solve per corrected pair)": [
-        (backend.SolverBackend, "mobility_forms")],
+    "collision relative mobilities (a GMRES solve per group of corrected pairs)": [
+        (krylov.KrylovSolver, "mobility_forms")],
     "stresslets of other velocities (CG)": [(krylov.KrylovSolver, "stresslets")],
     "Brownian far-field forces (Lanczos)": [(krylov.KrylovSolver, "brownian_forces")],
     "set-ups (split resistance, solver, preconditioner)": [
