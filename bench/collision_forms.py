@@ -18,10 +18,9 @@ FILE merges it into FILE under --label.
 """
 
 import argparse
-import json
-from pathlib import Path
 
 import numpy as np
+from workers import report  # bench/ is on sys.path when run as a script
 
 from sdmpi.config import enumerate_tasks
 from sdmpi.dynamics import Realisation
@@ -96,12 +95,7 @@ def main():
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     row = compare(args.job, args.overrides, args.steps)
-    print(json.dumps(row, indent=1), flush=True)
-    if args.out:
-        path = Path(args.out)
-        data = json.loads(path.read_text()) if path.exists() else {}
-        data[args.label or "-".join(args.overrides)] = row
-        path.write_text(json.dumps(data, indent=1) + "\n")
+    report(row, args.out, args.label or "-".join(args.overrides))
 
 
 if __name__ == "__main__":

@@ -30,15 +30,14 @@ resident memory of each rank (ru_maxrss, GiB, start and Monte Carlo included). P
 """
 
 import argparse
-import json
 import resource
 import time
-from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from bench_step import cholesky_ms  # bench/ is on sys.path when run as a script
+from bench_step import cholesky_matrix, cholesky_ms  # bench/ is on sys.path when run as a script
+from workers import report
 
 from sdmpi.config import enumerate_tasks
 from sdmpi.dynamics import Realisation
@@ -136,8 +135,7 @@ def measure(job_path, overrides, warmup, steps):
     iterations, Cholesky-equivalents."""
     comm = MPI.COMM_WORLD
     job = load_job(job_path, overrides)
-    spd = np.random.default_rng(0).standard_normal((297, 297))
-    spd = spd @ spd.T + 297 * np.eye(297)
+    spd = cholesky_matrix()
     chol = [cholesky_ms(spd)[1]]
     meter = Meter()
     meter.install()
@@ -176,20 +174,14 @@ def main():
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     if args.product:
-        spd = np.random.default_rng(0).standard_normal((297, 297))
-        spd = spd @ spd.T + 297 * np.eye(297)
+        spd = cholesky_matrix()
         rows = [product_stages(n, args.ewald_tolerance, args.steps) for n in args.product]
         row = {"products": rows, "cholesky_ms": cholesky_ms(spd)[1]}
     else:
         row = measure(args.job, args.overrides, args.warmup, args.steps)
     if MPI.COMM_WORLD.rank:
         return
-    print(json.dumps(row, indent=1), flush=True)
-    if args.out:
-        path = Path(args.out)
-        data = json.loads(path.read_text()) if path.exists() else {}
-        data[args.label or "-".join(args.overrides) or args.job or "products"] = row
-        path.write_text(json.dumps(data, indent=1) + "\n")
+    report(row, args.out, args.label or "-".join(args.overrides) or args.job or "products")
 
 
 if __name__ == "__main__":
