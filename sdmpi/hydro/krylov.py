@@ -801,7 +801,7 @@ class KrylovSolver(SolverBackend):
         motion: f_p.R_FU^-1.f_q ~ G_p G_q (measured, N = 343, phi = 0.45, 40 pairs with
         gaps below 0.02: |f_p.R_FU^-1.f_q| / G_p <= 2 G_q eta_m a (centres >= 4 a apart),
         <= 8 G_q eta_m a (sharing a sphere); pairs at gaps of the collisions, G_p ~ 1e-4
-        1/(eta_m a): each form within 1e-3 of one solve per set; docs/numerics.md,
+        1/(eta_m a): each form within 1e-3 of one solve per set, N = 1000; docs/numerics.md,
         "Krylov backend").
         Other sets (other supports, wider gaps, no lubrication) are solved one by one.
 
