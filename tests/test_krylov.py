@@ -480,7 +480,8 @@ def test_mobility_forms_share_solves_between_distant_near_contact_pairs():
     from sdmpi.dynamics.drift import unit_pair_forces
     from sdmpi.dynamics.initial import compress, hard_sphere_fluid
     from sdmpi.hydro.backend import SolverBackend
-    from sdmpi.hydro.krylov import FORMS_MAX_GAP
+    from sdmpi.hydro.geometry import Lattice
+    from sdmpi.hydro.krylov import FORMS_MAX_GAP, FORMS_SEPARATION
 
     n, rng = 125, np.random.default_rng(3)
     pos, side = hard_sphere_fluid(n, 0.2, rng)
@@ -499,6 +500,14 @@ def test_mobility_forms_share_solves_between_distant_near_contact_pairs():
     solver = make_solver("petsc-krylov", res, tolerance=1e-10)
     groups = solver.form_groups(forces)
     assert len(near) == 7 and len(groups) == 5 and [len(chosen)] in groups and [len(chosen) - 1] in groups
+    for group in groups:  # no two pairs of a solve within FORMS_SEPARATION (nearest images)
+        spheres = [np.concatenate([pairs.i[chosen[[p]]], pairs.j[chosen[[p]]]]) for p in group if p < len(near)]
+        for a in range(len(spheres)):
+            for b in range(a):
+                d = Lattice(box, 0.0).nearest_image(pos[spheres[a]][:, None] - pos[spheres[b]][None])
+                assert np.linalg.norm(d, axis=-1).min() >= 2 * FORMS_SEPARATION
+    twice = solver.form_groups(np.concatenate([forces[:1], forces[:1]]))  # the same pair twice: apart
+    assert twice == [[0], [1]]
     exact = make_solver("dense", grand_resistance(res.positions, np.ones(n), box, 0.0)).mobility_forms(forces)
     shared = solver.mobility_forms(forces)
     error = np.abs(shared / exact - 1)
