@@ -122,8 +122,7 @@ def main():
     ap.add_argument("--out", default="bench/step.json")
     ap.add_argument("--no-cold", action="store_true", help="skip the first step from an empty numba cache")
     args = ap.parse_args()
-    a = np.random.default_rng(0).standard_normal((297, 297))
-    spd = a @ a.T + 297 * np.eye(297)
+    spd = cholesky_matrix()
     guess_ms = {8: 2.5, 27: 7.0, 64: 45.0, 125: 150.0}
     results = {"command": "make bench (python bench/bench_step.py)", "job": JOB,
                "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
