@@ -10,7 +10,9 @@ and --ewald-tolerance (1e-6); far field by N as in `krylov`: dense below 400 par
 spectral from there on), one warm-up step (numba compilation, PETSc set-up), then
 `--steps` timed steps. Recorded: wall time per step (max over ranks), Krylov and Lanczos
 iterations per step, peak resident memory summed over the ranks (ru_maxrss), the
-far-field operator used. Each (N, ranks) runs in its own process group so that peak
+far-field operator used, a 297 x 297 LAPACK Cholesky timed on every rank before and
+after the steps (wall ms) and the step's median wall time in units of the Cholesky's
+median (Cholesky-equivalents: the shared machine's speed drifts 2x). Each (N, ranks) runs in its own process group so that peak
 memory is per size.
 
   python bench/bench_krylov.py --sizes 343 1000 --ranks 2          # launches mpirun
@@ -30,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from workers import emit, run_worker  # bench/ is on sys.path when run as a script
+from bench_step import cholesky_matrix, cholesky_ms  # bench/ is on sys.path when run as a script
+from workers import emit, run_worker
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -57,6 +60,8 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
         "integration.steps_per_period=2000",  # dt = 5e-4 t_D, Schaink et al.'s largest
         *([f"solver.far_field='{far_field}'"] if far_field else [])])
     speed_before = machine_speed()
+    spd = cholesky_matrix()
+    chol = [cholesky_ms(spd)[0]]
     t0 = time.perf_counter()
     real = Realisation(job, enumerate_tasks(job)[0], comm if comm.size > 1 else None)
     t_init = time.perf_counter() - t0
@@ -70,6 +75,8 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
         its.append(int(sample["solver_iterations"][0]))
         lanczos.append(int(sample["lanczos_iterations"][0]))
     rss = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 2 ** 20  # KiB -> GiB
+    chol.append(cholesky_ms(spd)[0])
+    chol = sorted(c for pair in comm.allgather(chol) for c in pair)  # every rank's, before and after
     far = "-" if backend != "petsc-krylov" else krylov.far_field_kind(far_field, n)
     return {"backend": backend, "n": n, "ranks": comm.size, "phi": 0.45, "tolerance": tolerance,
             "lanczos_tolerance": lanczos_tolerance, "ewald_tolerance": ewald_tolerance,
@@ -78,7 +85,9 @@ def measure(n, backend, steps, tolerance, ewald_tolerance, lanczos_tolerance, fa
             "seconds_per_step_all": times, "iterations_per_step": its,
             "lanczos_per_step": lanczos, "peak_rss_gib_total": rss, "init_seconds": t_init,
             "dt": real.dt, "load_average_1min": os.getloadavg()[0],
-            "dgemm_gflops_before_after": [speed_before, machine_speed()]}
+            "dgemm_gflops_before_after": [speed_before, machine_speed()],
+            "cholesky_wall_ms": chol,
+            "cholesky_equivalents_per_step": 1e3 * float(np.median(times)) / float(np.median(chol))}
 
 
 def machine_speed(n=1000, repeat=5):

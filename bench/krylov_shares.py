@@ -9,8 +9,9 @@ outermost wrapped call; calls made inside another part count for that part) and 
 far-field product (`KrylovSolver.far_rows`) counted for the part that asked for it:
 
 * GMRES solves: the mixed-form solves of velocities (`KrylovSolver.velocities`);
-* collision relative mobilities: f.R_FU^-1.f of each pair an overlap correction moved
-  (`SolverBackend.mobility_forms`, one GMRES solve per pair), for the collision stress;
+* collision relative mobilities: f.R_FU^-1.f of the pairs an overlap correction moved
+  (`KrylovSolver.mobility_forms`: one GMRES solve for each group of pairs far apart), for
+  the collision stress;
 * stresslets of velocities not from the last solve (`KrylovSolver.stresslets`: a CG
   solve M lambda = V, e.g. the start's Brownian stresslets of the midpoint scheme);
 * Brownian far-field forces (`KrylovSolver.brownian_forces`: the Lanczos iteration);
@@ -29,27 +30,26 @@ resident memory of each rank (ru_maxrss, GiB, start and Monte Carlo included). P
 """
 
 import argparse
-import json
 import resource
 import time
-from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from bench_step import cholesky_ms  # bench/ is on sys.path when run as a script
+from bench_step import cholesky_matrix, cholesky_ms  # bench/ is on sys.path when run as a script
+from workers import report
 
 from sdmpi.config import enumerate_tasks
 from sdmpi.dynamics import Realisation
 from sdmpi.dynamics.checks import load_job
-from sdmpi.hydro import backend, krylov, solvers, spectral
+from sdmpi.hydro import krylov, solvers, spectral
 from sdmpi.hydro.geometry import Lattice
 
 #: part -> the (owner, method) calls it owns
 PARTS = {
     "GMRES solves (velocities)": [(krylov.KrylovSolver, "velocities")],
-    "collision relative mobilities (a GMRES solve per corrected pair)": [
-        (backend.SolverBackend, "mobility_forms")],
+    "collision relative mobilities (a GMRES solve per group of corrected pairs)": [
+        (krylov.KrylovSolver, "mobility_forms")],
     "stresslets of other velocities (CG)": [(krylov.KrylovSolver, "stresslets")],
     "Brownian far-field forces (Lanczos)": [(krylov.KrylovSolver, "brownian_forces")],
     "set-ups (split resistance, solver, preconditioner)": [
@@ -135,8 +135,7 @@ def measure(job_path, overrides, warmup, steps):
     iterations, Cholesky-equivalents."""
     comm = MPI.COMM_WORLD
     job = load_job(job_path, overrides)
-    spd = np.random.default_rng(0).standard_normal((297, 297))
-    spd = spd @ spd.T + 297 * np.eye(297)
+    spd = cholesky_matrix()
     chol = [cholesky_ms(spd)[1]]
     meter = Meter()
     meter.install()
@@ -175,20 +174,14 @@ def main():
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     if args.product:
-        spd = np.random.default_rng(0).standard_normal((297, 297))
-        spd = spd @ spd.T + 297 * np.eye(297)
+        spd = cholesky_matrix()
         rows = [product_stages(n, args.ewald_tolerance, args.steps) for n in args.product]
         row = {"products": rows, "cholesky_ms": cholesky_ms(spd)[1]}
     else:
         row = measure(args.job, args.overrides, args.warmup, args.steps)
     if MPI.COMM_WORLD.rank:
         return
-    print(json.dumps(row, indent=1), flush=True)
-    if args.out:
-        path = Path(args.out)
-        data = json.loads(path.read_text()) if path.exists() else {}
-        data[args.label or "-".join(args.overrides) or args.job or "products"] = row
-        path.write_text(json.dumps(data, indent=1) + "\n")
+    report(row, args.out, args.label or "-".join(args.overrides) or args.job or "products")
 
 
 if __name__ == "__main__":

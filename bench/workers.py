@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 #: one BLAS/OpenMP thread per rank; mpirun allowed as root (containers)
 ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
@@ -32,3 +33,13 @@ def run_worker(script, args, ranks, cwd=None):
     text = re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", res.stdout)  # stray terminal escapes (seen: ESC[0m)
     return [row for line in text.splitlines() if line.startswith(TAG)
             for row in json.loads(line[len(TAG):])]
+
+
+def report(row, out=None, label=None):
+    """Print the row as JSON; with out (a path), merge it into that JSON file under label."""
+    print(json.dumps(row, indent=1), flush=True)
+    if out:
+        path = Path(out)
+        data = json.loads(path.read_text()) if path.exists() else {}
+        data[label] = row
+        path.write_text(json.dumps(data, indent=1) + "\n")
