@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test pip-check bench schaink2000 finite-size dratler1996 dratler1996-sensitivity clean
+.PHONY: setup run test pip-check bench schaink2000 finite-size finite-size-n343 dratler1996 dratler1996-sensitivity clean
 
 setup: $(VENV)/.installed
 
@@ -95,6 +95,16 @@ finite-size: setup
 	done
 	$(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
 	  out/finite_size/n125.h5 \
+	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
+
+# N = 343 at two plateau frequencies (jobs/finite_size_n343.toml, ~5 core-hours), resumable;
+# then the study's tables with it.
+finite-size-n343: setup
+	mkdir -p out/finite_size
+	mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/finite_size_n343.toml \
+	  -o out/finite_size/n343.h5
+	$(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
+	  out/finite_size/n125.h5 out/finite_size/n343.h5 \
 	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
 
 # The Dratler & Schowalter (1996) monolayer study (docs/validation/dratler1996/README.md):

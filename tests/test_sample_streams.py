@@ -68,6 +68,7 @@ CASES = {
     "finite_size_n27": ("finite_size_n27.toml", ["system.n_particles=8"], 0),
     "finite_size_n64": ("finite_size_n64.toml", ["system.n_particles=8"], -1),
     "finite_size_n125": ("finite_size_n125.toml", ["system.n_particles=8"], 0),
+    "finite_size_n343": ("finite_size_n343.toml", ["system.n_particles=8"], -1),
     "finite_size_dt_control": ("finite_size_dt_control.toml", ["system.n_particles=8"], 0),
     "schaink2000_maxwell": ("schaink2000_maxwell.toml", ["system.n_particles=8"], 0),
     "schaink2000_newtonian": ("schaink2000_newtonian.toml", ["system.n_particles=8"], 0),
