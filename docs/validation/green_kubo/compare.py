@@ -187,6 +187,8 @@ def totals_and_cost(reds, g, study, steps, gk_steps):
     print("|---|---|---|---|---|---|---|---|")
     for k, w in enumerate(STUDY_OMEGA):
         key = min({q[0] for q in study}, key=lambda q: abs(q - w))
+        if not math.isclose(key, w, rel_tol=1e-6):
+            continue  # a frequency the oscillatory table does not have
         t, b1, b2 = study[(key, "total")], study[(key, "brownian")][1], study[(key, "brownian")][3]
         for rule in RULES:
             r, mod = reds[rule], reds[rule].groups[0].moduli
@@ -240,6 +242,8 @@ def schaink(rest, study_csv, study_job, window, same_dt_csv=None):
     print("|---|---|" + "---|---|" * len(rows))
     for k, w in enumerate(STUDY_OMEGA):
         key = min({q[0] for q in study}, key=lambda q: abs(q - w))
+        if not math.isclose(key, w, rel_tol=1e-6):
+            continue  # a frequency the oscillatory table does not have
         ref = [study[(key, r)] for r in rows]
         print(f"| {w / math.pi:g} pi | study | " + " | ".join(
             f"{pm(v[0], v[1])} | {pm(v[2], v[3])}" for v in ref) + " |")
