@@ -1,24 +1,8 @@
-"""Shared set-up of the test suite.
+"""Shared set-up of the test suite (the thread counts and BLAS kernels: `tests/__init__.py`)."""
 
-One BLAS/OpenMP thread: the tests compare sample streams and run files bit for bit, which
-holds with one thread (`sdmpi run` sets the same unless told otherwise). The variables are
-set here, before any test module imports numpy, also when pytest runs outside
-``make test``.
-"""
+import pytest
 
-import os
-import sys
-import warnings
-
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_var] = "1"
-if "numpy" in sys.modules:  # a plugin imported it first: its BLAS keeps its thread count
-    warnings.warn("numpy was imported before tests/conftest.py set one BLAS thread; run "
-                  "with OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1")
-
-import pytest  # noqa: E402
-
-from .runs import JOB, sdmpi  # noqa: E402
+from .runs import JOB, sdmpi
 
 
 @pytest.fixture(scope="session")

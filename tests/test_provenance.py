@@ -21,7 +21,7 @@ def test_resume_under_another_stack_warns_and_is_recorded(tmp_path):
     first = read_summary(out).sessions
     assert [s["mode"] for s in first] == ["new"] and first[0]["versions"] == versions()
     for key in ("python", "numpy", "scipy", "numba", "h5py", "hdf5", "mpi4py", "MPI",
-                "petsc4py", "sdmpi source"):
+                "petsc4py", "sdmpi source", "BLAS kernels"):
         assert key in first[0]["versions"]
 
     res = other_stack("run", job, "-o", out, env={"SDMPI_TEST_KILL": "step:100"})

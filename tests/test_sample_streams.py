@@ -33,6 +33,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sdmpi._blas_kernel import openblas_kernel
+
 from .runs import fresh_lubrication_tables
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -110,7 +112,7 @@ def stream(case):
 
 def _stack():
     """The floating-point stack the digests were made on: versions, the BLAS and LAPACK
-    libraries loaded (Linux), the CPU."""
+    libraries loaded (Linux) and OpenBLAS's kernels, the CPU."""
     import numba
     import scipy
     import scipy.linalg  # noqa: F401  (loads LAPACK)
@@ -129,7 +131,7 @@ def _stack():
         pass
     return {"numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
             "blas": [lib for lib in libs if not lib.startswith("_") and "cython" not in lib],
-            "machine": platform.machine(), "cpu": cpu,
+            "blas kernels": openblas_kernel(), "machine": platform.machine(), "cpu": cpu,
             "python": platform.python_version()}
 
 

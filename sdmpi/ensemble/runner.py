@@ -46,6 +46,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .. import __version__
+from .._blas_kernel import openblas_kernel
 from .._kernel_cache import kernels_cached
 from ..config import (LAYOUT_KEYS, LENGTH_KEYS, JobError, canonical_text, enumerate_tasks,
                       extension_hash, parse_job, resources, resume_hash)
@@ -413,8 +414,8 @@ def source_digest(root: Path = Path(__file__).resolve().parents[1]) -> str:
 def versions() -> dict[str, str]:
     """Versions of sdmpi (its number and its source digest) and of the library stack it
     runs on (Python, numpy, scipy, numba, h5py and its HDF5, mpi4py and its MPI library,
-    petsc4py when installed): a run's numbers are bit-for-bit reproducible for one such
-    stack.
+    petsc4py when installed, OpenBLAS's kernels): a run's numbers are bit-for-bit
+    reproducible for one such stack.
 
     Returns:
         name -> version text ("not installed" for a missing petsc4py).
@@ -433,7 +434,7 @@ def versions() -> dict[str, str]:
             "h5py": h5py.version.version, "hdf5": h5py.version.hdf5_version,
             "mpi4py": mpi4py.__version__,
             "MPI": MPI.Get_library_version().split(",")[0].splitlines()[0].strip(),
-            "petsc4py": petsc4py}
+            "petsc4py": petsc4py, "BLAS kernels": openblas_kernel()}
 
 
 # --------------------------------------------------------------------------- stopping
