@@ -199,15 +199,9 @@ class GrandResistance:
         return self.product(v, "rigid", strain_only=True).ravel()
 
     def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """S = R_SE e_inf - R_SU U' (N, 5) for rigid-body velocities U' (N, 6), einf (N, 5).
-
-        Args:
-            velocities: (N, 6) velocities and angular velocities relative to the imposed flow.
-            einf: (N, 5) imposed rate of strain at each sphere (`basis` components).
-
-        Returns:
-            (N, 5) stresslets (`basis` components, Stokes units).
-        """
+        """S = R_SE e_inf - R_SU U' (N, 5) at this resistance: arguments, units and result
+        as `sdmpi.hydro.backend.SolverBackend.stresslets`, which the direct solvers answer
+        with it."""
         v = np.empty((self.n_particles, NDOF))
         np.negative(velocities, out=v[:, :6])
         v[:, 6:] = einf
