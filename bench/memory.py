@@ -26,7 +26,6 @@ shared work arrays. Prints a JSON row; --out FILE merges it into FILE under --la
 
 import argparse
 import resource
-import weakref
 
 import h5py  # noqa: F401  (loaded as by sdmpi run: part of the baseline)
 import numpy as np
@@ -145,6 +144,10 @@ def holdings(solver):
         out["far field: k-space kernel"] = _nbytes(getattr(far, "_scale", None))
     else:
         out["far field: dense matrix"] = _nbytes(far.matrix)
+    lub = solver._lubrication
+    out["lubrication matrix (11x11 blocks)"] = _nbytes(lub.data, lub.indices, lub.indptr)
+    if solver.lubricated is not None:
+        out["lubrication pair list"] = _nbytes(*vars(solver.lubricated).values())
     out["lubrication pair factors (12x12)"] = _nbytes(solver.pair_chol, solver.pair_i, solver.pair_j)
     out["L_uu (PETSc BAIJ)"] = _petsc_bytes(solver.l_uu)
     out["G pattern, D_uu^-1"] = _nbytes(solver._g_keep, solver._g_pattern[2], solver._d_uu)
@@ -156,14 +159,6 @@ def holdings(solver):
     return out
 
 
-def resistance_holdings(split):
-    """Bytes held by one SplitResistance on this rank beyond its solver's: the lubrication
-    matrix and the pair list."""
-    lub, pairs = split.lubrication, split.pairs
-    return {"lubrication matrix (11x11 blocks)": _nbytes(lub.data, lub.indices, lub.indptr),
-            "lubrication pair list": _nbytes(*vars(pairs).values())}
-
-
 def measure(job_path, overrides, steps):
     """The row of one realisation: resident memory per part and holdings per rank."""
     comm = MPI.COMM_WORLD
@@ -172,22 +167,15 @@ def measure(job_path, overrides, steps):
     baseline = rss()
     snapshots = []
 
-    velocities, split_resistance = krylov.KrylovSolver.velocities, solvers.split_resistance
-    splits = []  # weak references (a SplitResistance is not hashable)
+    velocities = krylov.KrylovSolver.velocities
 
     def snapshot(self, *args, **kwargs):
         # the midpoint's solve: two evaluations alive (the step's start and the midpoint)
         if len(krylov._LIVE) >= 2 and not snapshots:
-            snapshots.append([holdings(s) for s in list(krylov._LIVE)]
-                             + [resistance_holdings(r()) for r in splits if r() is not None])
+            snapshots.append([holdings(s) for s in list(krylov._LIVE)])
         return velocities(self, *args, **kwargs)
 
-    def keep(*args, **kwargs):
-        split = split_resistance(*args, **kwargs)
-        splits.append(weakref.ref(split))
-        return split
-
-    krylov.KrylovSolver.velocities, solvers.split_resistance = snapshot, keep
+    krylov.KrylovSolver.velocities = snapshot
     peaks.install()
     peaks.enter("start (lattice, Monte Carlo, model)")
     real = Realisation(job, enumerate_tasks(job)[0], comm if comm.size > 1 else None)
@@ -200,7 +188,7 @@ def measure(job_path, overrides, steps):
         for key, value in owner.items():
             held[key] = held.get(key, 0.0) + value / GIB
     rows = comm.allgather({"baseline_gib": baseline, "parts": peaks.parts, "held_gib": held,
-                           "solvers_alive": len(krylov._LIVE),
+                           "solvers_at_snapshot": len(snapshots[0]) if snapshots else 0,
                            "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20})
     return {"job": job_path, "overrides": overrides, "ranks": comm.size, "n": job.system.n_particles,
             "steps": steps, "hwm_resettable": peaks.resettable, "per_rank": rows,

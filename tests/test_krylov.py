@@ -170,6 +170,21 @@ def test_resistance_for_solves_only():
         only.brownian_forces(rng.standard_normal(only.noise_shape))
 
 
+def test_solver_frees_its_petsc_objects():
+    """A solver its caller drops destroys its PETSc objects (`KrylovSolver.__del__`): the
+    shell matrix and preconditioner hold their python contexts from PETSc's side, and
+    PETSc would otherwise keep the solver's matrices, factor and Krylov vectors allocated
+    until the process ends (two solvers a Brownian step)."""
+    start, _ = near_contact_start()
+    n = start.n_particles
+    solver = make_solver("petsc-krylov", start, tolerance=1e-6)
+    solver.velocities(np.ones((n, 6)), np.zeros((n, 5)))
+    held = [solver.ksp, solver.saddle, solver.inner, solver.l_uu, solver.schur]
+    assert all(obj.handle != 0 for obj in held)
+    del solver
+    assert all(obj.handle == 0 for obj in held)
+
+
 def test_midpoint_difference_is_accurate():
     """The Brownian stresslets are a difference of two solves, S_mid - S_start, at
     configurations ~sqrt(dt) apart, much smaller than each (here 1-2%). The midpoint's solve (which

@@ -584,12 +584,21 @@ class KrylovSolver(SolverBackend):
         self._last = None  # (velocities, einf, lambda rows) of the last solve
 
     def destroy(self) -> None:
-        """Frees the PETSc objects now (otherwise when the solver is garbage collected)."""
-        for obj in (self.ksp, self._mobility_ksp, self.inner, self.saddle, self.l_uu, self.schur,
-                    self.u_in, self.u_out, self._g_in, self._g_out):
+        """Frees the PETSc objects now (otherwise when the solver is garbage collected:
+        `__del__`). Idempotent."""
+        for name in ("ksp", "_mobility_ksp", "inner", "saddle", "l_uu", "schur", "u_in", "u_out", "_g_in", "_g_out"):
+            obj = getattr(self, name, None)  # (None also for a solver whose __init__ failed)
             if obj is not None:
                 obj.destroy()
         _LIVE.discard(self)
+
+    def __del__(self) -> None:
+        """The PETSc objects destroyed with the solver: the shell matrices and
+        preconditioners hold their python contexts from PETSc's side, and PETSc keeps the
+        objects alive with them unless they are destroyed (a solver's matrices, factor and
+        Krylov vectors, every step's start and midpoint, would otherwise stay allocated
+        until the process ends)."""
+        self.destroy()
 
     # ------------------------------------------------------------------ helpers
 
