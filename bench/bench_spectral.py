@@ -79,7 +79,7 @@ def measure(n, tol, repeat, dense_max):
            "xi": op.params.xi, "rcut": op.params.rcut, "grid": list(op.params.grid),
            "window_points": op._stencils.pad}
     par, st = op.params, op._stencils
-    padded = op._padded_grid
+    padded, contiguous, fk = op.work_grids()
     grid = padded[:, :, :par.grid[2]]
     clock = time.process_time
     yy = np.zeros_like(x)
@@ -95,15 +95,15 @@ def measure(n, tol, repeat, dense_max):
 
     parts = {"real": _median_time(lambda: op.real_space(x, yy), repeat, clock),
              "spread": _median_time(spread, repeat, clock),
-             "fft_kernel": (_median_time(lambda: op._velocity_grid(grid), repeat, clock)
+             "fft_kernel": (_median_time(lambda: op._velocity_grid(grid, fk), repeat, clock)
                             if comm.rank == 0 else 0.0),
              "interpolate": _median_time(interpolate, repeat, clock)}
     parts["total"] = sum(parts.values())
     row["parts_cpu"] = comm.gather(parts)
     if comm.size > 1:
         def grid_comm():
-            comm.Reduce(MPI.IN_PLACE if comm.rank == 0 else op._grid, op._grid, op=MPI.SUM, root=0)
-            comm.Bcast(op._grid, root=0)
+            comm.Reduce(MPI.IN_PLACE if comm.rank == 0 else contiguous, contiguous, op=MPI.SUM, root=0)
+            comm.Bcast(contiguous, root=0)
 
         row["grid_reduce_bcast"] = comm.allreduce(_median_time(grid_comm, repeat, barrier=comm.Barrier),
                                                   op=MPI.MAX)

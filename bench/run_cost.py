@@ -8,8 +8,9 @@ first the short run, e.g. 2; a fresh run file each), then times the Cholesky aga
 wall time per step is the difference between the runs over the difference of their step
 counts (the start, the Monte Carlo, the run file and the first step's compilation
 cancel), and its Cholesky-equivalents that time over the Cholesky's wall time (median of
-the ranks' timings before and after). Prints a JSON row; --out FILE merges it into FILE
-under --label.
+the ranks' timings before and after). Also the peak resident memory of each rank over
+the runs (ru_maxrss, GiB). Prints a JSON row; --out FILE merges it into FILE under
+--label.
 
     mpirun -n 2 python bench/run_cost.py jobs/large_n_krylov.toml --steps 2 12 \\
         --set 'shear.protocol="none"' --set integration.dt=5e-4 --set integration.discard_steps=0 \\
@@ -17,6 +18,7 @@ under --label.
 """
 
 import argparse
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -61,7 +63,8 @@ def measure(job, overrides, steps):
     chol_ms = float(np.median(chol))
     return {"job": job, "overrides": overrides, "ranks": comm.size, "steps": steps, "wall_s": walls,
             "wall_s_per_step": per_step, "cholesky_wall_ms": chol,
-            "cholesky_equivalents_per_step": 1e3 * per_step / chol_ms}
+            "cholesky_equivalents_per_step": 1e3 * per_step / chol_ms,
+            "peak_rss_gib_per_rank": comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20)}
 
 
 def main():

@@ -148,6 +148,43 @@ def near_contact_start():
     return split_resistance(pos, np.ones(len(pos)), box, STRAIN), box
 
 
+def test_resistance_for_solves_only():
+    """split_resistance(..., brownian=False) (the Brownian midpoint's) leaves out the pairs'
+    factors and nothing else: the same lubrication matrix and noise shape, solves and
+    stresslets equal bit for bit, and Brownian forces refused with a message."""
+    from .petsc_check import STRAIN
+
+    start, box = near_contact_start()
+    n = start.n_particles
+    solves = split_resistance(start.positions, np.ones(n), box, STRAIN, plan=start.plan, brownian=False)
+    assert solves.pair_chol is None and solves.pair_i is None and start.pair_chol is not None
+    assert np.array_equal(solves.lubrication.data, start.lubrication.data)
+    rng = np.random.default_rng(5)
+    forces, einf = rng.standard_normal((n, 6)), rng.standard_normal((n, 5))
+    full, only = (make_solver("petsc-krylov", r, tolerance=1e-8) for r in (start, solves))
+    assert full.noise_shape == only.noise_shape
+    u = full.velocities(forces, einf)
+    assert np.array_equal(only.velocities(forces, einf), u)
+    assert np.array_equal(only.stresslets(u, einf), full.stresslets(u, einf))
+    with pytest.raises(ValueError, match="pairs' factors"):
+        only.brownian_forces(rng.standard_normal(only.noise_shape))
+
+
+def test_solver_frees_its_petsc_objects():
+    """A solver its caller drops destroys its PETSc objects (`KrylovSolver.__del__`): the
+    shell matrix and preconditioner hold their python contexts from PETSc's side, and
+    PETSc would otherwise keep the solver's matrices, factor and Krylov vectors allocated
+    until the process ends (two solvers a Brownian step)."""
+    start, _ = near_contact_start()
+    n = start.n_particles
+    solver = make_solver("petsc-krylov", start, tolerance=1e-6)
+    solver.velocities(np.ones((n, 6)), np.zeros((n, 5)))
+    held = [solver.ksp, solver.saddle, solver.inner, solver.l_uu, solver.schur]
+    assert all(obj.handle != 0 for obj in held)
+    del solver
+    assert all(obj.handle == 0 for obj in held)
+
+
 def test_midpoint_difference_is_accurate():
     """The Brownian stresslets are a difference of two solves, S_mid - S_start, at
     configurations ~sqrt(dt) apart, much smaller than each (here 1-2%). The midpoint's solve (which

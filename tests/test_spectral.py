@@ -85,6 +85,24 @@ def test_linear_and_symmetric():
     assert np.linalg.norm(combo - (2.5 * y1 - 0.7 * y2)) <= 1e-12 * np.linalg.norm(combo)
 
 
+def test_operators_sharing_the_work_grids_give_their_own_products():
+    """Operators of one process share their grids (`SpectralFarField.work_grids`, one
+    product at a time): products of two operators on different grids, taken in turn,
+    equal each operator's products taken alone, bit for bit (every product overwrites
+    the grids), and the grids are the same arrays for operators of one grid."""
+    (pos, radii, box, _), (pos2, radii2, box2, _) = configuration(0.5, 0.3, True), configuration(0.05, 0.0, False)
+    x = np.random.default_rng(4).standard_normal(11 * N)
+    alone = [SpectralFarField(p, r, Lattice(b, s), tol=t).matvec(x)
+             for p, r, b, s, t in ((pos, radii, box, 0.3, 1e-4), (pos2, radii2, box2, 0.0, 1e-3))]
+    first, second = (SpectralFarField(p, r, Lattice(b, s), tol=t)
+                     for p, r, b, s, t in ((pos, radii, box, 0.3, 1e-4), (pos2, radii2, box2, 0.0, 1e-3)))
+    assert first.params.grid != second.params.grid
+    for _ in range(2):
+        assert np.array_equal(first.matvec(x), alone[0]) and np.array_equal(second.matvec(x), alone[1])
+    twin = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=1e-4)
+    assert all(np.shares_memory(a, b) for a, b in zip(first.work_grids(), twin.work_grids()) if a is not None)
+
+
 def test_public_fft_fallback_gives_the_same_product(monkeypatch):
     """Without scipy's private pocketfft module (transforms into given arrays, pruned to
     the lines of the kept modes) the public scipy.fft functions (full 3-D transforms) give

@@ -201,7 +201,8 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         self.strain = strain
         self.positions = resistance.positions
         self.n_particles = resistance.n_particles
-        self._solvers = [solver]
+        self._stats = [solver.stats]  # of its solver and the displaced ones (not the solvers:
+        # a displaced solver is freed as soon as its caller is done with it)
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
         """U', Omega' = R_FU^-1 (F + R_FE e_inf) by the backend's solver."""
@@ -269,8 +270,9 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         return self.model.drift.brownian(self, z, kT, dt, near, z_stress)
 
     def displaced(self, positions: np.ndarray) -> tuple[Any, int]:
-        """The solver at ``positions`` with this evaluation's pair sets and strain, overlaps
-        first separated (counted); its solves join `stats`. Returns (solver, overlaps).
+        """The solver at ``positions`` with this evaluation's pair sets and strain, for solves
+        (it draws no Brownian forces), overlaps first separated (counted); its solves join
+        `stats`. Returns (solver, overlaps).
 
         Args:
             positions: displaced centres, shape (N, 3), in a.
@@ -279,7 +281,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
             (the backend's solver there, number of overlapping pairs separated first).
         """
         solver, found = self.model.displaced(self, positions, separate=True)
-        self._solvers.append(solver)
+        self._stats.append(solver.stats)
         return solver, found
 
     def resistance_change(self, positions: np.ndarray, vector: np.ndarray) -> np.ndarray:
@@ -299,7 +301,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
 
     def stats(self) -> dict[str, float]:
         """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""
-        stats = [s.stats for s in self._solvers]
+        stats = self._stats
         return {"solver_iterations": sum(s["iterations"] for s in stats),
                 "solver_residual": max(s["residual"] for s in stats),
                 "lanczos_iterations": sum(s["lanczos"] for s in stats)}
@@ -352,9 +354,9 @@ class ResistanceModel(HydrodynamicModel):
                 raise
             raise self._on_error(err) from err
 
-    def _assemble(self, positions, strain, plan=None, **far):
+    def _assemble(self, positions, strain, plan=None, brownian=True, **far):
         return self._guarded(assemble, self.backend, positions, self.radii, self.box, strain, plan=plan,
-                             comm=self.comm, **self._hydro, **far)
+                             comm=self.comm, brownian=brownian, **self._hydro, **far)
 
     def hold_far_field(self, positions: np.ndarray, strain: float) -> None:
         """From now on, evaluate with the far-field mobility of (positions, strain) and the
@@ -393,7 +395,8 @@ class ResistanceModel(HydrodynamicModel):
     def displaced(self, evaluation: ResistanceEvaluation, positions: np.ndarray,
                   separate: bool) -> tuple[Any, int]:
         """The solver at displaced positions with the pair sets of `evaluation` (and its
-        strain); separate: remove overlaps first (counted). Returns (solver, overlaps).
+        strain), for solves (it draws no Brownian forces); separate: remove overlaps first
+        (counted). Returns (solver, overlaps).
 
         Args:
             evaluation: the evaluation whose pair sets and strain are kept.
@@ -406,7 +409,7 @@ class ResistanceModel(HydrodynamicModel):
         found = 0
         if separate and self._separate is not None:
             positions, found = self._separate(positions, evaluation.strain)
-        res = self._assemble(positions, evaluation.strain, plan=evaluation.resistance.plan)
+        res = self._assemble(positions, evaluation.strain, plan=evaluation.resistance.plan, brownian=False)
         return self._solver(res), found
 
 

@@ -539,10 +539,10 @@ class KrylovSolver(SolverBackend):
         self.counts6 = 6 * np.diff(splits)
         nl = p1 - p0
         self.nl11 = NDOF * nl
-        self.noise_shape = (NDOF * n + 12 * len(resistance.pair_i),)
-        self.pair_i, self.pair_j, self.pair_chol = resistance.pair_i, resistance.pair_j, resistance.pair_chol
         # the lubricated pairs (none without lubrication: then resistance.pairs are overlaps)
-        self.lubricated = resistance.pairs if len(resistance.pair_i) else None
+        self.lubricated = resistance.lubricated
+        self.noise_shape = (NDOF * n + 12 * (0 if self.lubricated is None else len(self.lubricated.i)),)
+        self.pair_i, self.pair_j, self.pair_chol = resistance.pair_i, resistance.pair_j, resistance.pair_chol
         self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
 
         # this rank's block rows of the lubrication matrix L (11 x 11 blocks), and of its
@@ -555,21 +555,20 @@ class KrylovSolver(SolverBackend):
         self.u_in, self.u_out = self.l_uu.createVecs()
         # far-field self blocks of the preconditioner (isolated spheres, scaled by
         # self_resistance_scale, weighted by self_resistance_weights; this rank's
-        # particles), and the blocks of the whole Schur complement G (every rank): L_uu
-        # with D_uu^-1 added to its diagonal blocks (lubrication_sparse stores one for
-        # every particle), of which G keeps the diagonal ones and those of pairs closer
-        # than PRECONDITIONER_MAX_GAP
+        # particles, and the rigid-body part of every particle's), and the pattern of the
+        # whole Schur complement G (every rank): L_uu with D_uu^-1 added to its diagonal
+        # blocks (lubrication_sparse stores one for every particle), of which G keeps the
+        # diagonal ones and those of pairs closer than PRECONDITIONER_MAX_GAP (its blocks
+        # formed when needed: schur_blocks)
         root_w = np.sqrt(self_resistance_weights())
         scale = self_resistance_scale(resistance.volume_fraction) * np.outer(root_w, root_w)
         inv = {a: scale * np.linalg.inv(self_mobility(a)) for a in np.unique(resistance.radii)}
         d_inv = np.array([inv[a] for a in resistance.radii])
         self.d_inv = d_inv[p0:p1]
-        g_blocks = np.ascontiguousarray(bsr.data[:, :6, :6])
+        self._d_uu = np.ascontiguousarray(d_inv[:, :6, :6])
         block_rows = np.repeat(np.arange(n), np.diff(bsr.indptr))
-        diagonal = bsr.indices == block_rows
-        g_blocks[diagonal] += d_inv[:, :6, :6]
-        self._g_blocks, self._g_pattern = g_blocks, (bsr.indptr, bsr.indices, block_rows)
-        self._g_keep = diagonal | _near_blocks(resistance.pairs, block_rows, bsr.indices, n)
+        self._lubrication, self._g_pattern = bsr, (bsr.indptr, bsr.indices, block_rows)
+        self._g_keep = (bsr.indices == block_rows) | _near_blocks(resistance.pairs, block_rows, bsr.indices, n)
         # G as a sequential PETSc matrix, its incomplete factor (the KSP `inner`) and work
         # vectors: built at the first preconditioner application, or taken over from a
         # solver of the same pattern (take_preconditioner)
@@ -585,12 +584,21 @@ class KrylovSolver(SolverBackend):
         self._last = None  # (velocities, einf, lambda rows) of the last solve
 
     def destroy(self) -> None:
-        """Frees the PETSc objects now (otherwise when the solver is garbage collected)."""
-        for obj in (self.ksp, self._mobility_ksp, self.inner, self.saddle, self.l_uu, self.schur,
-                    self.u_in, self.u_out, self._g_in, self._g_out):
+        """Frees the PETSc objects now (otherwise when the solver is garbage collected:
+        `__del__`). Idempotent."""
+        for name in ("ksp", "_mobility_ksp", "inner", "saddle", "l_uu", "schur", "u_in", "u_out", "_g_in", "_g_out"):
+            obj = getattr(self, name, None)  # (None also for a solver whose __init__ failed)
             if obj is not None:
                 obj.destroy()
         _LIVE.discard(self)
+
+    def __del__(self) -> None:
+        """The PETSc objects destroyed with the solver: the shell matrices and
+        preconditioners hold their python contexts from PETSc's side, and PETSc keeps the
+        objects alive with them unless they are destroyed (a solver's matrices, factor and
+        Krylov vectors, every step's start and midpoint, would otherwise stay allocated
+        until the process ends)."""
+        self.destroy()
 
     # ------------------------------------------------------------------ helpers
 
@@ -605,8 +613,12 @@ class KrylovSolver(SolverBackend):
         """
         _, cols, rows = self._g_pattern
         keep = self._g_keep
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=self.n))])
-        return _block_csr(indptr, cols[keep], self._g_blocks[keep])
+        cols, rows = cols[keep], rows[keep]
+        blocks = self._lubrication.data[keep, :6, :6]  # a copy
+        diagonal = cols == rows
+        blocks[diagonal] += self._d_uu[rows[diagonal]]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=self.n))])
+        return _block_csr(indptr, cols, blocks)
 
     def schur_solver(self) -> Any:
         """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
@@ -854,7 +866,14 @@ class KrylovSolver(SolverBackend):
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
         """F (N, 6) with covariance R_FU over the noise (flat, noise_shape, standard
         normal): P_u P (P^T M P)^-1/2 z_1 + sum_p Q_p^T C_p z_p (module docstring; P:
-        `LongWaveFactor`)."""
+        `LongWaveFactor`).
+
+        Raises:
+            ValueError: the resistance is one for solves only (no pair factors).
+        """
+        if self.pair_chol is None:
+            raise ValueError("petsc-krylov: Brownian forces need the lubrication pairs' factors "
+                             "(a resistance of split_resistance(..., brownian=True))")
         n = self.n
         z1 = noise[:NDOF * n]
         z2 = noise[NDOF * n:].reshape(-1, 12)

@@ -503,13 +503,16 @@ class SplitResistance:
     """R = M_inf^-1 + L without M_inf^-1 (for `krylov.KrylovSolver`): the far-field
     mobility as an operator (`far.matvec`), the lubrication L as a sparse (11N x 11N)
     BSR matrix, and per lubrication pair (pair_i, pair_j) the Cholesky factor pair_chol
-    (npairs, 12, 12) of its rigid-body block (Brownian forces)."""
+    (npairs, 12, 12) of its rigid-body block (Brownian forces; all three None in a
+    resistance for solves only, `split_resistance` with brownian=False). lubricated: the
+    lubrication pairs (None without lubrication, when pairs are the overlaps)."""
 
     far: object
     lubrication: object
-    pair_i: np.ndarray
-    pair_j: np.ndarray
-    pair_chol: np.ndarray
+    pair_i: np.ndarray | None
+    pair_j: np.ndarray | None
+    pair_chol: np.ndarray | None
+    lubricated: PairList | None
     pairs: PairList
     plan: HydroPlan
     positions: np.ndarray
@@ -523,32 +526,39 @@ class SplitResistance:
         return self.positions.shape[0]
 
 
-def _shared_lubrication(positions, radii, pairs, comm):
-    """`lubrication_sparse(positions, radii, pairs, factors=True)` on every rank of comm,
-    computed by rank 0 alone and broadcast (the same bits everywhere): the other ranks
-    meanwhile finish their larger shares of the spectral far field's real-space blocks
+def _shared_lubrication(positions, radii, pairs, comm, factors):
+    """`lubrication_sparse(positions, radii, pairs, factors=True)` (factors False: the
+    matrix, and None for pair_i, pair_j, pair_chol) on every rank of comm, computed by
+    rank 0 alone and broadcast (the same bits everywhere): the other ranks meanwhile
+    finish their larger shares of the spectral far field's real-space blocks
     (`spectral.real_space_shares` gives rank 0 the smallest)."""
+    def compute():
+        if factors:
+            return lubrication_sparse(positions, radii, pairs, factors=True)
+        return lubrication_sparse(positions, radii, pairs), None, None, None
+
     if comm is None or comm.size == 1:
-        return lubrication_sparse(positions, radii, pairs, factors=True)
+        return compute()
     if comm.rank == 0:
-        lub, pi, pj, chol = lubrication_sparse(positions, radii, pairs, factors=True)
-        arrays = [lub.data, lub.indices, lub.indptr, pi, pj, chol]
+        lub, *rest = compute()
+        arrays = [lub.data, lub.indices, lub.indptr, *rest[:3 if factors else 0]]
         comm.bcast([(a.shape, a.dtype.str) for a in arrays], root=0)
     else:
         arrays = [np.empty(shape, dtype) for shape, dtype in comm.bcast(None, root=0)]
     for a in arrays:
         comm.Bcast(a, root=0)
     if comm.rank == 0:
-        return lub, pi, pj, chol
-    data, indices, indptr, pi, pj, chol = arrays
+        return (lub, *rest)
+    data, indices, indptr, *rest = arrays
     n = NDOF * positions.shape[0]
-    return scipy.sparse.bsr_matrix((data, indices, indptr), shape=(n, n)), pi, pj, chol
+    return (scipy.sparse.bsr_matrix((data, indices, indptr), shape=(n, n)), *(rest or [None] * 3))
 
 
 def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
                      lubrication: bool = True, ewald_tol: float = DEFAULT_EWALD_TOL, cutoff: float = DEFAULT_CUTOFF,
                      min_gap: float = DEFAULT_MIN_GAP, max_overlap: float | None = None,
-                     plan: HydroPlan | None = None, far_field: str | None = None, comm: Any = None) -> SplitResistance:
+                     plan: HydroPlan | None = None, far_field: str | None = None, comm: Any = None,
+                     brownian: bool = True) -> SplitResistance:
     """The matrix-free form of `grand_resistance` (same arguments and pair sets): the
     far field by the operator `far_field` (`krylov.far_field_operator`: "spectral",
     "dense", None: by N; built on the MPI communicator comm), the
@@ -559,6 +569,9 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
             max_overlap, plan: as for `grand_resistance`.
         far_field: "spectral", "dense" or None (chosen by N).
         comm: the MPI communicator (collective over it), or None (this rank alone).
+        brownian: with the lubrication pairs' factors of the Brownian forces (False: a
+            resistance for solves only, without pair_i, pair_j, pair_chol; 12 x 12
+            doubles per pair less).
 
     Returns:
         The matrix-free resistance (Stokes units, viscosity 1).
@@ -574,8 +587,9 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
         lub_pairs = close_pairs(pos, radii, images=(none, none, np.zeros((0, 3))))
     else:
         lub_pairs = pairs
-    lub, pi, pj, chol = _shared_lubrication(pos, radii, lub_pairs, comm)
+    lub, pi, pj, chol = _shared_lubrication(pos, radii, lub_pairs, comm, brownian)
     # the box's volume fraction (a monolayer's cell of height layer_spacing x L: ~0.02,
     # so its preconditioner's self-resistance scale is ~1)
     phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
-    return SplitResistance(far, lub, pi, pj, chol, pairs, plan, pos, radii, phi, lattice)
+    lubricated = lub_pairs if len(lub_pairs.i) else None
+    return SplitResistance(far, lub, pi, pj, chol, lubricated, pairs, plan, pos, radii, phi, lattice)

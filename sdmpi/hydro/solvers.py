@@ -94,21 +94,25 @@ def resolve_backend(name: str, n_particles: int, comm: Any = None) -> str:
     return backend_for(name, n_particles, 1 if comm is None else comm.size)
 
 
-def assemble(name: str, *args: Any, comm: Any = None, **kwargs: Any) -> GrandResistance | SplitResistance:
+def assemble(name: str, *args: Any, comm: Any = None, brownian: bool = True,
+             **kwargs: Any) -> GrandResistance | SplitResistance:
     """The resistance backend `name` needs: `grand_resistance(*args, **kwargs)`, or for
-    the matrix-free backends `split_resistance(*args, comm=comm, **kwargs)`.
+    the matrix-free backends `split_resistance(*args, comm=comm, brownian=brownian,
+    **kwargs)`.
 
     Args:
         name: a registered backend.
         *args: positional arguments of `grand_resistance` / `split_resistance`.
         comm: the MPI communicator of a matrix-free backend, or None (one rank).
+        brownian: its solver will draw Brownian forces (False: solves only; a
+            matrix-free resistance then leaves out the pair factors they need).
         **kwargs: keyword arguments of `grand_resistance` / `split_resistance`.
 
     Returns:
         The resistance of the configuration in the form the backend takes.
     """
     if SOLVER_BACKENDS[name].matrix_free:
-        return split_resistance(*args, comm=comm, **kwargs)
+        return split_resistance(*args, comm=comm, brownian=brownian, **kwargs)
     return grand_resistance(*args, **kwargs)
 
 

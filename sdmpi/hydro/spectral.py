@@ -62,6 +62,7 @@ from .basis import BASIS
 from .farfield import (NDOF, _cached_radial_table, _pair_block, _power_bounds, _truncation_parameter,
                        self_mobility)
 from .geometry import Lattice, find_pairs
+from .workspace import work_array
 
 
 @dataclass(frozen=True)
@@ -571,15 +572,9 @@ class SpectralFarField:
         self._order = np.array_split(np.lexsort(cells.T[::-1]), size)[rank]
         steps = lattice.vectors / np.array(par.grid)[:, None]
         self._stencils = Stencils.build(self._frac[self._order], par.grid, steps, half, par.alpha, par.window)
-        # work grids: padded along z for spreading and interpolation; for MPI, a contiguous
-        # copy of its periodic part
-        self._padded_grid = np.zeros((*par.grid[:2], par.grid[2] + self._stencils.pad, 3))
-        if size > 1:
-            self._grid = np.zeros((*par.grid, 3))
         if rank == 0:
             self._scale = _kernel_scale(lattice, par)
             self._recip = lattice.reciprocal
-            self._fk = np.empty((*self._scale.shape, 3), dtype=complex)
             self._kept = _kept_modes(self._scale)
         # real space: pair images on one rank, else shared so that every rank's real-space
         # work plus rank 0's FFTs balance (real_space_shares)
@@ -592,6 +587,28 @@ class SpectralFarField:
         self._blocks = np.empty((len(pi), NDOF, NDOF), dtype=precision)
         _pair_blocks(pos, rad, pi, pj, np.ascontiguousarray(shift), _cached_radial_table(par.xi),
                      par.xi, BASIS, self._blocks)
+
+    def work_grids(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """The work grids of a product: the grid padded along z for spreading and
+        interpolation (M1, M2, M3 + pad, 3); with several ranks a contiguous copy of its
+        periodic part for MPI (M1, M2, M3, 3), else None; on the rank that does the FFTs
+        their output (M1, M2, M3//2 + 1, 3) complex, else None. Views of this thread's
+        `workspace.work_array` buffers, shared by all operators of this process (one
+        product at a time: the step's start and its midpoint hold one set of grids, not
+        two) and kept between products (fresh pages, also of the FFT outputs, cost more
+        than the transforms); their contents are overwritten by every product.
+
+        Returns:
+            (padded grid, MPI grid or None, FFT output or None).
+        """
+        m1, m2, m3 = self.params.grid
+        padded = work_array("spectral_padded_grid", (m1, m2, m3 + self._stencils.pad, 3))
+        parallel = self.comm is not None and self.comm.size > 1
+        grid = work_array("spectral_grid", (m1, m2, m3, 3)) if parallel else None
+        fk = None
+        if self.comm is None or self.comm.rank == 0:
+            fk = work_array("spectral_fft", (*self._scale.shape, 6)).view(complex)
+        return padded, grid, fk
 
     def real_space(self, x: np.ndarray, y: np.ndarray) -> None:
         """y += this rank's share of the real-space product.
@@ -614,9 +631,7 @@ class SpectralFarField:
         """
         par, st = self.params, self._stencils
         parallel = self.comm is not None and self.comm.size > 1
-        # work arrays kept between products (fresh pages, also of the FFT outputs, cost more
-        # than the transforms)
-        padded, m3 = self._padded_grid, par.grid[2]
+        (padded, contiguous, fk), m3 = self.work_grids(), par.grid[2]
         padded.fill(0.0)
         _spread(self._radii, self._order, x, par.alpha, BASIS, *st.arrays(), padded)
         _fold(padded, m3)
@@ -624,11 +639,11 @@ class SpectralFarField:
         if parallel:
             from mpi4py import MPI
 
-            self._grid[...] = grid  # contiguous, for MPI
-            grid = self._grid
+            contiguous[...] = grid  # contiguous, for MPI
+            grid = contiguous
             self.comm.Reduce(MPI.IN_PLACE if self.comm.rank == 0 else grid, grid, op=MPI.SUM, root=0)
         if self.comm is None or self.comm.rank == 0:
-            self._velocity_grid(grid)
+            self._velocity_grid(grid, fk)
         if meanwhile is not None:
             meanwhile()
         if parallel:
@@ -637,9 +652,9 @@ class SpectralFarField:
         _pad(padded, m3)
         _interpolate(self._radii, self._order, padded, par.alpha, BASIS, *st.arrays(), y)
 
-    def _velocity_grid(self, grid):
+    def _velocity_grid(self, grid, fk):
         """Rank 0: grid (M1, M2, M3, 3), the force density <- the velocity field, by FFT,
-        k-space kernel and inverse FFT."""
+        k-space kernel and inverse FFT; fk: the FFT output (`work_grids`)."""
         if pypocketfft is None:  # unnormalised both ways, as below
             fk = scipy.fft.rfftn(grid, axes=(0, 1, 2))
             _apply_kernel(fk, self._scale, self._recip)
@@ -647,7 +662,7 @@ class SpectralFarField:
             return
         # one axis at a time, each along the lines the kept modes need (`_kept_modes`); the
         # c2c transforms in place on views of the FFT output
-        fk, (z_kept, y_kept) = self._fk, self._kept
+        z_kept, y_kept = self._kept
         pypocketfft.r2c(grid, axes=(2,), forward=True, out=fk)
         lines = fk[:, :, z_kept]
         pypocketfft.c2c(lines, axes=(1,), forward=True, out=lines)
