@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test pip-check bench schaink2000 finite-size finite-size-n343 dratler1996 dratler1996-sensitivity clean
+.PHONY: setup run test pip-check bench schaink2000 finite-size finite-size-n343 dratler1996 dratler1996-sensitivity dratler1996-size clean
 
 setup: $(VENV)/.installed
 
@@ -139,6 +139,21 @@ dratler1996-sensitivity: setup
 	  "tau=1.25e4=out/dratler1996/sens_tau1.25e4.h5" \
 	  "tau=1.25e5=out/dratler1996/sens_tau1.25e5.h5" \
 	  "N=36=out/dratler1996/sens_n36.h5" -o $(DSS_OUT)
+
+# Its overlaps per sphere against N (sec. 4.1; jobs/dratler1996_size.toml, one process each,
+# as committed: N = 49 and 64 with one realisation, N = 64 to strain 30), then size.csv
+# into DSZ_OUT.
+DSZ_OUT   ?= docs/validation/dratler1996/size
+DSZ_RUN    = $(VENV)/bin/sdmpi run jobs/dratler1996_size.toml
+dratler1996-size: setup
+	mkdir -p out/dratler1996
+	$(DSZ_RUN) -o out/dratler1996/size_n25.h5
+	$(DSZ_RUN) -o out/dratler1996/size_n36.h5 --set system.n_particles=36
+	$(DSZ_RUN) -o out/dratler1996/size_n49.h5 --set system.n_particles=49 --set ensemble.realisations=1
+	$(DSZ_RUN) -o out/dratler1996/size_n64.h5 --set system.n_particles=64 --set ensemble.realisations=1 \
+	  --set integration.n_steps=6000
+	$(VPY) postprocess/dratler1996_size.py out/dratler1996/size_n25.h5 out/dratler1996/size_n36.h5 \
+	  out/dratler1996/size_n49.h5 out/dratler1996/size_n64.h5 -o $(DSZ_OUT)
 
 clean:
 	rm -rf $(VENV) $(PIP_VENV) .numba_cache .numba_cache_pip build *.egg-info
