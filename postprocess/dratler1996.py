@@ -93,6 +93,12 @@ def check_model(name, files):
                               f"{job.interparticle.kind!r}, this model's is {KINDS[name]!r}")
 
 
+def committed_strain(red, phi) -> float:
+    """The longest strain committed by a realisation at this phi_a in a reduction."""
+    g = int(np.flatnonzero(np.isclose(red.phi, phi, rtol=1e-9))[0])
+    return float(red.committed[g].max()) * red.job.integration.dt * red.job.shear.rate
+
+
 def model_rows(name, red, files):
     """The monolayer.csv rows of one model's reduction."""
     rows = []
@@ -100,10 +106,8 @@ def model_rows(name, red, files):
         (eta, eta_err), (h, h_err), (p, p_err) = (
             eta_of(red, phi, c) for c in ("total", "hydrodynamic", "interparticle"))
         ov = overlap_statistics(files, phi)
-        g = int(np.flatnonzero(np.isclose(red.phi, phi, rtol=1e-9))[0])
-        strain = float(red.committed[g].max()) * red.job.integration.dt * red.job.shear.rate
         rows.append({"model": name, "phi_a": phi, "realisations": ov["realisations"],
-                     "strain": strain, "eta": eta, "eta_err": eta_err,
+                     "strain": committed_strain(red, phi), "eta": eta, "eta_err": eta_err,
                      "eta_h": h, "eta_h_err": h_err, "eta_p": p, "eta_p_err": p_err,
                      "overlaps_mean": ov["mean"], "overlaps_max": ov["max"],
                      "deepest_overlap": ov["deepest"], "smallest_gap": ov["smallest_gap"],

@@ -20,7 +20,8 @@ fraction each. Units: a = 1, eta_m = 1, time (= strain) in 1/gamma_dot.
   job.seed, system.n_particles and number of realisations the variants start from the
   reference's configurations (common random numbers): the change is the mean over the
   realisations of (eta_variant - eta_reference) / eta_reference, each realisation's eta
-  its time average after the start-up and up to the shorter of the two, and its error the
+  its time average after the start-up and up to the shorter strain of the two (so the
+  variant may change integration.dt, its discard_steps covering the same strain), and its error the
   standard error of that mean (``paired`` = 1). Otherwise the two means' ratio minus one with
   independent errors (``paired`` = 0);
 * ``overlaps_mean``, ``overlaps_max``, ``smallest_gap`` (a) over the analysed samples.
@@ -115,14 +116,18 @@ def task_etas(path) -> tuple[np.ndarray, np.ndarray]:
 
 def paired_change(path, reference) -> tuple[float, float]:
     """(mean relative change of eta, its standard error) over realisations that start alike,
-    each realisation's eta averaged over the samples both runs committed."""
+    each realisation's eta averaged over the strain both runs committed after their
+    start-ups (with different time steps, the samples of that strain in each)."""
     (n_v, eta_v), (n_r, eta_r) = task_etas(path), task_etas(reference)
+    dt_v = [task.dt for task in open_run(path).tasks]
+    dt_r = [task.dt for task in open_run(reference).tasks]
     changes = []
     for k in range(len(n_v)):
-        m = int(min(n_v[k], n_r[k]))
-        if m > 0:
-            ref = eta_r[k, :m].mean()
-            changes.append((eta_v[k, :m].mean() - ref) / ref)
+        strain = min(n_v[k] * dt_v[k], n_r[k] * dt_r[k])
+        m_v, m_r = (int(math.floor(strain / dt * (1 + 1e-12))) for dt in (dt_v[k], dt_r[k]))
+        if m_v > 0 and m_r > 0:
+            ref = eta_r[k, :m_r].mean()
+            changes.append((eta_v[k, :m_v].mean() - ref) / ref)
     if len(changes) < 2:
         raise ReduceError(f"{path}: fewer than two realisations with samples past the start-up")
     changes = np.array(changes)

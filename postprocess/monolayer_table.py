@@ -29,6 +29,7 @@ import numpy as np
 
 from sdmpi.analysis.reduce import (TABLE_COMPONENTS, PartialRunWarning, ReduceError, open_run,
                                    reduce_runs)
+from sdmpi.analysis.errors import ensemble_average
 from sdmpi.analysis.report import plus_minus
 from sdmpi.ensemble.store import task_key
 
@@ -76,8 +77,10 @@ def analysed_samples(summary, f, task):
 def overlap_statistics(files, phi):
     """Overlap statistics of every realisation at this phi_a in these run files, over the
     samples after the start-up and before a stop: dict with mean and max overlaps per
-    configuration, the deepest overlap (a, 0 if none), the smallest gap (a) and the stops
-    as strains."""
+    configuration, the mean's standard error ``err`` (as `eta_of`'s: the larger of the
+    spread between the realisations and the blocking error within them,
+    `sdmpi.analysis.errors.ensemble_average`), the deepest overlap (a, 0 if none), the
+    smallest gap (a) and the stops as strains."""
     counts, gaps, stops, n_real = [], [], [], 0
     for path in files:
         summary = open_run(path)
@@ -91,10 +94,11 @@ def overlap_statistics(files, phi):
                     stops.append(stop)
                 counts.append(n)
                 gaps.append(gap)
+    err = float(ensemble_average(counts).err) if counts else math.nan
     counts = np.concatenate(counts) if counts else np.zeros(0)
     gaps = np.concatenate(gaps) if gaps else np.zeros(0)
     smallest = float(gaps.min()) if gaps.size else math.nan
-    return {"mean": float(counts.mean()) if counts.size else math.nan,
+    return {"mean": float(counts.mean()) if counts.size else math.nan, "err": err,
             "max": int(counts.max()) if counts.size else 0,
             "deepest": max(-smallest, 0.0), "smallest_gap": smallest,
             "stops": stops, "realisations": n_real}

@@ -194,3 +194,92 @@ def test_sensitivity_bad_input_exits_2(sensitivity_runs, tmp_path, capsys):
     assert exc.value.code == 2
     assert "LABEL=RUN.h5" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_sensitivity_pairs_by_strain_when_the_step_changes(sensitivity_runs, tmp_path):
+    """A variant with half the step, the same start-up strain and a shorter run is paired
+    over the strain both runs committed: 40 of its samples against 20 of the reference's."""
+    ref = sensitivity_runs[0]
+    half = sdmpi_run(tmp_path / "half.h5", *SHORT_RANGE, "--set", "integration.dt=0.0025",
+                     "--set", "integration.n_steps=60", "--set", "integration.discard_steps=20",
+                     job="dratler1996_sensitivity.toml", shrink=TINY)
+    out = tmp_path / "s"
+    assert SENSITIVITY.main(["--reference", str(ref), "--variant", f"dt={half}", "-o", str(out)]) == 0
+    row = rows(out / "sensitivity.csv")[1]
+    assert row["paired"] == "1" and "integration.dt=0.0025" in row["changed"]
+    (n_v, eta_v), (n_r, eta_r) = SENSITIVITY.task_etas(half), SENSITIVITY.task_etas(ref)
+    assert list(n_v) == [40, 40] and list(n_r) == [30, 30]
+    per = (eta_v[:, :40].mean(axis=1) - eta_r[:, :20].mean(axis=1)) / eta_r[:, :20].mean(axis=1)
+    assert math.isclose(float(row["change"]), per.mean(), rel_tol=1e-12)
+
+
+#: postprocess/dratler1996_size.py as a module
+SIZE = postprocess_script("dratler1996_size")
+#: a step and a floor so coarse that spheres overlap within 40 steps, and a deep stop
+#: that lets some realisations run on with overlaps
+OVERLAPPING = ["--set", "system.phi=[0.6]", "--set", "integration.dt=0.05",
+               "--set", "hydrodynamics.min_gap=0.05", "--set", "integration.overlap_stop=0.2"]
+
+
+@pytest.fixture(scope="module")
+def size_runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("size")
+    job = "dratler1996_size.toml"
+    n9 = sdmpi_run(d / "n9.h5", *OVERLAPPING, job=job, shrink=TINY)
+    n9b = sdmpi_run(d / "n9b.h5", *OVERLAPPING, "--set", "job.seed=7", job=job, shrink=TINY)
+    n16 = sdmpi_run(d / "n16.h5", *OVERLAPPING, "--set", "system.n_particles=16", job=job,
+                    shrink=TINY)
+    return n9, n9b, n16
+
+
+def overlap_series(path):
+    """Per task: (n_overlaps after the start-up and before a stop, the stop strain or None),
+    read directly from the run file (a stopped task's later samples hold -1)."""
+    out = []
+    with h5py.File(path, "r") as f:
+        for name in sorted(f["tasks"]):
+            n = f[f"tasks/{name}/samples/n_overlaps"][:]
+            stop = int(np.flatnonzero(n < 0)[0]) if (n < 0).any() else None
+            out.append((n[10:stop], None if stop is None else stop * 0.05))
+    return out
+
+
+def test_size_table(size_runs, tmp_path):
+    n9, n9b, n16 = size_runs
+    out = tmp_path / "size"
+    assert SIZE.main([str(n9), str(n16), str(n9b), "-o", str(out)]) == 0
+    table = rows(out / "size.csv")
+    assert [(r["n_particles"], r["phi_a"], r["realisations"]) for r in table] == [
+        ("9", "0.6", "4"), ("16", "0.6", "2")]
+    for row, files, n in ((table[0], (n9, n9b), 9), (table[1], (n16,), 16)):
+        series = [s for path in files for s in overlap_series(path)]
+        counts = [c for c, _ in series]
+        mean = np.concatenate(counts).mean()
+        assert mean > 0   # the coarse step overlaps
+        assert math.isclose(float(row["overlaps_mean"]), mean, rel_tol=1e-12)
+        assert math.isclose(float(row["per_sphere"]), mean / n, rel_tol=1e-12)
+        assert math.isclose(float(row["per_sphere_err"]), float(row["overlaps_err"]) / n,
+                            rel_tol=1e-12)
+        assert int(row["overlaps_max"]) == max(c.max() for c in counts)
+        stops = sorted(s for _, s in series if s is not None)
+        assert sorted(float(s) for s in row["stops"].split()) == pytest.approx(stops)
+        # the error is at least the spread of the realisations' means (sample-weighted)
+        w = np.array([len(c) for c in counts], float)
+        m = np.array([c.mean() for c in counts])
+        spread = math.sqrt((w * (m - mean) ** 2).sum() / ((len(w) - 1) * w.sum()))
+        assert float(row["overlaps_err"]) >= spread * (1 - 1e-12) > 0
+    # eta is sdmpi reduce's over the files of one N together
+    assert sdmpi_main(["reduce", str(n9), str(n9b), "-o", str(tmp_path / "r"), "--no-plots"]) == 0
+    total = {r["component"]: r for r in rows(tmp_path / "r" / "viscosity.csv")}
+    assert float(table[0]["eta"]) == float(total["total"]["eta"])
+    again = tmp_path / "again"
+    assert SIZE.main([str(n9), str(n16), str(n9b), "-o", str(again)]) == 0
+    assert (again / "size.csv").read_bytes() == (out / "size.csv").read_bytes()
+
+
+def test_size_bad_input_exits_2(size_runs, runs, tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert SIZE.main([str(size_runs[0]), str(runs[1]), "-o", str(out)]) == 2
+    assert "interparticle.kind is 'repulsion'" in capsys.readouterr().err
+    assert SIZE.main([str(size_runs[0]), str(tmp_path / "no.h5"), "-o", str(out)]) == 2
+    assert not out.exists()

@@ -65,6 +65,7 @@ CASES = {
     "dratler1996_hydro": ("dratler1996_hydro.toml", ["system.n_particles=9"], 0),
     "dratler1996_repulsion": ("dratler1996_repulsion.toml", ["system.n_particles=9"], 0),
     "dratler1996_sensitivity": ("dratler1996_sensitivity.toml", ["system.n_particles=9"], 0),
+    "dratler1996_size": ("dratler1996_size.toml", ["system.n_particles=9"], 0),
     "monolayer_hydro": ("monolayer_hydro.toml", ["system.n_particles=9"], 0),
     "monolayer_repulsion": ("monolayer_repulsion.toml", ["system.n_particles=9"], 0),
     "schaink2000_fixed_dt": ("schaink2000_fixed_dt.toml", ["system.n_particles=8"], 0),
