@@ -10,6 +10,7 @@ import os
 import platform
 import time
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 
 from sdmpi.dynamics.initial import hard_sphere_fluid

@@ -30,6 +30,7 @@ import resource
 import time
 from pathlib import Path
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 
 from bench_step import cholesky_matrix, cholesky_ms  # bench/ is on sys.path when run as a script

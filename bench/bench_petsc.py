@@ -19,6 +19,7 @@ import os
 import platform
 import time
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 
 from workers import emit, run_worker  # bench/ is on sys.path when run as a script

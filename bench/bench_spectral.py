@@ -27,6 +27,7 @@ import platform
 import resource
 import time
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 
 from workers import emit, run_worker  # bench/ is on sys.path when run as a script

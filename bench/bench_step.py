@@ -31,6 +31,7 @@ import sys
 import tempfile
 import time
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 from scipy.linalg import lapack
 

@@ -33,6 +33,7 @@ import argparse
 import resource
 import time
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 from mpi4py import MPI
 

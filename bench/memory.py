@@ -28,6 +28,7 @@ import argparse
 import resource
 
 import h5py  # noqa: F401  (loaded as by sdmpi run: part of the baseline)
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 from mpi4py import MPI
 

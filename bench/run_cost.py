@@ -23,6 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does)
 import numpy as np
 from mpi4py import MPI
 

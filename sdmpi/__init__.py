@@ -6,15 +6,18 @@ Packages (data flows one way): ``config`` -> ``hydro`` -> ``dynamics`` -> ``ense
 The Python API (docs/api.md, module :mod:`sdmpi.api`): ``sdmpi.load_job``,
 ``sdmpi.tasks``, ``sdmpi.Realisation``, ``sdmpi.Samples`` and
 ``sdmpi.hydro.solve_mobility``. They are imported on first use, so that ``import sdmpi``
-does not load numpy (the command line sets the thread counts first).
+does not load numpy (the command line sets the thread counts first); it chooses OpenBLAS's
+kernels for the CPU when numpy is not loaded yet (`sdmpi._blas_kernel`).
 """
 
 import importlib
 
 __version__ = "0.1.0"
 
+from ._blas_kernel import choose_openblas_kernel  # noqa: E402
 from ._kernel_cache import ensure_kernels_can_load  # noqa: E402
 
+choose_openblas_kernel()  # before anything loads numpy: the kernels `sdmpi run` uses
 ensure_kernels_can_load()
 
 _API = ("Realisation", "Samples", "load_job", "tasks")

@@ -42,11 +42,12 @@ def test_nothing_set_once_numpy_is_loaded(tmp_path):
 
 
 def test_a_fresh_process_loads_the_chosen_kernels():
-    """In a fresh process the choice is made before numpy loads OpenBLAS, and the loaded
-    library reports it (where numpy's BLAS is OpenBLAS and the CPU has AVX2 or better)."""
-    code = ("import os; from sdmpi._blas_kernel import choose_openblas_kernel, openblas_kernel; "
-            "os.environ.pop('OPENBLAS_CORETYPE', None); chosen = choose_openblas_kernel(); "
-            "import numpy, scipy.linalg; print(chosen, openblas_kernel(), sep='|')")
+    """In a fresh process ``import sdmpi`` chooses before numpy loads OpenBLAS, and the
+    loaded library reports the choice (where numpy's BLAS is OpenBLAS and the CPU has AVX2
+    or better)."""
+    code = ("import os; os.environ.pop('OPENBLAS_CORETYPE', None); import sdmpi; "
+            "chosen = os.environ.get('OPENBLAS_CORETYPE'); import numpy, scipy.linalg; "
+            "from sdmpi._blas_kernel import openblas_kernel; print(chosen, openblas_kernel(), sep='|')")
     chosen, loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                     check=True).stdout.strip().split("|")
     assert chosen == str(kernel_for(cpu_flags()))
