@@ -16,19 +16,16 @@ written); 3 ``run`` stopped by SIGTERM/SIGINT/SIGUSR1 after a clean checkpoint
 (SIGUSR1 when sent to mpirun): resumable by running the same command again.
 
 One BLAS/OpenMP thread per process (one rank per core): the thread-count variables are set
-to 1 here, before numpy is imported, unless the user set them; so is OpenBLAS's kernel
-choice where the user did not make it (`sdmpi._blas_kernel`).
+to 1 here, before numpy is imported, unless the user set them (OpenBLAS's kernels were
+chosen by the package's import: `sdmpi._blas_kernel`).
 """
 
 from __future__ import annotations
 
 import os
 
-from ._blas_kernel import choose_openblas_kernel
-
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
-choose_openblas_kernel()
 
 import argparse  # noqa: E402
 import json  # noqa: E402

@@ -16,6 +16,4 @@ if "numpy" in sys.modules:  # a plugin imported it first: its BLAS keeps its thr
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
-from sdmpi._blas_kernel import choose_openblas_kernel  # noqa: E402  (loads no numpy)
-
-choose_openblas_kernel()
+import sdmpi  # noqa: E402,F401  (loads no numpy; its import chooses OpenBLAS's kernels)
