@@ -2,8 +2,10 @@
 (Monte Carlo starts of sdmpi.dynamics.initial.hard_sphere_fluid, independent seeds), full SD
 (far field + lubrication, Ewald tolerance 1e-6), one standard error over the configurations;
 writes bench/eta_inf.json (docs/validation.md compares it with Schaink et al. 2000 eq. 38).
+Rows of other (N, phi) already in the file are kept, so a size or volume fraction can be
+added without recomputing the others; "commands" lists the invocations that wrote it.
 
-    python bench/eta_inf_table.py [--configs 30] [--sizes 27 64 125]
+    python bench/eta_inf_table.py [--configs 30] [--sizes 27 64 125] [--phis 0.1 ... 0.5]
 """
 
 import argparse
@@ -35,17 +37,25 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--configs", type=int, default=30)
     parser.add_argument("--sizes", type=int, nargs="+", default=[27, 64, 125])
+    parser.add_argument("--phis", type=float, nargs="+", default=list(PHIS))
     parser.add_argument("--out", default=str(Path(__file__).with_name("eta_inf.json")))
     args = parser.parse_args()
+    out = Path(args.out)
+    old = json.loads(out.read_text()) if out.exists() else {"rows": []}
+    commands = old.get("commands", [old["command"]] if "command" in old else [])
     rows = []
     for n in args.sizes:
-        for phi in PHIS:
+        for phi in args.phis:
             t = time.perf_counter()
             mean, err = measure(n, phi, args.configs)
             rows.append({"n_particles": n, "phi": phi, "eta_inf": mean, "err": err, "configs": args.configs})
             print(f"N = {n:4d} phi = {phi:.2f}: eta'_inf = {mean:.3f} +- {err:.3f} "
                   f"({time.perf_counter() - t:.0f} s)", flush=True)
-    Path(args.out).write_text(json.dumps({"command": "python bench/eta_inf_table.py " + " ".join(sys.argv[1:]), "rows": rows}, indent=1))
+    new = {(row["n_particles"], row["phi"]) for row in rows}
+    kept = [row for row in old["rows"] if (row["n_particles"], row["phi"]) not in new]
+    rows = sorted(kept + rows, key=lambda row: (row["n_particles"], row["phi"]))
+    commands.append(" ".join(["python bench/eta_inf_table.py", *sys.argv[1:]]).strip())
+    out.write_text(json.dumps({"commands": commands, "rows": rows}, indent=1))
 
 
 if __name__ == "__main__":

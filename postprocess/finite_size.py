@@ -25,11 +25,12 @@ Outputs in OUTDIR:
   N's own eta_H(0) (postprocess/fig8_maxwell_viscosity.py);
 * ``dt_control/``: the control reduced;
 * ``quantities.csv``: per N, each quantity with one standard error (:data:`QUANTITIES`);
-* ``extrapolation.csv``: per quantity, the weighted fit Q(N) = Q_inf + c / L (L the box
-  side in radii) over the sizes that have it, Q_inf and c with standard errors, chi^2 and
-  degrees of freedom, and N_within: the N from which |c| / L is below the error of Q_inf;
+* ``extrapolation.csv``: per quantity and variable x (column ``in``: 1/L, L the box side
+  in radii, or 1/N), the weighted fit Q(N) = Q_inf + c x over the sizes that have it, Q_inf
+  and c with standard errors, chi^2 and degrees of freedom, and N_within: the N from which
+  |c| x is below the error of Q_inf;
 * ``moduli.png`` (G', G'' against omega, every N), ``viscosities.png`` (eta', eta''),
-  ``size.png`` (each quantity against 1/L with its fit);
+  ``size.png`` (each quantity against 1/L with both fits);
 * ``summary.md``: the numbers above as text, the eta'_H check, and the time-step controls
   (the control and an N = 27 run against the reference, frequency by frequency).
 
@@ -74,6 +75,19 @@ def quantity(name, description):
 def box_side(n: int, phi: float = PHI) -> float:
     """Side of the cubic box of n unit spheres at volume fraction phi, in radii."""
     return (4 * math.pi * n / (3 * phi)) ** (1 / 3)
+
+
+#: the variables Q is extrapolated in: name -> x(N) (x -> 0 as N -> infinity)
+FIT_VARIABLES = {"1/L": lambda n: 1 / box_side(n), "1/N": lambda n: 1 / n}
+
+
+def size_where(variable: str, x: float) -> float:
+    """The N at which the fit variable (FIT_VARIABLES) takes the value x (infinite at 0)."""
+    if x == 0:
+        return math.inf
+    if variable == "1/N":
+        return 1 / x
+    return 3 * PHI / (4 * math.pi * x ** 3)
 
 
 def rows_of(path) -> list[dict]:
@@ -204,7 +218,8 @@ def main(argv=None):
               for n in sorted(set(tables) | set(eta_inf))}
     for n in values:
         values[n]["eta_inf_minus_1"] = eta_inf.get(n, none)
-    fits = {q: extrapolate(values, q) for q in [*QUANTITIES, "eta_inf_minus_1"]}
+    fits = {(q, var): extrapolate(values, q, var)
+            for q in [*QUANTITIES, "eta_inf_minus_1"] for var in FIT_VARIABLES}
     write_quantities(values, out / "quantities.csv")
     write_extrapolation(fits, out / "extrapolation.csv")
     draw_spectra({n: rows for n, rows in tables.items() if n in runs}, rows_of(args.reference), out)
@@ -215,19 +230,18 @@ def main(argv=None):
     return 0
 
 
-def extrapolate(values, q):
-    """Weighted fit Q = Q_inf + c / L over the sizes where Q is known; N_within: the N
-    from which |c| / L < err(Q_inf)."""
+def extrapolate(values, q, variable):
+    """Weighted fit Q = Q_inf + c x over the sizes where Q is known, x = 1/L or 1/N
+    (``variable``, FIT_VARIABLES); N_within: the N from which |c| x < err(Q_inf)."""
     sizes = sorted(n for n in values if math.isfinite(values[n][q][1]))
     if len(sizes) < 2:
         return {"sizes": sizes, "Q_inf": math.nan, "Q_inf_err": math.nan, "c": math.nan,
                 "c_err": math.nan, "chi2": math.nan, "dof": 0, "N_within": math.nan}
-    x = np.array([1 / box_side(n) for n in sizes])
+    x = np.array([FIT_VARIABLES[variable](n) for n in sizes])
     y = np.array([values[n][q][0] for n in sizes])
     e = np.array([values[n][q][1] for n in sizes])
     fit = weighted_line(x, y, e)
-    side = abs(fit.b) / fit.a_err if fit.a_err > 0 else math.inf
-    n_within = 3 * PHI * side ** 3 / (4 * math.pi)
+    n_within = size_where(variable, fit.a_err / abs(fit.b)) if fit.b != 0 else 0.0
     return {"sizes": sizes, "Q_inf": fit.a, "Q_inf_err": fit.a_err, "c": fit.b,
             "c_err": fit.b_err, "chi2": fit.chi2, "dof": fit.dof, "N_within": n_within}
 
@@ -245,9 +259,9 @@ def write_extrapolation(fits, path):
     keys = ["Q_inf", "Q_inf_err", "c", "c_err", "chi2", "dof", "N_within"]
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
-        w.writerow(["quantity", "sizes", *keys])
-        for q, fit in fits.items():
-            w.writerow([q, " ".join(map(str, fit["sizes"])), *[f"{fit[k]:.10g}" for k in keys]])
+        w.writerow(["quantity", "in", "sizes", *keys])
+        for (q, variable), fit in fits.items():
+            w.writerow([q, variable, " ".join(map(str, fit["sizes"])), *[f"{fit[k]:.10g}" for k in keys]])
 
 
 def draw_spectra(tables, reference, out):
@@ -274,26 +288,33 @@ def draw_spectra(tables, reference, out):
 
 
 def draw_size(values, fits, path):
-    names = list(fits)
+    """Each quantity against 1/L, with its fits in 1/L (a line) and in 1/N (a curve here)
+    and their Q_inf at 1/L = 0."""
+    names = list(dict.fromkeys(q for q, _ in fits))
     fig, axes = figure(len(names), width=3.0 * len(names), height=3.4)
     for ax, q in zip(axes, names):
         sizes = sorted(values)
         x = np.array([1 / box_side(n) for n in sizes])
         y = np.array([values[n][q][0] for n in sizes])
         e = np.array([values[n][q][1] for n in sizes])
-        ax.errorbar(x, y, e, marker="o", ls="none", capsize=2)
-        fit = fits[q]
-        if math.isfinite(fit["Q_inf"]):
-            xs = np.linspace(0, x.max() * 1.05, 20)
-            ax.plot(xs, fit["Q_inf"] + fit["c"] * xs, "--", lw=1)
-            ax.errorbar([0], [fit["Q_inf"]], [fit["Q_inf_err"]], marker="s", color="C3", capsize=2)
+        ax.errorbar(x, y, e, marker="o", ls="none", capsize=2, color="k")
+        for k, variable in enumerate(FIT_VARIABLES):
+            fit = fits[q, variable]
+            if math.isfinite(fit["Q_inf"]):
+                xs = np.linspace(0, x.max() * 1.05, 40)
+                along = [FIT_VARIABLES[variable](size_where("1/L", v)) if v > 0 else 0.0 for v in xs]
+                ax.plot(xs, fit["Q_inf"] + fit["c"] * np.array(along), "--", lw=1, color=f"C{k}",
+                        label=f"fit in {variable}")
+                ax.errorbar([0.002 * k], [fit["Q_inf"]], [fit["Q_inf_err"]], marker="s", ms=3,
+                            color=f"C{k}", capsize=2)
         ax.set(xlabel="1/L  [1/a]", title=q, xlim=(-0.005, None))
         ax.tick_params(labelsize=7)
+        ax.legend(fontsize=6)
     save(fig, path)
 
 
 def summary(values, fits, notes, reference) -> str:
-    """summary.md's numbers: the quantities per N with their fits in 1/L, the same
+    """summary.md's numbers: the quantities per N with their fits in 1/L and 1/N, the same
     quantities of the reference study (N = 27 at its own time steps), and eta'_H against
     the equilibrium eta'_inf - 1."""
     sizes = sorted(values)
@@ -301,15 +322,16 @@ def summary(values, fits, notes, reference) -> str:
              "Written by postprocess/finite_size.py. phi = 0.45, gamma0 = 0.02; one standard "
              "error.", "", *[f"- {note}" for note in notes], "",
              "| quantity | " + " | ".join(f"N = {n} (L = {box_side(n):.2f})" for n in sizes)
-             + " | Q_inf (fit in 1/L) | N within error |",
-             "|---|" + "---|" * len(sizes) + "---|---|"]
-    for q in fits:
-        fit = fits[q]
+             + "".join(f" | Q_inf (fit in {v}) | N within error ({v})" for v in FIT_VARIABLES) + " |",
+             "|---|" + "---|" * len(sizes) + "---|---|" * len(FIT_VARIABLES)]
+    for q in dict.fromkeys(q for q, _ in fits):
         cells = [pm(*values[n][q]) for n in sizes]
-        n_within = f"{fit['N_within']:.0f}" if math.isfinite(fit["N_within"]) else "-"
-        lines.append(f"| {q} | " + " | ".join(cells) + f" | {pm(fit['Q_inf'], fit['Q_inf_err'])}"
-                     f" (sizes {', '.join(map(str, fit['sizes']))}, chi2 {fit['chi2']:.3g}, "
-                     f"dof {fit['dof']}) | {n_within} |")
+        for variable in FIT_VARIABLES:
+            fit = fits[q, variable]
+            n_within = f"{fit['N_within']:.0f}" if math.isfinite(fit["N_within"]) else "-"
+            cells += [f"{pm(fit['Q_inf'], fit['Q_inf_err'])} (sizes {', '.join(map(str, fit['sizes']))}, "
+                      f"chi2 {fit['chi2']:.3g}, dof {fit['dof']})", n_within]
+        lines.append(f"| {q} | " + " | ".join(cells) + " |")
     lines += ["", "Quantities: " + "; ".join(f"{q}: {d}" for q, (d, _) in QUANTITIES.items())
               + "; eta_inf_minus_1: the equilibrium eta'_inf - 1 (bench/eta_inf.json).", "",
               "The same quantities of the reference study (N = 27, 500 steps per period, "

@@ -1,7 +1,7 @@
 """postprocess/finite_size.py, the regeneration path of docs/validation/finite_size/, on
 tiny real runs (N = 8 and 16 of jobs/finite_size_n64.toml, shrunk; the time-step control at
-80 pi): every table and figure, the per-N tables equal to `sdmpi reduce`'s, the fit in 1/L
-against an independent least-squares solution, byte-identical tables when run again."""
+80 pi): every table and figure, the per-N tables equal to `sdmpi reduce`'s, the fits in 1/L
+and 1/N against an independent least-squares solution, byte-identical tables when run again."""
 
 import csv
 import math
@@ -53,20 +53,26 @@ def test_regeneration_writes_every_table_and_figure(runs, tmp_path):
     control = text.split("## Time step: the control")[1]
     assert "| 80 pi | 5e-4, 5e-05 |" in control and "nan" not in control
 
-    # the fit in 1/L, independently: weighted least squares by numpy
+    # the fits in 1/L and 1/N, independently: weighted least squares by numpy
     quantities = {r["quantity"]: r for r in read(out / "quantities.csv")}
-    fits = {r["quantity"]: r for r in read(out / "extrapolation.csv")}
-    sizes = [8, 16, 27]
-    assert fits["eta_H"]["sizes"] == "8 16 27"
-    side = [(4 * math.pi * n / (3 * 0.45)) ** (1 / 3) for n in sizes]
+    fits = {(r["quantity"], r["in"]): r for r in read(out / "extrapolation.csv")}
+    sizes = np.array([8, 16, 27])
+    side = (4 * math.pi * sizes / (3 * 0.45)) ** (1 / 3)
     y = np.array([float(quantities["eta_H"][f"N{n}"]) for n in sizes])
     e = np.array([float(quantities["eta_H"][f"N{n}_err"]) for n in sizes])
-    design = np.vstack([np.ones(3), 1 / np.array(side)]).T
-    cov = np.linalg.inv(design.T @ (design / e[:, None] ** 2))
-    coef = cov @ design.T @ (y / e ** 2)
-    assert float(fits["eta_H"]["Q_inf"]) == pytest.approx(coef[0], rel=1e-9)
-    assert float(fits["eta_H"]["Q_inf_err"]) == pytest.approx(math.sqrt(cov[0, 0]), rel=1e-9)
-    assert float(fits["eta_H"]["c"]) == pytest.approx(coef[1], rel=1e-9)
+    for variable, x in (("1/L", 1 / side), ("1/N", 1 / sizes)):
+        fit = fits["eta_H", variable]
+        assert fit["sizes"] == "8 16 27"
+        design = np.vstack([np.ones(3), x]).T
+        cov = np.linalg.inv(design.T @ (design / e[:, None] ** 2))
+        coef = cov @ design.T @ (y / e ** 2)
+        assert float(fit["Q_inf"]) == pytest.approx(coef[0], rel=1e-9)
+        assert float(fit["Q_inf_err"]) == pytest.approx(math.sqrt(cov[0, 0]), rel=1e-9)
+        assert float(fit["c"]) == pytest.approx(coef[1], rel=1e-9)
+        # N_within: where the fitted correction |c| x falls to the error of Q_inf
+        x_within = math.sqrt(cov[0, 0]) / abs(coef[1])
+        n_within = 1 / x_within if variable == "1/N" else 3 * 0.45 / (4 * math.pi * x_within ** 3)
+        assert float(fit["N_within"]) == pytest.approx(n_within, rel=1e-9)
     # N = 27 comes from the committed study's table
     study = [r for r in read("docs/validation/schaink2000/newtonian/moduli.csv")
              if r["component"] == "hydrodynamic"]
