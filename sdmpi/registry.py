@@ -236,9 +236,13 @@ class Registry(Generic[E]):
 # --------------------------------------------------------------------------- solver backends
 
 AUTO = "auto"
-#: `auto` picks petsc-krylov from this many particles on, for its memory (it forms no
-#: dense 11N x 11N matrix); on one rank at the default tolerances dense stays the faster up to
-#: N ~ 1000 (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
+#: `auto` picks petsc-krylov from this many particles on when a task has one rank: below,
+#: dense is the faster at the default tolerances (and its ~4 (11N)^2 doubles, 3.9 GB at
+#: N = 1000, still fit a rank); from here on petsc-krylov is the leaner, and the faster
+#: beyond (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
+AUTO_KRYLOV_MIN_N_ONE_RANK = 1000
+#: the same for a task of several ranks: petsc-dense assembles the whole R on every rank,
+#: so petsc-krylov, which shares its work between the ranks, takes over earlier
 AUTO_KRYLOV_MIN_N = 300
 #: petsc-krylov's memory per sphere at phi = 0.45, tolerances 1e-4 (bytes): every rank holds
 #: about KRYLOV_BYTES, the task's ranks share KRYLOV_SPREAD_BYTES (real-space blocks,
@@ -253,7 +257,8 @@ KRYLOV_BYTES, KRYLOV_SPREAD_BYTES = 56e3, 400e3
 DENSE_MATRICES = 4
 
 SOLVER_BACKENDS: Registry[BackendSpec] = Registry("solver.backend", {
-    AUTO: f"dense (petsc-dense on several ranks) below {AUTO_KRYLOV_MIN_N} particles, else petsc-krylov"})
+    AUTO: f"dense below {AUTO_KRYLOV_MIN_N_ONE_RANK} particles on one rank per task, petsc-dense below "
+          f"{AUTO_KRYLOV_MIN_N} on several, else petsc-krylov"})
 SOLVER_BACKENDS.register(BackendSpec(
     "dense", "LAPACK Cholesky on one rank", "sdmpi.hydro.solvers:DenseSolver",
     dense_matrices=DENSE_MATRICES))
@@ -268,13 +273,15 @@ SOLVER_BACKENDS.register(BackendSpec(
 
 def backend_for(name: str, n_particles: int, ranks: int) -> str:
     """The backend solver.backend = ``name`` stands for with ``ranks`` ranks per task:
-    itself, or for "auto" dense (one rank) or petsc-dense (several) below
-    AUTO_KRYLOV_MIN_N particles, else petsc-krylov. ValueError for an unknown name."""
+    itself, or for "auto" dense below AUTO_KRYLOV_MIN_N_ONE_RANK particles (one rank),
+    petsc-dense below AUTO_KRYLOV_MIN_N (several ranks), else petsc-krylov. The choice
+    depends on N and the ranks alone, so a job resolves to the same backend on every
+    machine. ValueError for an unknown name."""
     if name != AUTO:
         return SOLVER_BACKENDS[name].name
-    if n_particles >= AUTO_KRYLOV_MIN_N:
-        return "petsc-krylov"
-    return "dense" if ranks == 1 else "petsc-dense"
+    if ranks == 1:
+        return "dense" if n_particles < AUTO_KRYLOV_MIN_N_ONE_RANK else "petsc-krylov"
+    return "petsc-dense" if n_particles < AUTO_KRYLOV_MIN_N else "petsc-krylov"
 
 
 def several_rank_choices() -> tuple[str, ...]:

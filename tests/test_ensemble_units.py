@@ -120,7 +120,7 @@ def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):
 
     jobs = Path(__file__).parents[1] / "jobs"
     assert main(["validate", str(jobs / "demo.toml"), "--set", 'solver.backend="auto"',
-                 "--set", "system.n_particles=343"]) == 0
+                 "--set", "system.n_particles=1000"]) == 0
     assert "backend auto (here petsc-krylov), spectral far field" in capsys.readouterr().out
 
     def unavailable():

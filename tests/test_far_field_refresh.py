@@ -84,10 +84,10 @@ def test_far_field_refresh_refused_where_it_does_not_apply(sets, why):
 
 def test_far_field_refresh_with_auto_follows_what_auto_resolves_to():
     """solver.backend = "auto" holds the far field where it resolves to a direct backend
-    (N = 8: dense) and is refused where it resolves to petsc-krylov (N >= 300)."""
+    (N = 8: dense) and is refused where it resolves to petsc-krylov (N >= 1000 on one rank)."""
     from sdmpi.config import JobError
 
     sets = [*STEADY[:2], "hydrodynamics.far_field_refresh=0.1", 'solver.backend="auto"']
     assert sdmpi.load_job("jobs/demo.toml", sets).hydrodynamics.far_field_refresh == 0.1  # N = 8: dense
     with pytest.raises(JobError, match="held only by the backends that form it"):
-        sdmpi.load_job("jobs/demo.toml", [*sets, "system.n_particles=400"])
+        sdmpi.load_job("jobs/demo.toml", [*sets, "system.n_particles=1000"])

@@ -98,12 +98,19 @@ def test_script_holding_a_solver_exits_cleanly():
 
 
 def test_auto_picks_by_size():
+    """"auto": dense on one rank below AUTO_KRYLOV_MIN_N_ONE_RANK particles, petsc-dense on
+    several below AUTO_KRYLOV_MIN_N, petsc-krylov from there on; a name stands for itself."""
+    from sdmpi.registry import AUTO_KRYLOV_MIN_N, AUTO_KRYLOV_MIN_N_ONE_RANK
+
     class Two:
         size = 2
 
+    one, several = AUTO_KRYLOV_MIN_N_ONE_RANK, AUTO_KRYLOV_MIN_N
     assert resolve_backend("auto", 27) == "dense"
-    assert resolve_backend("auto", 27, Two()) == "petsc-dense"
-    assert resolve_backend("auto", 4096) == "petsc-krylov"
+    assert resolve_backend("auto", one - 1) == "dense"
+    assert resolve_backend("auto", one) == resolve_backend("auto", 4096) == "petsc-krylov"
+    assert resolve_backend("auto", 27, Two()) == resolve_backend("auto", several - 1, Two()) == "petsc-dense"
+    assert resolve_backend("auto", several, Two()) == "petsc-krylov"
     assert resolve_backend("petsc-dense", 4096) == "petsc-dense"
 
 
