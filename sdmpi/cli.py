@@ -407,13 +407,9 @@ def info_text(run, running=None) -> str:
                                                  else f"{100.0 * p / task.n_steps:.0f}%")
         lines.append(f"  {task.task_id:>6}  {task.phi:>6.4g}  {omega:>10}  "
                      f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
-    every = run.job.output.trajectory_every
-    if every:
-        from .ensemble.trajectory import frames_done
+    from .ensemble.writers import active
 
-        frames = sum(frames_done(p, every) for p in done)
-        lines.append(f"trajectory: H5MD, a frame every {every} steps, {frames} frames "
-                     f"committed (particles/task_NNNNNN; docs/trajectories.md)")
+    lines += [line for writer in active(run.job) if (line := writer.describe(run.job, done))]
     if "solver_backend" in a:
         lines.append(f"solver backend: {a['solver_backend']} (recorded at creation; a resume "
                      "keeps it)")

@@ -112,6 +112,9 @@ class StepTimes:
     def file_bytes(self, job):
         return 8.0 * sum(task.n_steps for task in enumerate_tasks(job))
 
+    def describe(self, job, done):
+        return f"step times: {sum(done)} committed (extra/NNNNNN/time)"
+
 
 class StepTimesRecorder:
     """One task's step times since its last checkpoint."""

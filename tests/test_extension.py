@@ -92,7 +92,8 @@ def test_registered_model_runs_a_job(tmp_path):
 def test_registered_writer_is_committed_resumed_and_extended(tmp_path):
     """The plugin's writer (the time of every step, extra/000000/time) through a run killed
     after its second checkpoint, its resume and an extension to twice the length: every row
-    equals the sample stream's time of that step, bit for bit (both are the same value)."""
+    equals the sample stream's time of that step, bit for bit (both are the same value);
+    `sdmpi info` shows the writer's line."""
     out = tmp_path / "run.h5"
     sets = [*ONE_TASK, 'hydrodynamics.model="free-draining"', "output.checkpoint_every=5"]
     killed = _plugin(out, sets, env={"SDMPI_TEST_KILL": "commit:2"})
@@ -107,6 +108,11 @@ def test_registered_writer_is_committed_resumed_and_extended(tmp_path):
         times, samples = f["extra/000000/time"][()], f["tasks/000000/samples/time"][()]
     assert times.shape == (40,) and np.all(np.diff(times) > 0)
     assert np.array_equal(times, samples)
+    # `sdmpi info` reports every registered writer by its own line
+    info = subprocess.run([sys.executable, str(PLUGIN), "info", str(out)], capture_output=True,
+                          text=True, env=child_env(), timeout=600)
+    assert info.returncode == 0, info.stderr
+    assert "step times: 40 committed (extra/NNNNNN/time)" in info.stdout, info.stdout
 
 
 class _Sized:

@@ -106,12 +106,14 @@ def rfd_length(min_gap: float) -> float:
     return RFD_STEP * min_gap * 6 * math.pi
 
 
-def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> tuple[np.ndarray, np.ndarray]:
+def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float,
+              stresslets: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """(drift (N, 6), Brownian stresslets (N, 5)) of one random finite difference along the
     direction m = R_FU^-1 F (N, 6): (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F and
     -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F, eps = `rfd_length`, to first
     order in Delta R = R(x + eps m) - R (docs/numerics.md). Their means over F = C z are
-    kT div R_FU^-1 and -kT div(R_SU R_FU^-1)."""
+    kT div R_FU^-1 and -kT div(R_SU R_FU^-1). stresslets False: the drift alone (None
+    for the stresslets, whose product is then not formed)."""
     solver = evaluation.solver
     zero = np.zeros((evaluation.n_particles, 5))
     step = rfd_length(evaluation.min_gap)
@@ -119,6 +121,8 @@ def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> tuple[n
     direction[:, :6] = m
     change = evaluation.resistance_change(evaluation.positions + step * m[:, :3], direction)
     dm = -solver.velocities(change[:, :6], zero)  # (R + Delta R)_FU^-1 F - m, first order
+    if not stresslets:
+        return (kT / step) * dm, None
     return (kT / step) * dm, (kT / step) * (solver.stresslets(dm, zero) - change[:, 6:])
 
 
@@ -151,7 +155,7 @@ class SplitRandomFiniteDifference:
         solver = evaluation.solver
         m = solver.brownian_velocities(z)
         noise = math.sqrt(2 * kT / dt) * m
-        drift, _ = rfd_terms(evaluation, m, kT)
+        drift, _ = rfd_terms(evaluation, m, kT, stresslets=False)
         _, stress = rfd_terms(evaluation, solver.brownian_velocities(z_stress), kT)
         return BrownianTerms(noise + drift + near(m), stress)
 

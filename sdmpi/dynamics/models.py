@@ -354,9 +354,10 @@ class ResistanceModel(HydrodynamicModel):
                 raise
             raise self._on_error(err) from err
 
-    def _assemble(self, positions, strain, plan=None, brownian=True, **far):
+    def _assemble(self, positions, strain, plan=None, brownian=True, lubrication=None, **far):
+        hydro = self._hydro if lubrication is None else {**self._hydro, "lubrication": lubrication}
         return self._guarded(assemble, self.backend, positions, self.radii, self.box, strain, plan=plan,
-                             comm=self.comm, brownian=brownian, **self._hydro, **far)
+                             comm=self.comm, brownian=brownian, **hydro, **far)
 
     def hold_far_field(self, positions: np.ndarray, strain: float) -> None:
         """From now on, evaluate with the far-field mobility of (positions, strain) and the
@@ -375,8 +376,8 @@ class ResistanceModel(HydrodynamicModel):
         """{"far": the held far-field blocks (S^-1, X, U_b)}, or {} when none is held."""
         if self._held is None:
             return {}
-        if self._held_blocks is None:
-            res = self._assemble(*self._held)
+        if self._held_blocks is None:  # the far field alone (its blocks do not depend on L)
+            res = self._assemble(*self._held, lubrication=False)
             self._held_blocks = (res.s_inverse, res.x_ab, res.chol_bb)
         return {"far": self._held_blocks}
 

@@ -31,6 +31,11 @@ class SampleStream:
         """Always: every run keeps its samples."""
         return True
 
+    def describe(self, job: Job, done: list[int]) -> None:
+        """Nothing: a task's committed samples are its committed steps, which ``sdmpi
+        info`` lists."""
+        return None
+
     def create(self, f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Any]) -> None:
         """One dataset (n_steps, *shape) per sample field of each task's layout, with its
         unit, description and, for samples that represent another instant, its

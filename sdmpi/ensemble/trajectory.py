@@ -128,6 +128,13 @@ class TrajectoryWriter:
         """Whether the job keeps a trajectory (output.trajectory_every >= 1)."""
         return bool(job.output.trajectory_every)
 
+    def describe(self, job: Job, done: list[int]) -> str:
+        """The frames committed in all (`frames_done` of each task) and where they are."""
+        every = job.output.trajectory_every
+        frames = sum(frames_done(p, every) for p in done)
+        return (f"trajectory: H5MD, a frame every {every} steps, {frames} frames committed "
+                "(particles/task_NNNNNN; docs/trajectories.md)")
+
     def create(self, f: h5py.File, job: Job, tasks: Iterable[Task], layouts: dict[int, Any]) -> None:
         """The /h5md group, then one H5MD particles group (and observables group) per task,
         ``n_frames(n_steps, trajectory_every)`` frames preallocated."""

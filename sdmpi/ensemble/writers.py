@@ -134,6 +134,19 @@ class Writer(Protocol):
         """
         raise NotImplementedError
 
+    def describe(self, job: Job, done: list[int]) -> str | None:
+        """One line of ``sdmpi info`` on this output of a run file.
+
+        Args:
+            job: the run file's job.
+            done: the committed steps of each task, in task order.
+
+        Returns:
+            What the output holds at that progress, or None (nothing beyond the report's
+            steps per task).
+        """
+        raise NotImplementedError
+
 
 def active(job: Job) -> list[Writer]:
     """The registered writers the job asks for, in registration order.
