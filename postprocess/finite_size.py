@@ -27,8 +27,9 @@ Outputs in OUTDIR:
 * ``quantities.csv``: per N, each quantity with one standard error (:data:`QUANTITIES`);
 * ``extrapolation.csv``: per quantity and variable x (column ``in``: 1/L, L the box side
   in radii, or 1/N), the weighted fit Q(N) = Q_inf + c x over the sizes that have it, Q_inf
-  and c with standard errors, chi^2 and degrees of freedom, and N_within: the N from which
-  |c| x is below the error of Q_inf;
+  and c with standard errors, chi^2 per degree of freedom, the degrees of freedom, p: the
+  probability of a chi^2 at least as large if Q were linear in x with these errors, and
+  N_within: the N from which |c| x is below the error of Q_inf;
 * ``moduli.png`` (G', G'' against omega, every N), ``viscosities.png`` (eta', eta''),
   ``size.png`` (each quantity against 1/L with both fits);
 * ``summary.md``: the numbers above as text, the eta'_H check, and the time-step controls
@@ -49,6 +50,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import scipy.stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fig8_maxwell_viscosity  # noqa: E402
@@ -236,14 +238,16 @@ def extrapolate(values, q, variable):
     sizes = sorted(n for n in values if math.isfinite(values[n][q][1]))
     if len(sizes) < 2:
         return {"sizes": sizes, "Q_inf": math.nan, "Q_inf_err": math.nan, "c": math.nan,
-                "c_err": math.nan, "chi2": math.nan, "dof": 0, "N_within": math.nan}
+                "c_err": math.nan, "chi2_per_dof": math.nan, "dof": 0, "p": math.nan, "N_within": math.nan}
     x = np.array([FIT_VARIABLES[variable](n) for n in sizes])
     y = np.array([values[n][q][0] for n in sizes])
     e = np.array([values[n][q][1] for n in sizes])
     fit = weighted_line(x, y, e)
     n_within = size_where(variable, fit.a_err / abs(fit.b)) if fit.b != 0 else 0.0
     return {"sizes": sizes, "Q_inf": fit.a, "Q_inf_err": fit.a_err, "c": fit.b,
-            "c_err": fit.b_err, "chi2": fit.chi2, "dof": fit.dof, "N_within": n_within}
+            "c_err": fit.b_err, "chi2_per_dof": fit.chi2, "dof": fit.dof,
+            "p": float(scipy.stats.chi2.sf(fit.chi2 * fit.dof, fit.dof)) if fit.dof else math.nan,
+            "N_within": n_within}
 
 
 def write_quantities(values, path):
@@ -256,7 +260,7 @@ def write_quantities(values, path):
 
 
 def write_extrapolation(fits, path):
-    keys = ["Q_inf", "Q_inf_err", "c", "c_err", "chi2", "dof", "N_within"]
+    keys = ["Q_inf", "Q_inf_err", "c", "c_err", "chi2_per_dof", "dof", "p", "N_within"]
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["quantity", "in", "sizes", *keys])
@@ -330,7 +334,7 @@ def summary(values, fits, notes, reference) -> str:
             fit = fits[q, variable]
             n_within = f"{fit['N_within']:.0f}" if math.isfinite(fit["N_within"]) else "-"
             cells += [f"{pm(fit['Q_inf'], fit['Q_inf_err'])} (sizes {', '.join(map(str, fit['sizes']))}, "
-                      f"chi2 {fit['chi2']:.3g}, dof {fit['dof']})", n_within]
+                      f"chi2/dof {fit['chi2_per_dof']:.3g}, dof {fit['dof']}, p {fit['p']:.2g})", n_within]
         lines.append(f"| {q} | " + " | ".join(cells) + " |")
     lines += ["", "Quantities: " + "; ".join(f"{q}: {d}" for q, (d, _) in QUANTITIES.items())
               + "; eta_inf_minus_1: the equilibrium eta'_inf - 1 (bench/eta_inf.json).", "",

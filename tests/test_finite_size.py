@@ -69,6 +69,11 @@ def test_regeneration_writes_every_table_and_figure(runs, tmp_path):
         assert float(fit["Q_inf"]) == pytest.approx(coef[0], rel=1e-9)
         assert float(fit["Q_inf_err"]) == pytest.approx(math.sqrt(cov[0, 0]), rel=1e-9)
         assert float(fit["c"]) == pytest.approx(coef[1], rel=1e-9)
+        # chi^2 is a difference of near-equal sums in the fit's closed form: ~1e-9 relative
+        chi2 = float(np.sum(((y - design @ coef) / e) ** 2))
+        assert float(fit["chi2_per_dof"]) == pytest.approx(chi2, rel=1e-7) and fit["dof"] == "1"
+        # one degree of freedom: P(chi^2_1 >= chi2) = erfc(sqrt(chi2 / 2))
+        assert float(fit["p"]) == pytest.approx(math.erfc(math.sqrt(chi2 / 2)), rel=1e-6)
         # N_within: where the fitted correction |c| x falls to the error of Q_inf
         x_within = math.sqrt(cov[0, 0]) / abs(coef[1])
         n_within = 1 / x_within if variable == "1/N" else 3 * 0.45 / (4 * math.pi * x_within ** 3)
