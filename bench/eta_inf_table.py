@@ -42,7 +42,7 @@ def main():
     args = parser.parse_args()
     out = Path(args.out)
     old = json.loads(out.read_text()) if out.exists() else {"rows": []}
-    commands = old.get("commands", [old["command"]] if "command" in old else [])
+    commands = old.get("commands", [])
     rows = []
     for n in args.sizes:
         for phi in args.phis:

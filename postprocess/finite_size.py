@@ -35,6 +35,12 @@ Outputs in OUTDIR:
 * ``summary.md``: the numbers above as text, the eta'_H check, and the time-step controls
   (the control and an N = 27 run against the reference, frequency by frequency).
 
+The two forms are empirical here: a sphere's mobility in a periodic box carries a 1/L
+correction (Hasimoto, J. Fluid Mech. 5, 317 (1959)), while the shear viscosity of simple
+fluids shows no 1/L term (Yeh & Hummer, J. Phys. Chem. B 108, 15873 (2004)); 1/N is
+1/L^3 at fixed phi, a correction that falls with the box volume. chi^2 and p say which
+the data allow.
+
 Tables are byte-identical when the same inputs are processed again. Units: omega in
 rad/t_D, moduli in eta_m/t_D, viscosities relative to eta_m, L in sphere radii.
 """
@@ -50,11 +56,10 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import scipy.stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fig8_maxwell_viscosity  # noqa: E402
-from schaink_common import figure, pm, save, weighted_line  # noqa: E402
+from schaink_common import figure, p_value, pm, save, weighted_line  # noqa: E402
 
 from sdmpi.analysis.reduce import PartialRunWarning, ReduceError, reduce_runs  # noqa: E402
 from sdmpi.analysis.report import write_all  # noqa: E402
@@ -246,7 +251,7 @@ def extrapolate(values, q, variable):
     n_within = size_where(variable, fit.a_err / abs(fit.b)) if fit.b != 0 else 0.0
     return {"sizes": sizes, "Q_inf": fit.a, "Q_inf_err": fit.a_err, "c": fit.b,
             "c_err": fit.b_err, "chi2_per_dof": fit.chi2, "dof": fit.dof,
-            "p": float(scipy.stats.chi2.sf(fit.chi2 * fit.dof, fit.dof)) if fit.dof else math.nan,
+            "p": p_value(fit.chi2, fit.dof),
             "N_within": n_within}
 
 
@@ -313,7 +318,8 @@ def draw_size(values, fits, path):
                             color=f"C{k}", capsize=2)
         ax.set(xlabel="1/L  [1/a]", title=q, xlim=(-0.005, None))
         ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=6)
     save(fig, path)
 
 

@@ -47,7 +47,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fig2_viscosity_vs_phi  # noqa: E402
@@ -55,7 +54,7 @@ import fig4_moduli  # noqa: E402
 import fig5_omega_half  # noqa: E402
 import fig7_newtonian_viscosity  # noqa: E402
 import fig8_maxwell_viscosity  # noqa: E402
-from schaink_common import figure, pm, save, series  # noqa: E402
+from schaink_common import figure, p_value, pm, save, series  # noqa: E402
 
 from sdmpi.analysis.analytic import maxwell_eta_h, maxwell_viscosity, schaink_eta_h  # noqa: E402
 from sdmpi.analysis.reduce import PartialRunWarning, ReduceError, reduce_runs  # noqa: E402
@@ -132,11 +131,6 @@ def main(argv=None):
 
 
 # --------------------------------------------------------------------------- statements
-
-
-def p_value(chi2_per_dof, dof):
-    """Upper-tail probability of a chi^2 of ``chi2_per_dof`` x dof (nan if dof < 1)."""
-    return float(chi2_dist.sf(chi2_per_dof * dof, dof)) if dof >= 1 else math.nan
 
 
 def constant_fit(values, errors):

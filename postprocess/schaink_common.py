@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 
 from sdmpi.analysis.reduce import (FREE_KEYS, PartialRunWarning, ReduceError, job_items,
                                    open_run, reduce_runs)
@@ -103,6 +104,11 @@ def weighted_line(x, y, e) -> LineFit:
     chi2 = float(np.sum(w * (y - a - b * x) ** 2) / dof) if dof > 0 else np.nan
     return LineFit(float(a), float(np.sqrt(sxx / det)), float(b), float(np.sqrt(s / det)),
                    chi2, dof)
+
+
+def p_value(chi2_per_dof, dof):
+    """Upper-tail probability of a chi^2 of ``chi2_per_dof`` x dof (nan if dof < 1)."""
+    return float(chi2_dist.sf(chi2_per_dof * dof, dof)) if dof >= 1 else math.nan
 
 
 def phis(reductions):

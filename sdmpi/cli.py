@@ -409,7 +409,11 @@ def info_text(run, running=None) -> str:
                      f"{task.realisation:>5}  {f'{p}/{task.n_steps}':>17}  {mark}")
     from .ensemble.writers import active
 
-    lines += [line for writer in active(run.job) if (line := writer.describe(run.job, done))]
+    for writer in active(run.job):
+        describe = getattr(writer, "describe", None)  # optional: without it, no line
+        line = describe(run.job, done) if describe is not None else None
+        if line:
+            lines.append(line)
     if "solver_backend" in a:
         lines.append(f"solver backend: {a['solver_backend']} (recorded at creation; a resume "
                      "keeps it)")

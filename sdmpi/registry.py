@@ -237,9 +237,9 @@ class Registry(Generic[E]):
 
 AUTO = "auto"
 #: `auto` picks petsc-krylov from this many particles on when a task has one rank: below,
-#: dense is the faster at the default tolerances (and its ~4 (11N)^2 doubles, 3.9 GB at
-#: N = 1000, still fit a rank); from here on petsc-krylov is the leaner, and the faster
-#: beyond (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
+#: dense is the faster at the default tolerances (its peak at N = 1000: 2.2 GiB, against
+#: 0.5 GiB for petsc-krylov), from here on petsc-krylov, the leaner, is as fast or faster
+#: (bench/bench_krylov.py: docs/numerics.md, "Parameter choices")
 AUTO_KRYLOV_MIN_N_ONE_RANK = 1000
 #: the same for a task of several ranks: petsc-dense assembles the whole R on every rank,
 #: so petsc-krylov, which shares its work between the ranks, takes over earlier

@@ -180,7 +180,7 @@ def test_rfd_on_what_auto_picks_for_large_n_refused(tmp_path):
     for res in (python_m("validate", job, *sets), ens.sdmpi("run", job, "-o", tmp_path / "run.h5", *sets)):
         assert res.returncode == 2, res.stderr
         assert "brownian.scheme" in res.stderr and '"midpoint"' in res.stderr, res.stderr
-        assert 'what "auto" stands for with 1000 particles' in res.stderr, res.stderr
+        assert 'what "auto" stands for with 1000 particles on 1 rank(s) per task' in res.stderr, res.stderr
         assert "Traceback" not in res.stderr
     assert sorted(os.listdir(tmp_path)) == ["job.toml"]
     # below 1000 particles on one rank "auto" is a direct solver: the same job is valid

@@ -328,7 +328,8 @@ def scheme_problems(job, backend: str) -> list[Problem]:
             backend not in SOLVER_BACKENDS or scheme in drift_schemes_for(backend):
         return []
     named = job.solver.backend
-    where = "" if named == backend else f' (what "{named}" stands for with {job.system.n_particles} particles)'
+    where = "" if named == backend else (f' (what "{named}" stands for with {job.system.n_particles} particles '
+                                         f'on {job.ensemble.ranks_per_task} rank(s) per task)')
     return [Problem("brownian.scheme", DRIFT_SCHEMES[scheme].why_not, scheme,
                     allowed=f'{quoted(drift_schemes_for(backend))} (or absent) with solver.backend = "{backend}"{where}')]
 

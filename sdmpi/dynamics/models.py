@@ -376,7 +376,7 @@ class ResistanceModel(HydrodynamicModel):
         """{"far": the held far-field blocks (S^-1, X, U_b)}, or {} when none is held."""
         if self._held is None:
             return {}
-        if self._held_blocks is None:  # the far field alone (its blocks do not depend on L)
+        if self._held_blocks is None:  # the far field alone (its blocks do not depend on the lubrication)
             res = self._assemble(*self._held, lubrication=False)
             self._held_blocks = (res.s_inverse, res.x_ab, res.chol_bb)
         return {"far": self._held_blocks}

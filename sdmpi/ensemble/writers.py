@@ -135,7 +135,8 @@ class Writer(Protocol):
         raise NotImplementedError
 
     def describe(self, job: Job, done: list[int]) -> str | None:
-        """One line of ``sdmpi info`` on this output of a run file.
+        """One line of ``sdmpi info`` on this output of a run file (optional: a writer
+        without it adds no line).
 
         Args:
             job: the run file's job.
