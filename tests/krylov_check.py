@@ -86,9 +86,13 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
             np.add.at(near, (pu, slice(None), pv), c[:, 6 * u:6 * u + 6, 6 * v:6 * v + 6])
     lub_fu = rigid_block(lubrication_matrix(res.positions, np.ones(N), res.pairs), N)
     out["near_covariance"] = rel(lub_fu, near.reshape(6 * N, 6 * N))
-    # the lubrication of the split resistance (computed by rank 0, broadcast) is this rank's own
+    # the lubrication of the split resistance (each rank's rows computed by that rank, the
+    # pair factors gathered) is the whole matrix's rows here, and no more than them
     own, _, _, own_chol = lubrication_sparse(split.positions, np.ones(N), split.pairs, factors=True)
-    out["lubrication_shared"] = max(rel(own.data, split.lubrication.data), rel(own_chol, split.pair_chol))
+    lo, hi = own.indptr[krylov.p0], own.indptr[krylov.p1]
+    out["lubrication_shared"] = max(rel(own.data[lo:hi], split.lubrication.data), rel(own_chol, split.pair_chol))
+    out["lubrication_blocks_held"] = largest_lubrication(split, krylov)
+    out["lubrication_blocks_own"] = int(hi - lo)
     z = np.zeros(krylov.noise_shape)
     z[:NDOF * N] = rng.standard_normal(NDOF * N)
     lattice = Lattice(box, STRAIN)
@@ -109,6 +113,18 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     out["lanczos"] = krylov.stats["lanczos"]
     out["digest"] = hashlib.sha256(np.concatenate([u_k.ravel(), f_b.ravel()]).tobytes()).hexdigest()
     return out
+
+
+def largest_lubrication(*holders):
+    """The most 11 x 11 lubrication blocks that one attribute of the holders (a
+    SplitResistance, a KrylovSolver) holds: a BSR matrix or an array of such blocks."""
+    most = 0
+    for holder in holders:
+        for value in vars(holder).values():
+            data = getattr(value, "data", value)
+            if isinstance(data, np.ndarray) and data.ndim == 3 and data.shape[1:] == (NDOF, NDOF):
+                most = max(most, len(data))
+    return most
 
 
 def takeover(krylov, split, box, forces, einf, u_k, comm):

@@ -46,6 +46,8 @@ def _check(out):
     assert out["near_covariance"] < EXACT and out["long_wave_factor"] < EXACT, out
     assert max(out["takeover_g"], out["takeover_u"], out["takeover_again"]) < EXACT, out
     assert out["lubrication_shared"] == 0.0, out
+    # the resistance and the solver hold this rank's block rows of L alone
+    assert out["lubrication_blocks_held"] == out["lubrication_blocks_own"], out
 
 
 @pytest.mark.parametrize("far_field", ["dense", "spectral"])
@@ -121,6 +123,43 @@ def test_sparse_lubrication_equals_dense():
     dense = lubrication_matrix(pos, np.ones(len(pos)), pairs)
     sparse = lubrication_sparse(pos, np.ones(len(pos)), pairs).toarray()
     assert np.abs(dense - sparse).max() <= EXACT * np.abs(dense).max()
+
+
+@pytest.mark.parametrize("phi, cutoff, sizes", [(0.5, 6.0, "equal"), (0.3, 2.0, "two"), (0.45, 2.0, "spread")])
+def test_lubrication_rows_are_the_whole_matrix_rows(phi, cutoff, sizes):
+    """Each rank's block rows of L, formed from the pairs touching them
+    (`lubrication_rows`), are the whole matrix's rows bit for bit, and the ranges' owned
+    pair factors together are the whole matrix's factors in its order: equal spheres
+    (self-image pairs and repeated images: small box, cut-off 6), two sizes (pairs swapped
+    big sphere first, tabulated) and spread sizes (every pair on the exact path)."""
+    from .petsc_check import STRAIN, configuration
+    from sdmpi.hydro.geometry import Lattice
+    from sdmpi.hydro.krylov import particle_ranges
+    from sdmpi.hydro.lubrication import lubrication_rows
+
+    pos, side = configuration(phi)
+    n = len(pos)
+    radii = {"equal": np.ones(n), "two": np.where(np.arange(n) % 2, 1.0, 0.7),
+             "spread": 0.8 + 0.2 * np.random.default_rng(0).random(n)}[sizes]
+    lattice = Lattice(np.full(3, side), STRAIN)
+    pos = lattice.wrap(pos)
+    pairs = close_pairs(pos, radii, lattice, cutoff=cutoff)
+    whole, *factors = lubrication_sparse(pos, radii, pairs, factors=True)
+    for ranks in (1, 2, 5):
+        bounds = particle_ranges(n, ranks)
+        owned = []
+        for r0, r1 in zip(bounds[:-1], bounds[1:]):
+            rows, own = lubrication_rows(pos, radii, pairs, (r0, r1), factors=True)
+            lo, hi = whole.indptr[r0], whole.indptr[r1]
+            assert rows.shape == (11 * (r1 - r0), 11 * n)
+            assert np.array_equal(rows.indptr, whole.indptr[r0:r1 + 1] - lo)
+            assert np.array_equal(rows.indices, whole.indices[lo:hi])
+            assert np.array_equal(rows.data, whole.data[lo:hi])
+            owned.append(own)
+        place = np.argsort(np.concatenate([own[0] for own in owned]))
+        assert len(place) == len(pairs.i)
+        for k, ref in enumerate(factors, 1):
+            assert np.array_equal(np.concatenate([own[k] for own in owned])[place], ref)
 
 
 def test_lanczos_inverse_square_root():
