@@ -44,7 +44,7 @@ GIB = 2.0 ** 30
 #: part -> the (owner, method) calls it owns
 PARTS = {
     "split resistance (pairs, lubrication, far-field operator)": (solvers, "split_resistance"),
-    "lubrication rows and pair factors (each rank its rows, factors gathered)": (resistance, "_rank_lubrication"),
+    "lubrication rows and pair factors (each rank its own)": (resistance, "_rank_lubrication"),
     "far-field operator (real-space blocks, stencils, grids)": (krylov, "far_field_operator"),
     "solver set-up (L_uu, G blocks)": (krylov.KrylovSolver, "__init__"),
     "preconditioner's incomplete factor": (krylov.KrylovSolver, "schur_solver"),
@@ -149,7 +149,7 @@ def holdings(solver):
     out["lubrication matrix (11x11 blocks, this rank's rows)"] = _nbytes(lub.data, lub.indices, lub.indptr)
     if solver.lubricated is not None:
         out["lubrication pair list"] = _nbytes(*vars(solver.lubricated).values())
-    out["lubrication pair factors (12x12)"] = _nbytes(solver.pair_chol, solver.pair_i, solver.pair_j)
+    out["lubrication pair factors (12x12, pairs touching this rank's rows)"] = _nbytes(*(solver.pair_factors or ()))
     out["L_uu (PETSc BAIJ)"] = _petsc_bytes(solver.l_uu)
     out["G pattern (this rank's rows), D^-1"] = _nbytes(solver._g_keep, solver._g_pattern[2], solver.d_inv)
     out["G (PETSc BAIJ, sequential)"] = _petsc_bytes(solver.schur)

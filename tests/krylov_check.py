@@ -16,7 +16,7 @@ import numpy as np
 
 from sdmpi.hydro.farfield import NDOF, far_field_mobility, self_mobility
 from sdmpi.hydro.geometry import Lattice
-from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, long_waves
+from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, allgather_rows, long_waves
 from sdmpi.hydro.lubrication import lubrication_matrix, lubrication_sparse
 from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
 from sdmpi.hydro.solvers import make_solver
@@ -79,18 +79,23 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
            "velocities": rel(u_d, u_k),
            "stresslets": rel(dense.stresslets(u_d, einf), krylov.stresslets(u_k, einf))}
     # Brownian: near field exactly (covariance), far field on the z_1 part of one noise
-    c = np.einsum("pij,pkj->pik", split.pair_chol, split.pair_chol)
+    # (every rank's pair factors: those of the pairs touching its spheres, gathered)
+    at, pair_i, pair_j, chol = (allgather_rows(krylov.comm, a) for a in split.pair_factors)
+    at, first = np.unique(at, return_index=True)
+    pair_i, pair_j, chol = pair_i[first], pair_j[first], chol[first]
+    c = np.einsum("pij,pkj->pik", chol, chol)
     near = np.zeros((N, 6, N, 6))
-    for u, pu in enumerate((split.pair_i, split.pair_j)):
-        for v, pv in enumerate((split.pair_i, split.pair_j)):
+    for u, pu in enumerate((pair_i, pair_j)):
+        for v, pv in enumerate((pair_i, pair_j)):
             np.add.at(near, (pu, slice(None), pv), c[:, 6 * u:6 * u + 6, 6 * v:6 * v + 6])
     lub_fu = rigid_block(lubrication_matrix(res.positions, np.ones(N), res.pairs), N)
     out["near_covariance"] = rel(lub_fu, near.reshape(6 * N, 6 * N))
-    # the lubrication of the split resistance (each rank's rows computed by that rank, the
-    # pair factors gathered) is the whole matrix's rows here, and no more than them
+    # the lubrication of the split resistance (each rank's rows and the factors of the pairs
+    # touching them, computed by that rank) is the whole matrix's rows here, no more
     own, _, _, own_chol = lubrication_sparse(split.positions, np.ones(N), split.pairs, factors=True)
     lo, hi = own.indptr[krylov.p0], own.indptr[krylov.p1]
-    out["lubrication_shared"] = max(rel(own.data[lo:hi], split.lubrication.data), rel(own_chol, split.pair_chol))
+    out["lubrication_shared"] = max(rel(own.data[lo:hi], split.lubrication.data), rel(own_chol, chol),
+                                    float(len(at) != len(own_chol)))
     out["lubrication_blocks_held"] = largest_lubrication(split, krylov)
     out["lubrication_blocks_own"] = int(hi - lo)
     z = np.zeros(krylov.noise_shape)

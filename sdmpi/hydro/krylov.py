@@ -41,8 +41,9 @@ Parallel layout over the communicator: particles split in contiguous ranges; eve
 vector holds this rank's particles, (lambda, U') laid out [11 per particle, then 6 per
 particle]. The far-field product takes and returns whole (11N,) vectors (gathered); the
 sparse products and the preconditioner are local or PETSc-distributed. Each rank holds
-its particles' block rows of L alone (`particle_ranges`); G's kept blocks are gathered
-from all ranks when a rank builds its factor. Inputs and outputs
+its particles' block rows of L alone (`particle_ranges`) and the factors C_p of the pairs
+that touch its particles (for its rows of F_B); G's kept blocks are gathered from all
+ranks when a rank builds its factor. Inputs and outputs
 of the interface are replicated numpy arrays; every method is collective.
 
 Far field: an object with matvec((11N,)) -> M (11N,) from `far_field_operator`:
@@ -581,7 +582,7 @@ class KrylovSolver(SolverBackend):
         # the lubricated pairs (none without lubrication: then resistance.pairs are overlaps)
         self.lubricated = resistance.lubricated
         self.noise_shape = (NDOF * n + 12 * (0 if self.lubricated is None else len(self.lubricated.i)),)
-        self.pair_i, self.pair_j, self.pair_chol = resistance.pair_i, resistance.pair_j, resistance.pair_chol
+        self.pair_factors = resistance.pair_factors
         self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
 
         # this rank's block rows of the lubrication matrix L (11 x 11 blocks: the
@@ -909,7 +910,7 @@ class KrylovSolver(SolverBackend):
         Raises:
             ValueError: the resistance is one for solves only (no pair factors).
         """
-        if self.pair_chol is None:
+        if self.pair_factors is None:
             raise ValueError("petsc-krylov: Brownian forces need the lubrication pairs' factors "
                              "(a resistance of split_resistance(..., brownian=True))")
         n = self.n
@@ -924,8 +925,11 @@ class KrylovSolver(SolverBackend):
         y, its = lanczos_inverse_sqrt(lambda v: pre.left(self.far_rows(pre.right(v))),
                                       z1[NDOF * self.p0:NDOF * self.p1], dot, self.lanczos_tol)
         self.stats["lanczos"] += its
-        force = self._gather(pre.right(y), self.counts11).reshape(n, NDOF)[:, :6].copy()
-        near = np.einsum("pij,pj->pi", self.pair_chol, z2)
-        np.add.at(force, self.pair_i, near[:, :6])
-        np.add.at(force, self.pair_j, near[:, 6:])
-        return force
+        force = pre.right(y).reshape(-1, NDOF)[:, :6].copy()  # this rank's rows
+        # the pairs touching this rank's spheres, each with its rows of the noise
+        at, pair_i, pair_j, chol = self.pair_factors
+        near = np.einsum("pij,pj->pi", chol, z2[at])
+        for spheres, part in ((pair_i, near[:, :6]), (pair_j, near[:, 6:])):
+            mine = (spheres >= self.p0) & (spheres < self.p1)
+            np.add.at(force, spheres[mine] - self.p0, part[mine])
+        return self._gather(force.ravel(), self.counts6).reshape(n, 6)

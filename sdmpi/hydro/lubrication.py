@@ -337,21 +337,20 @@ def lubrication_rows(positions: np.ndarray, radii: np.ndarray, pairs: PairList, 
     matrix, formed from the pairs that touch those spheres alone: every block sums the same
     pair blocks in the same order as the whole matrix's (`pair_blocks` with only), so the
     entries are the same bits. With factors, also the rigid-body Cholesky factors C_p of
-    the pairs whose first sphere (in `pair_blocks`' orientation) lies in the rows: each pair
-    belongs to the rows of exactly one range of a partition of the spheres.
+    those pairs, the same bits as `lubrication_sparse`'s.
 
     Args:
         positions: (N, 3) sphere centres.
         radii: (N,) sphere radii a.
         pairs: the close pairs (`close_pairs`).
         rows: (r0, r1), the block rows (spheres) 0 <= r0 <= r1 <= N.
-        factors: also return the factors of the pairs these rows own.
+        factors: also return the factors of the pairs that touch the rows.
 
     Returns:
         The (11 (r1 - r0), 11N) BSR matrix of the rows (Stokes units, viscosity 1), and with
-        factors (at, pair_i, pair_j, C_p) of the owned pairs: their places (m,) in the
-        order of all pairs of `lubrication_sparse`'s factors, their spheres (m,), (m,) and
-        factors (m, 12, 12); without factors None.
+        factors (at, pair_i, pair_j, C_p) of the pairs touching the rows, in the order of
+        `lubrication_sparse`'s factors: their places (m,) in that order of all pairs, their
+        spheres (m,), (m,) and factors (m, 12, 12); without factors None.
 
     Raises:
         numpy.linalg.LinAlgError: a pair's rigid-body block is not positive definite.
@@ -378,26 +377,23 @@ def lubrication_rows(positions: np.ndarray, radii: np.ndarray, pairs: PairList, 
         return np.where(inside, slot_of[np.where(inside, raw, 0)], -1)
 
     data = np.zeros((len(order), NDOF, NDOF))
-    n_touch = int(touch.sum())
-    at, all_pi, all_pj = (np.empty(n_touch if factors else 0, dtype=np.int64) for _ in range(3))
-    chol = np.empty((n_touch if factors else 0, 12, 12))
-    done = 0  # owned pairs so far
+    n_touch = int(touch.sum()) if factors else 0
+    at, all_pi, all_pj = (np.empty(n_touch, dtype=np.int64) for _ in range(3))
+    chol = np.empty((n_touch, 12, 12))
+    done = 0  # pairs so far, in the order of pair_blocks
     for ci, cj, res, places in pair_blocks(radii, pairs, touch):
         _scatter_slots(slots(ci, ci), slots(ci, cj), slots(cj, ci), slots(cj, cj), res, data)
         if factors:
-            own = (ci >= r0) & (ci < r1)
-            part = slice(done, done + int(own.sum()))
-            at[part], all_pi[part], all_pj[part] = places[own], ci[own], cj[own]
-            bad = _rigid_cholesky(res if own.all() else res[own], chol[part])
+            part = slice(done, done + len(res))
+            at[part], all_pi[part], all_pj[part] = places, ci, cj
+            bad = _rigid_cholesky(res, chol[part])
             if bad >= 0:
-                raise np.linalg.LinAlgError(f"the rigid-body lubrication block of the pair ({ci[own][bad]}, "
-                                            f"{cj[own][bad]}) is not positive definite")
+                raise np.linalg.LinAlgError(f"the rigid-body lubrication block of the pair ({ci[bad]}, "
+                                            f"{cj[bad]}) is not positive definite")
             done = part.stop
     indptr = np.searchsorted(block_rows[order], np.arange(nl + 1))
     matrix = scipy.sparse.bsr_matrix((data, cols[order], indptr), shape=(NDOF * nl, NDOF * n))
-    if not factors:
-        return matrix, None
-    return matrix, (at[:done], all_pi[:done], all_pj[:done], chol[:done])
+    return matrix, ((at, all_pi, all_pj, chol) if factors else None)
 
 
 @numba.njit(cache=True)

@@ -34,7 +34,7 @@ from scipy.linalg import blas, lapack
 from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldIndefinite, FarFieldPlan, far_field_mobility,
                        far_field_product, plan_far_field)
 from .geometry import Lattice, pairs_in_reach
-from .krylov import DenseFarField, allgather_rows, far_field_operator, particle_ranges
+from .krylov import DenseFarField, far_field_operator, particle_ranges
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
                           lubrication_product, lubrication_reach, lubrication_rows)
 
@@ -502,17 +502,16 @@ class SplitResistance:
     """R = M_inf^-1 + L without M_inf^-1 (for `krylov.KrylovSolver`): the far-field
     mobility as an operator (`far.matvec`), this rank's block rows of the lubrication L
     (its spheres p0 .. p1 - 1 of `krylov.particle_ranges`: a sparse (11 (p1 - p0) x 11N)
-    BSR matrix; all of L on one rank), and per lubrication pair (all pairs, on every rank)
-    (pair_i, pair_j) the Cholesky factor pair_chol (npairs, 12, 12) of its rigid-body block
-    (Brownian forces; all three None in a resistance for solves only, `split_resistance`
-    with brownian=False). lubricated: the lubrication pairs (None without lubrication, when
-    pairs are the overlaps)."""
+    BSR matrix; all of L on one rank), and pair_factors (at, pair_i, pair_j, C_p) of the
+    lubrication pairs that touch this rank's spheres (`lubrication.lubrication_rows`): the
+    Cholesky factors C_p (m, 12, 12) of their rigid-body blocks, for Brownian forces, their
+    spheres and their places among all pairs (the rows of their noise; None in a
+    resistance for solves only, `split_resistance` with brownian=False). lubricated: the
+    lubrication pairs (None without lubrication, when pairs are the overlaps)."""
 
     far: object
     lubrication: object
-    pair_i: np.ndarray | None
-    pair_j: np.ndarray | None
-    pair_chol: np.ndarray | None
+    pair_factors: tuple | None
     lubricated: PairList | None
     pairs: PairList
     plan: HydroPlan
@@ -530,30 +529,12 @@ class SplitResistance:
 def _rank_lubrication(positions, radii, pairs, comm, factors):
     """This rank's block rows of `lubrication.lubrication_sparse(positions, radii, pairs)`
     (the spheres of `krylov.particle_ranges` on comm), formed by this rank from the pairs
-    that touch them (`lubrication.lubrication_rows`: the same bits as the whole matrix's rows),
-    and with factors the Cholesky factors of all pairs, in `lubrication_sparse`'s order:
-    each rank factors the pairs its rows own, and all ranks gather them (factors False:
-    None for pair_i, pair_j, pair_chol)."""
-    n = positions.shape[0]
+    that touch them (`lubrication.lubrication_rows`: the same bits as the whole matrix's
+    rows), and with factors (at, pair_i, pair_j, C_p) of those pairs (factors False:
+    None)."""
     rank, size = (0, 1) if comm is None else (comm.rank, comm.size)
-    bounds = particle_ranges(n, size)
-    rows = (bounds[rank], bounds[rank + 1])
-    if not factors:
-        return lubrication_rows(positions, radii, pairs, rows)[0], None, None, None
-    try:
-        lub, owned = lubrication_rows(positions, radii, pairs, rows, factors=True)
-        failure = None
-    except np.linalg.LinAlgError as err:  # raised on every rank, not left waiting for it
-        lub, owned, failure = None, (np.zeros(0, dtype=np.int64),) * 3 + (np.zeros((0, 12, 12)),), str(err)
-    if size > 1:
-        failure = next((f for f in comm.allgather(failure) if f is not None), None)
-    if failure is not None:
-        raise np.linalg.LinAlgError(failure)
-    at, pair_i, pair_j, chol = (allgather_rows(comm, a) for a in owned)
-    if not np.array_equal(at, np.arange(len(at))):  # the owners' pairs interleave: in order
-        place = np.argsort(at)
-        pair_i, pair_j, chol = pair_i[place], pair_j[place], chol[place]
-    return lub, pair_i, pair_j, chol
+    bounds = particle_ranges(positions.shape[0], size)
+    return lubrication_rows(positions, radii, pairs, (bounds[rank], bounds[rank + 1]), factors)
 
 
 def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
@@ -573,8 +554,8 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
         far_field: "spectral", "dense" or None (chosen by N).
         comm: the MPI communicator (collective over it), or None (this rank alone).
         brownian: with the lubrication pairs' factors of the Brownian forces (False: a
-            resistance for solves only, without pair_i, pair_j, pair_chol; 12 x 12
-            doubles per pair less).
+            resistance for solves only, without pair_factors; 12 x 12 doubles per pair
+            less).
 
     Returns:
         The matrix-free resistance (Stokes units, viscosity 1).
@@ -590,9 +571,9 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
         lub_pairs = close_pairs(pos, radii, images=(none, none, np.zeros((0, 3))))
     else:
         lub_pairs = pairs
-    lub, pi, pj, chol = _rank_lubrication(pos, radii, lub_pairs, comm, brownian)
+    lub, factors = _rank_lubrication(pos, radii, lub_pairs, comm, brownian)
     # the box's volume fraction (a monolayer's cell of height layer_spacing x L: ~0.02,
     # so its preconditioner's self-resistance scale is ~1)
     phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
     lubricated = lub_pairs if len(lub_pairs.i) else None
-    return SplitResistance(far, lub, pi, pj, chol, lubricated, pairs, plan, pos, radii, phi, lattice)
+    return SplitResistance(far, lub, factors, lubricated, pairs, plan, pos, radii, phi, lattice)
