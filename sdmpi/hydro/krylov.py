@@ -63,7 +63,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse
 
 from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
