@@ -7,7 +7,8 @@ covariance (the sum of the pair factors' squares must equal the dense lubricatio
 block), the far-field part against the dense P (P^T M P)^-1/2 z for one noise vector, P the
 Lanczos preconditioner's factor (krylov.LongWaveFactor) as a matrix, checked to give
 P^T C P = I for C = D + M_long built here from its definition. And a lone sphere, so that
-with two ranks one holds no particle (`lone_sphere`)."""
+with two ranks one holds no particle (`lone_sphere`), and a pair factor failing on one
+rank only (`failing_pair`)."""
 
 import hashlib
 import sys
@@ -177,9 +178,35 @@ def lone_sphere(comm=None):
             "digest": hashlib.sha256(np.concatenate([u_k.ravel(), f_comm.ravel()]).tobytes()).hexdigest()}
 
 
+def failing_pair(comm):
+    """A pair factor that fails on the last rank of comm alone (its lubrication rows
+    raise LinAlgError there): split_resistance raises on every rank, with that rank's
+    message, instead of leaving the others waiting in a collective."""
+    from sdmpi.hydro import resistance
+
+    pos, side = configuration(0.5, 1)
+    rows = resistance.lubrication_rows
+
+    def fail_on_last(*args, **kwargs):
+        if comm is None or comm.rank == comm.size - 1:
+            raise np.linalg.LinAlgError("the pair (0, 1) fails")
+        return rows(*args, **kwargs)
+
+    resistance.lubrication_rows = fail_on_last
+    try:
+        split_resistance(pos, np.ones(N), np.full(3, side), STRAIN, comm=comm)
+        message = ""
+    except np.linalg.LinAlgError as err:
+        message = str(err)
+    finally:
+        resistance.lubrication_rows = rows
+    return {"case": "failing pair", "raised": message == "the pair (0, 1) fails",
+            "digest": hashlib.sha256(message.encode()).hexdigest()}
+
+
 if __name__ == "__main__":
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
     print_per_rank([compare(float(phi), comm, far_field=far) for phi in sys.argv[1:] for far in FAR_FIELDS]
-                   + [lone_sphere(comm)], comm)
+                   + [lone_sphere(comm), failing_pair(comm)], comm)

@@ -531,10 +531,21 @@ def _rank_lubrication(positions, radii, pairs, comm, factors):
     (the spheres of `krylov.particle_ranges` on comm), formed by this rank from the pairs
     that touch them (`lubrication.lubrication_rows`: the same bits as the whole matrix's
     rows), and with factors (at, pair_i, pair_j, C_p) of those pairs (factors False:
-    None)."""
+    None). A pair whose rigid-body block is not positive definite raises LinAlgError on
+    every rank of comm, not only on those whose rows it touches."""
     rank, size = (0, 1) if comm is None else (comm.rank, comm.size)
     bounds = particle_ranges(positions.shape[0], size)
-    return lubrication_rows(positions, radii, pairs, (bounds[rank], bounds[rank + 1]), factors)
+    rows = (bounds[rank], bounds[rank + 1])
+    if not factors or size == 1:
+        return lubrication_rows(positions, radii, pairs, rows, factors)
+    try:
+        out, failure = lubrication_rows(positions, radii, pairs, rows, factors), None
+    except np.linalg.LinAlgError as err:
+        failure = str(err)
+    failure = next((f for f in comm.allgather(failure) if f is not None), None)
+    if failure is not None:
+        raise np.linalg.LinAlgError(failure)
+    return out
 
 
 def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
