@@ -327,8 +327,8 @@ def lubrication_sparse(positions: np.ndarray, radii: np.ndarray, pairs: PairList
     Raises:
         numpy.linalg.LinAlgError: a pair's rigid-body block is not positive definite.
     """
-    matrix, owned = lubrication_rows(positions, radii, pairs, (0, positions.shape[0]), factors)
-    return matrix if not factors else (matrix, *owned[1:])
+    matrix, found = lubrication_rows(positions, radii, pairs, (0, positions.shape[0]), factors)
+    return matrix if not factors else (matrix, *found[1:])
 
 
 def lubrication_rows(positions: np.ndarray, radii: np.ndarray, pairs: PairList, rows: tuple[int, int],
