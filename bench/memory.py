@@ -15,7 +15,7 @@ it) around each part:
 At the step's peak moment (the Brownian midpoint's GMRES solve, while the start's
 evaluation is alive) it sums the bytes of what the live solvers hold (`holdings`): the
 spectral far field's real-space pair blocks, pair lists, window stencils, grids; the
-lubrication matrix and pair factors of the split resistance; the preconditioner's G
+lubrication matrix rows and pair factors of the split resistance; the preconditioner's G
 pattern, its PETSc BAIJ matrix and incomplete factor (PETSc's count of their values); the
 shared work arrays. Prints a JSON row; --out FILE merges it into FILE under --label.
 
@@ -44,7 +44,7 @@ GIB = 2.0 ** 30
 #: part -> the (owner, method) calls it owns
 PARTS = {
     "split resistance (pairs, lubrication, far-field operator)": (solvers, "split_resistance"),
-    "lubrication matrix and pair factors (rank 0, broadcast)": (resistance, "_shared_lubrication"),
+    "lubrication rows and pair factors (each rank its own)": (resistance, "_rank_lubrication"),
     "far-field operator (real-space blocks, stencils, grids)": (krylov, "far_field_operator"),
     "solver set-up (L_uu, G blocks)": (krylov.KrylovSolver, "__init__"),
     "preconditioner's incomplete factor": (krylov.KrylovSolver, "schur_solver"),
@@ -145,13 +145,13 @@ def holdings(solver):
         out["far field: k-space kernel"] = _nbytes(getattr(far, "_scale", None))
     else:
         out["far field: dense matrix"] = _nbytes(far.matrix)
-    lub = solver._lubrication
-    out["lubrication matrix (11x11 blocks)"] = _nbytes(lub.data, lub.indices, lub.indptr)
+    lub = solver.lub
+    out["lubrication matrix (11x11 blocks, this rank's rows)"] = _nbytes(lub.data, lub.indices, lub.indptr)
     if solver.lubricated is not None:
         out["lubrication pair list"] = _nbytes(*vars(solver.lubricated).values())
-    out["lubrication pair factors (12x12)"] = _nbytes(solver.pair_chol, solver.pair_i, solver.pair_j)
+    out["lubrication pair factors (12x12, pairs touching this rank's rows)"] = _nbytes(*(solver.pair_factors or ()))
     out["L_uu (PETSc BAIJ)"] = _petsc_bytes(solver.l_uu)
-    out["G pattern, D_uu^-1"] = _nbytes(solver._g_keep, solver._g_pattern[2], solver._d_uu)
+    out["G pattern (this rank's rows), D^-1"] = _nbytes(solver._g_keep, solver._g_pattern[2], solver.d_inv)
     out["G (PETSc BAIJ, sequential)"] = _petsc_bytes(solver.schur)
     factor = None
     if solver.inner is not None:

@@ -7,7 +7,8 @@ covariance (the sum of the pair factors' squares must equal the dense lubricatio
 block), the far-field part against the dense P (P^T M P)^-1/2 z for one noise vector, P the
 Lanczos preconditioner's factor (krylov.LongWaveFactor) as a matrix, checked to give
 P^T C P = I for C = D + M_long built here from its definition. And a lone sphere, so that
-with two ranks one holds no particle (`lone_sphere`)."""
+with two ranks one holds no particle (`lone_sphere`), and a pair factor failing on one
+rank only (`failing_pair`)."""
 
 import hashlib
 import sys
@@ -16,7 +17,7 @@ import numpy as np
 
 from sdmpi.hydro.farfield import NDOF, far_field_mobility, self_mobility
 from sdmpi.hydro.geometry import Lattice
-from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, long_waves
+from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, allgather_rows, long_waves
 from sdmpi.hydro.lubrication import lubrication_matrix, lubrication_sparse
 from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
 from sdmpi.hydro.solvers import make_solver
@@ -79,16 +80,25 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
            "velocities": rel(u_d, u_k),
            "stresslets": rel(dense.stresslets(u_d, einf), krylov.stresslets(u_k, einf))}
     # Brownian: near field exactly (covariance), far field on the z_1 part of one noise
-    c = np.einsum("pij,pkj->pik", split.pair_chol, split.pair_chol)
+    # (every rank's pair factors: those of the pairs touching its spheres, gathered)
+    at, pair_i, pair_j, chol = (allgather_rows(krylov.comm, a) for a in split.pair_factors)
+    at, first = np.unique(at, return_index=True)
+    pair_i, pair_j, chol = pair_i[first], pair_j[first], chol[first]
+    c = np.einsum("pij,pkj->pik", chol, chol)
     near = np.zeros((N, 6, N, 6))
-    for u, pu in enumerate((split.pair_i, split.pair_j)):
-        for v, pv in enumerate((split.pair_i, split.pair_j)):
+    for u, pu in enumerate((pair_i, pair_j)):
+        for v, pv in enumerate((pair_i, pair_j)):
             np.add.at(near, (pu, slice(None), pv), c[:, 6 * u:6 * u + 6, 6 * v:6 * v + 6])
     lub_fu = rigid_block(lubrication_matrix(res.positions, np.ones(N), res.pairs), N)
     out["near_covariance"] = rel(lub_fu, near.reshape(6 * N, 6 * N))
-    # the lubrication of the split resistance (computed by rank 0, broadcast) is this rank's own
+    # the lubrication of the split resistance (each rank's rows and the factors of the pairs
+    # touching them, computed by that rank) is the whole matrix's rows here, no more
     own, _, _, own_chol = lubrication_sparse(split.positions, np.ones(N), split.pairs, factors=True)
-    out["lubrication_shared"] = max(rel(own.data, split.lubrication.data), rel(own_chol, split.pair_chol))
+    lo, hi = own.indptr[krylov.p0], own.indptr[krylov.p1]
+    out["lubrication_shared"] = max(rel(own.data[lo:hi], split.lubrication.data), rel(own_chol, chol),
+                                    float(len(at) != len(own_chol)))
+    out["lubrication_blocks_held"] = largest_lubrication(split, krylov)
+    out["lubrication_blocks_own"] = int(hi - lo)
     z = np.zeros(krylov.noise_shape)
     z[:NDOF * N] = rng.standard_normal(NDOF * N)
     lattice = Lattice(box, STRAIN)
@@ -109,6 +119,18 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     out["lanczos"] = krylov.stats["lanczos"]
     out["digest"] = hashlib.sha256(np.concatenate([u_k.ravel(), f_b.ravel()]).tobytes()).hexdigest()
     return out
+
+
+def largest_lubrication(*holders):
+    """The most 11 x 11 lubrication blocks that one attribute of the holders (a
+    SplitResistance, a KrylovSolver) holds: a BSR matrix or an array of such blocks."""
+    most = 0
+    for holder in holders:
+        for value in vars(holder).values():
+            data = getattr(value, "data", value)
+            if isinstance(data, np.ndarray) and data.ndim == 3 and data.shape[1:] == (NDOF, NDOF):
+                most = max(most, len(data))
+    return most
 
 
 def takeover(krylov, split, box, forces, einf, u_k, comm):
@@ -156,9 +178,35 @@ def lone_sphere(comm=None):
             "digest": hashlib.sha256(np.concatenate([u_k.ravel(), f_comm.ravel()]).tobytes()).hexdigest()}
 
 
+def failing_pair(comm):
+    """A pair factor that fails on the last rank of comm alone (its lubrication rows
+    raise LinAlgError there): split_resistance raises on every rank, with that rank's
+    message, instead of leaving the others waiting in a collective."""
+    from sdmpi.hydro import resistance
+
+    pos, side = configuration(0.5, 1)
+    rows = resistance.lubrication_rows
+
+    def fail_on_last(*args, **kwargs):
+        if comm is None or comm.rank == comm.size - 1:
+            raise np.linalg.LinAlgError("the pair (0, 1) fails")
+        return rows(*args, **kwargs)
+
+    resistance.lubrication_rows = fail_on_last
+    try:
+        split_resistance(pos, np.ones(N), np.full(3, side), STRAIN, comm=comm)
+        message = ""
+    except np.linalg.LinAlgError as err:
+        message = str(err)
+    finally:
+        resistance.lubrication_rows = rows
+    return {"case": "failing pair", "raised": message == "the pair (0, 1) fails",
+            "digest": hashlib.sha256(message.encode()).hexdigest()}
+
+
 if __name__ == "__main__":
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
     print_per_rank([compare(float(phi), comm, far_field=far) for phi in sys.argv[1:] for far in FAR_FIELDS]
-                   + [lone_sphere(comm)], comm)
+                   + [lone_sphere(comm), failing_pair(comm)], comm)

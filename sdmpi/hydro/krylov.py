@@ -40,7 +40,10 @@ pair): `noise_shape`.
 Parallel layout over the communicator: particles split in contiguous ranges; every PETSc
 vector holds this rank's particles, (lambda, U') laid out [11 per particle, then 6 per
 particle]. The far-field product takes and returns whole (11N,) vectors (gathered); the
-sparse products and the preconditioner are local or PETSc-distributed. Inputs and outputs
+sparse products and the preconditioner are local or PETSc-distributed. Each rank holds
+its particles' block rows of L alone (`particle_ranges`) and the factors C_p of the pairs
+that touch its particles (for its rows of F_B); G's kept blocks are gathered from all
+ranks when a rank builds its factor. Inputs and outputs
 of the interface are replicated numpy arrays; every method is collective.
 
 Far field: an object with matvec((11N,)) -> M (11N,) from `far_field_operator`:
@@ -60,7 +63,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse
 
 from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
@@ -172,6 +174,43 @@ def self_resistance_weights() -> np.ndarray:
         (11,) dimensionless weights, 3 translational, 3 rotational, 5 stresslet.
     """
     return np.repeat(SELF_RESISTANCE_WEIGHTS, [3, 3, 5])
+
+
+def particle_ranges(n: int, size: int) -> np.ndarray:
+    """The contiguous particle ranges of size ranks, as even as rounding allows: rank r
+    holds particles bounds[r] .. bounds[r + 1] - 1 (its rows of every distributed vector and
+    of the lubrication matrix).
+
+    Args:
+        n: the number of spheres N.
+        size: the number of ranks.
+
+    Returns:
+        (size + 1,) int bounds, from 0 to n.
+    """
+    return np.linspace(0, n, size + 1).round().astype(int)
+
+
+def allgather_rows(comm: Any, local: np.ndarray) -> np.ndarray:
+    """The arrays local of the ranks of comm stacked along their first axis in rank order
+    (None or one rank: local itself); the other axes and the dtype as local's, equal on
+    every rank. Collective.
+
+    Args:
+        comm: the MPI communicator, or None.
+        local: this rank's array (m, ...).
+
+    Returns:
+        (sum of m, ...) every rank's rows.
+    """
+    local = np.ascontiguousarray(local)
+    if comm is None or comm.size == 1:
+        return local
+    counts = np.array(comm.allgather(local.shape[0]))
+    out = np.empty((counts.sum(), *local.shape[1:]), dtype=local.dtype)
+    width = int(np.prod(local.shape[1:], dtype=np.int64))
+    comm.Allgatherv(local.reshape(-1), [out.reshape(-1), counts * width])
+    return out
 
 
 def _rank_sum(comm, local):
@@ -533,7 +572,7 @@ class KrylovSolver(SolverBackend):
         self.n = n = resistance.n_particles
         self.positions, self.radii, self.lattice = resistance.positions, resistance.radii, resistance.lattice
         size, rank = self.comm.size, self.comm.rank
-        splits = np.linspace(0, n, size + 1).round().astype(int)
+        splits = particle_ranges(n, size)
         self.p0, self.p1 = p0, p1 = splits[rank], splits[rank + 1]
         self.counts11 = NDOF * np.diff(splits)
         self.counts6 = 6 * np.diff(splits)
@@ -542,33 +581,31 @@ class KrylovSolver(SolverBackend):
         # the lubricated pairs (none without lubrication: then resistance.pairs are overlaps)
         self.lubricated = resistance.lubricated
         self.noise_shape = (NDOF * n + 12 * (0 if self.lubricated is None else len(self.lubricated.i)),)
-        self.pair_i, self.pair_j, self.pair_chol = resistance.pair_i, resistance.pair_j, resistance.pair_chol
+        self.pair_factors = resistance.pair_factors
         self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
 
-        # this rank's block rows of the lubrication matrix L (11 x 11 blocks), and of its
-        # rigid-body part L_uu (6 x 6 blocks)
-        bsr = resistance.lubrication
-        lo, hi = bsr.indptr[p0], bsr.indptr[p1]
-        blocks, cols, ptr = bsr.data[lo:hi], bsr.indices[lo:hi], bsr.indptr[p0:p1 + 1] - lo
-        self.lub = scipy.sparse.bsr_matrix((blocks, cols, ptr), shape=(NDOF * nl, NDOF * n))
-        self.l_uu = self._baij(_block_csr(ptr, cols, blocks[:, :6, :6]), self.comm)
+        # this rank's block rows of the lubrication matrix L (11 x 11 blocks: the
+        # resistance holds these alone), and of its rigid-body part L_uu (6 x 6 blocks)
+        self.lub = lub = resistance.lubrication
+        if lub.shape != (NDOF * nl, NDOF * n):
+            raise ValueError(f"petsc-krylov: the resistance holds lubrication rows {lub.shape[0] // NDOF} "
+                             f"spheres long, this rank's are {nl} (a resistance of another communicator)")
+        self.l_uu = self._baij(_block_csr(lub.indptr, lub.indices, lub.data[:, :6, :6]), self.comm)
         self.u_in, self.u_out = self.l_uu.createVecs()
         # far-field self blocks of the preconditioner (isolated spheres, scaled by
         # self_resistance_scale, weighted by self_resistance_weights; this rank's
-        # particles, and the rigid-body part of every particle's), and the pattern of the
-        # whole Schur complement G (every rank): L_uu with D_uu^-1 added to its diagonal
-        # blocks (lubrication_sparse stores one for every particle), of which G keeps the
-        # diagonal ones and those of pairs closer than PRECONDITIONER_MAX_GAP (its blocks
-        # formed when needed: schur_blocks)
+        # particles), and this rank's block rows of the Schur complement G: L_uu with
+        # D_uu^-1 added to its diagonal blocks (lubrication_sparse stores one for every
+        # particle), of which G keeps the diagonal ones and those of pairs closer than
+        # PRECONDITIONER_MAX_GAP (_g_keep, over the blocks of self.lub; G's blocks formed
+        # and gathered from all ranks when needed: schur_blocks)
         root_w = np.sqrt(self_resistance_weights())
         scale = self_resistance_scale(resistance.volume_fraction) * np.outer(root_w, root_w)
         inv = {a: scale * np.linalg.inv(self_mobility(a)) for a in np.unique(resistance.radii)}
-        d_inv = np.array([inv[a] for a in resistance.radii])
-        self.d_inv = d_inv[p0:p1]
-        self._d_uu = np.ascontiguousarray(d_inv[:, :6, :6])
-        block_rows = np.repeat(np.arange(n), np.diff(bsr.indptr))
-        self._lubrication, self._g_pattern = bsr, (bsr.indptr, bsr.indices, block_rows)
-        self._g_keep = (bsr.indices == block_rows) | _near_blocks(resistance.pairs, block_rows, bsr.indices, n)
+        self.d_inv = np.array([inv[a] for a in resistance.radii[p0:p1]]).reshape(nl, NDOF, NDOF)
+        block_rows = p0 + np.repeat(np.arange(nl), np.diff(lub.indptr))
+        self._g_pattern = (lub.indptr, lub.indices, block_rows)
+        self._g_keep = (lub.indices == block_rows) | _near_blocks(resistance.pairs, block_rows, lub.indices, n)
         # G as a sequential PETSc matrix, its incomplete factor (the KSP `inner`) and work
         # vectors: built at the first preconditioner application, or taken over from a
         # solver of the same pattern (take_preconditioner)
@@ -604,8 +641,8 @@ class KrylovSolver(SolverBackend):
 
     def schur_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """G (6N x 6N) in blocked CSR (`_block_csr`): its kept blocks (_g_keep) of L_uu +
-        D_uu^-1, block rows in order, columns sorted within each (as lubrication_sparse
-        stores them).
+        D_uu^-1, every rank's block rows gathered in order, columns sorted within each (as
+        lubrication_sparse stores them). Collective.
 
         Returns:
             Block row pointers (N + 1,) int32, block columns (nb,) int32, and the
@@ -614,11 +651,12 @@ class KrylovSolver(SolverBackend):
         _, cols, rows = self._g_pattern
         keep = self._g_keep
         cols, rows = cols[keep], rows[keep]
-        blocks = self._lubrication.data[keep, :6, :6]  # a copy
+        blocks = self.lub.data[keep, :6, :6]  # a copy
         diagonal = cols == rows
-        blocks[diagonal] += self._d_uu[rows[diagonal]]
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=self.n))])
-        return _block_csr(indptr, cols, blocks)
+        blocks[diagonal] += self.d_inv[rows[diagonal] - self.p0, :6, :6]
+        per_row = allgather_rows(self.comm, np.bincount(rows - self.p0, minlength=self.p1 - self.p0))
+        indptr = np.concatenate([[0], np.cumsum(per_row)])
+        return _block_csr(indptr, allgather_rows(self.comm, cols), allgather_rows(self.comm, blocks))
 
     def schur_solver(self) -> Any:
         """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
@@ -671,14 +709,14 @@ class KrylovSolver(SolverBackend):
         two solutions, the Brownian stresslets S_mid - S_start; started from other's
         solution instead, the midpoint needs ~20% fewer iterations, but its error is
         independent of other's and the difference is ~100 x less accurate:
-        tests/test_krylov.py::test_midpoint_difference_is_accurate.)
+        tests/test_krylov.py::test_midpoint_difference_is_accurate.) Collective.
 
         Args:
             other: a solver of this backend at a nearby configuration.
         """
         mine, theirs = self._g_pattern, other._g_pattern
-        if (self.inner is not None or other.inner is None
-                or not all(np.array_equal(a, b) for a, b in zip(mine, theirs))):
+        same = all(self.comm.allgather(all(np.array_equal(a, b) for a, b in zip(mine, theirs))))
+        if self.inner is not None or other.inner is None or not same:
             return
         self._g_keep = other._g_keep
         self.schur, self.inner = other.schur, other.inner
@@ -871,7 +909,7 @@ class KrylovSolver(SolverBackend):
         Raises:
             ValueError: the resistance is one for solves only (no pair factors).
         """
-        if self.pair_chol is None:
+        if self.pair_factors is None:
             raise ValueError("petsc-krylov: Brownian forces need the lubrication pairs' factors "
                              "(a resistance of split_resistance(..., brownian=True))")
         n = self.n
@@ -886,8 +924,11 @@ class KrylovSolver(SolverBackend):
         y, its = lanczos_inverse_sqrt(lambda v: pre.left(self.far_rows(pre.right(v))),
                                       z1[NDOF * self.p0:NDOF * self.p1], dot, self.lanczos_tol)
         self.stats["lanczos"] += its
-        force = self._gather(pre.right(y), self.counts11).reshape(n, NDOF)[:, :6].copy()
-        near = np.einsum("pij,pj->pi", self.pair_chol, z2)
-        np.add.at(force, self.pair_i, near[:, :6])
-        np.add.at(force, self.pair_j, near[:, 6:])
-        return force
+        force = pre.right(y).reshape(-1, NDOF)[:, :6].copy()  # this rank's rows
+        # the pairs touching this rank's spheres, each with its rows of the noise
+        at, pair_i, pair_j, chol = self.pair_factors
+        near = np.einsum("pij,pj->pi", chol, z2[at])
+        for spheres, part in ((pair_i, near[:, :6]), (pair_j, near[:, 6:])):
+            mine = (spheres >= self.p0) & (spheres < self.p1)
+            np.add.at(force, spheres[mine] - self.p0, part[mine])
+        return self._gather(force.ravel(), self.counts6).reshape(n, 6)

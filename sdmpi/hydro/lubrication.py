@@ -242,7 +242,7 @@ def lubrication_matrix(positions: np.ndarray, radii: np.ndarray, pairs: PairList
         out = np.zeros((NDOF * n, NDOF * n))
     elif out.shape != (NDOF * n, NDOF * n) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ValueError("lubrication_matrix: out must be a C-contiguous float64 (11N, 11N) array")
-    for pi, pj, res in pair_blocks(radii, pairs):
+    for pi, pj, res, _ in pair_blocks(radii, pairs):
         scatter_pair_blocks(pi, pj, res, out)
     return out
 
@@ -327,38 +327,73 @@ def lubrication_sparse(positions: np.ndarray, radii: np.ndarray, pairs: PairList
     Raises:
         numpy.linalg.LinAlgError: a pair's rigid-body block is not positive definite.
     """
+    matrix, found = lubrication_rows(positions, radii, pairs, (0, positions.shape[0]), factors)
+    return matrix if not factors else (matrix, *found[1:])
+
+
+def lubrication_rows(positions: np.ndarray, radii: np.ndarray, pairs: PairList, rows: tuple[int, int],
+                     factors: bool = False) -> tuple[scipy.sparse.bsr_matrix, tuple | None]:
+    """Block rows r0:r1 (rows = (r0, r1), spheres r0 .. r1 - 1) of `lubrication_sparse`'s
+    matrix, formed from the pairs that touch those spheres alone: every block sums the same
+    pair blocks in the same order as the whole matrix's (`pair_blocks` with only), so the
+    entries are the same bits. With factors, also the rigid-body Cholesky factors C_p of
+    those pairs, the same bits as `lubrication_sparse`'s.
+
+    Args:
+        positions: (N, 3) sphere centres.
+        radii: (N,) sphere radii a.
+        pairs: the close pairs (`close_pairs`).
+        rows: (r0, r1), the block rows (spheres) 0 <= r0 <= r1 <= N.
+        factors: also return the factors of the pairs that touch the rows.
+
+    Returns:
+        The (11 (r1 - r0), 11N) BSR matrix of the rows (Stokes units, viscosity 1), and with
+        factors (at, pair_i, pair_j, C_p) of the pairs touching the rows, in the order of
+        `lubrication_sparse`'s factors: their places (m,) in that order of all pairs, their
+        spheres (m,), (m,) and factors (m, 12, 12); without factors None.
+
+    Raises:
+        numpy.linalg.LinAlgError: a pair's rigid-body block is not positive definite.
+    """
     n = positions.shape[0]
+    r0, r1 = rows
+    nl = r1 - r0
     pi, pj = np.asarray(pairs.i, dtype=np.int64), np.asarray(pairs.j, dtype=np.int64)
-    # block slots: diagonal blocks first (one per particle), then the distinct (i, j), i != j
-    off = pi != pj
+    touch = ((pi >= r0) & (pi < r1)) | ((pj >= r0) & (pj < r1))
+    # block slots: diagonal blocks first (one per sphere of the rows), then the distinct
+    # (i, j), i != j, i in the rows
+    off = touch & (pi != pj)
     keys = np.unique(np.concatenate([pi[off] * n + pj[off], pj[off] * n + pi[off]]))
-    rows = np.concatenate([np.arange(n), keys // n])
-    cols = np.concatenate([np.arange(n), keys % n])
-    order = np.lexsort((cols, rows))
+    keys = keys[(keys >= r0 * n) & (keys < r1 * n)]
+    block_rows = np.concatenate([np.arange(r0, r1), keys // n]) - r0
+    cols = np.concatenate([np.arange(r0, r1), keys % n])
+    order = np.lexsort((cols, block_rows))
     slot_of = np.empty(len(order), dtype=np.int64)
     slot_of[order] = np.arange(len(order))
+
+    def slots(r, c):  # the slots of the blocks (r, c), -1 for rows outside r0:r1
+        inside = (r >= r0) & (r < r1)
+        raw = np.where(r == c, r - r0, nl + np.searchsorted(keys, r * n + c))
+        return np.where(inside, slot_of[np.where(inside, raw, 0)], -1)
+
     data = np.zeros((len(order), NDOF, NDOF))
-    n_pairs = len(pi)
-    all_pi, all_pj = np.empty(n_pairs, dtype=np.int64), np.empty(n_pairs, dtype=np.int64)
-    chol = np.empty((n_pairs if factors else 0, 12, 12))
+    n_touch = int(touch.sum()) if factors else 0
+    at, all_pi, all_pj = (np.empty(n_touch, dtype=np.int64) for _ in range(3))
+    chol = np.empty((n_touch, 12, 12))
     done = 0  # pairs so far, in the order of pair_blocks
-    for ci, cj, res in pair_blocks(radii, pairs):
-        s_ij = np.where(ci == cj, ci, n + np.searchsorted(keys, ci * n + cj))
-        s_ji = np.where(ci == cj, ci, n + np.searchsorted(keys, cj * n + ci))
-        _scatter_slots(slot_of[ci], slot_of[s_ij], slot_of[s_ji], slot_of[cj], res, data)
+    for ci, cj, res, places in pair_blocks(radii, pairs, touch):
+        _scatter_slots(slots(ci, ci), slots(ci, cj), slots(cj, ci), slots(cj, cj), res, data)
         if factors:
             part = slice(done, done + len(res))
-            all_pi[part], all_pj[part] = ci, cj
+            at[part], all_pi[part], all_pj[part] = places, ci, cj
             bad = _rigid_cholesky(res, chol[part])
             if bad >= 0:
                 raise np.linalg.LinAlgError(f"the rigid-body lubrication block of the pair ({ci[bad]}, "
                                             f"{cj[bad]}) is not positive definite")
-        done += len(res)
-    indptr = np.searchsorted(rows[order], np.arange(n + 1))
-    matrix = scipy.sparse.bsr_matrix((data, cols[order], indptr), shape=(NDOF * n, NDOF * n))
-    if not factors:
-        return matrix
-    return matrix, all_pi, all_pj, chol
+            done = part.stop
+    indptr = np.searchsorted(block_rows[order], np.arange(nl + 1))
+    matrix = scipy.sparse.bsr_matrix((data, cols[order], indptr), shape=(NDOF * nl, NDOF * n))
+    return matrix, ((at, all_pi, all_pj, chol) if factors else None)
 
 
 @numba.njit(cache=True)
@@ -418,29 +453,38 @@ def _pair_setup(radii, pairs):
     return (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0)
 
 
-def pair_blocks(radii: np.ndarray, pairs: PairList) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22)), rows and
-    columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then the
-    exact ones (module docstring); together all pairs once. A tabulated chunk's res is a
-    `workspace.work_array`, valid until the next chunk is asked for.
+def pair_blocks(radii: np.ndarray, pairs: PairList, only: np.ndarray | None = None
+                ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """R_2B - R_2B,inf of every pair, in chunks (pi, pj, res (npairs, 22, 22), places),
+    rows and columns ordered (pi's 11 dofs, pj's 11 dofs): the tabulated pairs first, then
+    the exact ones (module docstring); together all pairs once, places their positions
+    (m,) in that order. only (npairs,) bool: the pairs marked alone, in the same order and
+    by the same path (tabulated or exact) as among all pairs (places still count all). A
+    tabulated chunk's res is a `workspace.work_array`, valid until the next chunk is asked
+    for.
 
     Args:
         radii: (N,) sphere radii a.
         pairs: the close pairs (`close_pairs`).
+        only: which pairs to form, or None (all).
 
     Returns:
-        An iterator of chunks (pi (m,), pj (m,), res (m, 22, 22), Stokes units).
+        An iterator of chunks (pi (m,), pj (m,), res (m, 22, 22), Stokes units; places (m,)).
     """
     if len(pairs.i) == 0:
         return
     (pi, pj, a1, a2, dx, tab, tables, sel, slow), (pi0, pj0, a10, a20, dx0) = _pair_setup(radii, pairs)
+    places, slow_places = np.arange(len(sel)), len(sel) + np.arange(len(slow))
+    if only is not None:
+        places, sel = places[only[sel]], sel[only[sel]]
+        slow_places, slow = slow_places[only[slow]], slow[only[slow]]
     for c in range(0, len(sel), _CHUNK):
         part = sel[c:c + _CHUNK]
         res = work_array("pair_blocks", (len(part), 2 * NDOF, 2 * NDOF))
         _tabulated_kernel(dx[part], a1[part], a2[part], tab[part], *tables, res)
-        yield pi[part], pj[part], res
+        yield pi[part], pj[part], res, places[c:c + _CHUNK]
     if len(slow):  # as given (not reordered): same as lubrication_matrix_exact
-        yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow])
+        yield pi0[slow], pj0[slow], pair_corrections_exact(dx0[slow], a10[slow], a20[slow]), slow_places
 
 
 def lubrication_partitions(radii: np.ndarray, pairs: PairList, n: int
@@ -856,12 +900,15 @@ def scatter_pair_blocks(pi, pj, res, out):
 
 @numba.njit(cache=True)
 def _scatter_slots(s_ii, s_ij, s_ji, s_jj, res, data):
-    """Adds each pair's four 11x11 blocks res[p] into the block slots data[s_..[p]]."""
+    """Adds each pair's four 11x11 blocks res[p] into the block slots data[s_..[p]]
+    (slot -1: a block not held, skipped)."""
     for p in range(res.shape[0]):
         slots = ((s_ii[p], s_ij[p]), (s_ji[p], s_jj[p]))
         for u in range(2):
             for v in range(2):
                 s = slots[u][v]
+                if s < 0:
+                    continue
                 for a in range(NDOF):
                     for b in range(NDOF):
                         data[s, a, b] += res[p, NDOF * u + a, NDOF * v + b]

@@ -29,15 +29,14 @@ from typing import Any
 
 import numba
 import numpy as np
-import scipy.sparse
 from scipy.linalg import blas, lapack
 
 from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldIndefinite, FarFieldPlan, far_field_mobility,
                        far_field_product, plan_far_field)
 from .geometry import Lattice, pairs_in_reach
-from .krylov import DenseFarField, far_field_operator
+from .krylov import DenseFarField, far_field_operator, particle_ranges
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
-                          lubrication_product, lubrication_reach, lubrication_sparse)
+                          lubrication_product, lubrication_reach, lubrication_rows)
 
 
 @dataclass
@@ -501,17 +500,18 @@ def mobility_divergence(resistance_at: Callable[[np.ndarray, HydroPlan], GrandRe
 @dataclass
 class SplitResistance:
     """R = M_inf^-1 + L without M_inf^-1 (for `krylov.KrylovSolver`): the far-field
-    mobility as an operator (`far.matvec`), the lubrication L as a sparse (11N x 11N)
-    BSR matrix, and per lubrication pair (pair_i, pair_j) the Cholesky factor pair_chol
-    (npairs, 12, 12) of its rigid-body block (Brownian forces; all three None in a
+    mobility as an operator (`far.matvec`), this rank's block rows of the lubrication L
+    (its spheres p0 .. p1 - 1 of `krylov.particle_ranges`: a sparse (11 (p1 - p0) x 11N)
+    BSR matrix; all of L on one rank), and pair_factors (at, pair_i, pair_j, C_p) of the
+    lubrication pairs that touch this rank's spheres (`lubrication.lubrication_rows`): the
+    Cholesky factors C_p (m, 12, 12) of their rigid-body blocks, for Brownian forces, their
+    spheres and their places among all pairs (the rows of their noise; None in a
     resistance for solves only, `split_resistance` with brownian=False). lubricated: the
     lubrication pairs (None without lubrication, when pairs are the overlaps)."""
 
     far: object
     lubrication: object
-    pair_i: np.ndarray | None
-    pair_j: np.ndarray | None
-    pair_chol: np.ndarray | None
+    pair_factors: tuple | None
     lubricated: PairList | None
     pairs: PairList
     plan: HydroPlan
@@ -526,32 +526,26 @@ class SplitResistance:
         return self.positions.shape[0]
 
 
-def _shared_lubrication(positions, radii, pairs, comm, factors):
-    """`lubrication_sparse(positions, radii, pairs, factors=True)` (factors False: the
-    matrix, and None for pair_i, pair_j, pair_chol) on every rank of comm, computed by
-    rank 0 alone and broadcast (the same bits everywhere): the other ranks meanwhile
-    finish their larger shares of the spectral far field's real-space blocks
-    (`spectral.real_space_shares` gives rank 0 the smallest)."""
-    def compute():
-        if factors:
-            return lubrication_sparse(positions, radii, pairs, factors=True)
-        return lubrication_sparse(positions, radii, pairs), None, None, None
-
-    if comm is None or comm.size == 1:
-        return compute()
-    if comm.rank == 0:
-        lub, *rest = compute()
-        arrays = [lub.data, lub.indices, lub.indptr, *rest[:3 if factors else 0]]
-        comm.bcast([(a.shape, a.dtype.str) for a in arrays], root=0)
-    else:
-        arrays = [np.empty(shape, dtype) for shape, dtype in comm.bcast(None, root=0)]
-    for a in arrays:
-        comm.Bcast(a, root=0)
-    if comm.rank == 0:
-        return (lub, *rest)
-    data, indices, indptr, *rest = arrays
-    n = NDOF * positions.shape[0]
-    return (scipy.sparse.bsr_matrix((data, indices, indptr), shape=(n, n)), *(rest or [None] * 3))
+def _rank_lubrication(positions, radii, pairs, comm, factors):
+    """This rank's block rows of `lubrication.lubrication_sparse(positions, radii, pairs)`
+    (the spheres of `krylov.particle_ranges` on comm), formed by this rank from the pairs
+    that touch them (`lubrication.lubrication_rows`: the same bits as the whole matrix's
+    rows), and with factors (at, pair_i, pair_j, C_p) of those pairs (factors False:
+    None). A pair whose rigid-body block is not positive definite raises LinAlgError on
+    every rank of comm, not only on those whose rows it touches."""
+    rank, size = (0, 1) if comm is None else (comm.rank, comm.size)
+    bounds = particle_ranges(positions.shape[0], size)
+    rows = (bounds[rank], bounds[rank + 1])
+    if not factors or size == 1:
+        return lubrication_rows(positions, radii, pairs, rows, factors)
+    try:
+        out, failure = lubrication_rows(positions, radii, pairs, rows, factors), None
+    except np.linalg.LinAlgError as err:
+        failure = str(err)
+    failure = next((f for f in comm.allgather(failure) if f is not None), None)
+    if failure is not None:
+        raise np.linalg.LinAlgError(failure)
+    return out
 
 
 def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray | None = None, strain: float = 0.0,
@@ -562,7 +556,8 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
     """The matrix-free form of `grand_resistance` (same arguments and pair sets): the
     far field by the operator `far_field` (`krylov.far_field_operator`: "spectral",
     "dense", None: by N; built on the MPI communicator comm), the
-    lubrication sparse (`lubrication.lubrication_sparse`, computed by comm's rank 0).
+    lubrication sparse, each rank's block rows of `lubrication.lubrication_sparse`'s
+    matrix (`krylov.particle_ranges`) computed by that rank.
 
     Args:
         positions, radii, box, strain, lubrication, ewald_tol, cutoff, min_gap,
@@ -570,8 +565,8 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
         far_field: "spectral", "dense" or None (chosen by N).
         comm: the MPI communicator (collective over it), or None (this rank alone).
         brownian: with the lubrication pairs' factors of the Brownian forces (False: a
-            resistance for solves only, without pair_i, pair_j, pair_chol; 12 x 12
-            doubles per pair less).
+            resistance for solves only, without pair_factors; 12 x 12 doubles per pair
+            less).
 
     Returns:
         The matrix-free resistance (Stokes units, viscosity 1).
@@ -587,9 +582,9 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
         lub_pairs = close_pairs(pos, radii, images=(none, none, np.zeros((0, 3))))
     else:
         lub_pairs = pairs
-    lub, pi, pj, chol = _shared_lubrication(pos, radii, lub_pairs, comm, brownian)
+    lub, factors = _rank_lubrication(pos, radii, lub_pairs, comm, brownian)
     # the box's volume fraction (a monolayer's cell of height layer_spacing x L: ~0.02,
     # so its preconditioner's self-resistance scale is ~1)
     phi = 0.0 if lattice is None else float(np.sum(4 * np.pi / 3 * radii ** 3) / lattice.volume)
     lubricated = lub_pairs if len(lub_pairs.i) else None
-    return SplitResistance(far, lub, pi, pj, chol, lubricated, pairs, plan, pos, radii, phi, lattice)
+    return SplitResistance(far, lub, factors, lubricated, pairs, plan, pos, radii, phi, lattice)
