@@ -84,28 +84,25 @@ schaink2000: setup
 	  --phi-scan out/schaink2000/phi_scan.h5 --fixed-dt out/schaink2000/fixed_dt.h5 -o $(STUDY_OUT)
 
 # The finite-size study (docs/validation/finite_size/README.md): the time-step control and
-# the N = 27, 64 and 125 runs on RANKS ranks into out/finite_size/, then its tables and
-# figures into FS_OUT. A stopped study resumes where it stopped when this is run again.
+# the N = 27, 64, 125 and 343 runs on RANKS ranks into out/finite_size/ (~9 core-hours in
+# all, N = 343 more than half of it), then its tables and figures into FS_OUT. A stopped
+# study resumes where it stopped when this is run again; finite-size-n343 runs (or
+# resumes) N = 343 alone and then the same tables.
 FS_OUT    ?= docs/validation/finite_size
+FS_RUN     = mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run
+FS_TABLES  = $(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
+	  out/finite_size/n125.h5 out/finite_size/n343.h5 --control out/finite_size/dt_control.h5 -o $(FS_OUT)
 finite-size: setup
 	mkdir -p out/finite_size
-	for job in dt_control n27 n64 n125; do \
-	  mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/finite_size_$$job.toml \
-	    -o out/finite_size/$$job.h5 || exit 1; \
+	for job in dt_control n27 n64 n125 n343; do \
+	  $(FS_RUN) jobs/finite_size_$$job.toml -o out/finite_size/$$job.h5 || exit 1; \
 	done
-	$(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
-	  out/finite_size/n125.h5 \
-	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
+	$(FS_TABLES)
 
-# N = 343 at two plateau frequencies (jobs/finite_size_n343.toml, ~5 core-hours), resumable;
-# then the study's tables with it.
 finite-size-n343: setup
 	mkdir -p out/finite_size
-	mpirun --oversubscribe -n $(RANKS) $(VENV)/bin/sdmpi run jobs/finite_size_n343.toml \
-	  -o out/finite_size/n343.h5
-	$(VPY) postprocess/finite_size.py --runs out/finite_size/n27.h5 out/finite_size/n64.h5 \
-	  out/finite_size/n125.h5 out/finite_size/n343.h5 \
-	  --control out/finite_size/dt_control.h5 -o $(FS_OUT)
+	$(FS_RUN) jobs/finite_size_n343.toml -o out/finite_size/n343.h5
+	$(FS_TABLES)
 
 # The Dratler & Schowalter (1996) monolayer study (docs/validation/dratler1996/README.md):
 # both models at the paper's length on RANKS ranks into out/dratler1996/, then its tables
