@@ -24,7 +24,6 @@ shared work arrays. Prints a JSON row; --out FILE merges it into FILE under --la
         --set ensemble.realisations=1 --steps 2 --label n4096_rest --out bench/memory.json
 """
 
-import argparse
 import resource
 
 import h5py  # noqa: F401  (loaded as by sdmpi run: part of the baseline)
@@ -32,7 +31,7 @@ import sdmpi  # noqa: F401  (before numpy: it chooses OpenBLAS's kernels as `sdm
 import numpy as np
 from mpi4py import MPI
 
-from workers import report  # bench/ is on sys.path when run as a script
+from workers import job_benchmark  # bench/ is on sys.path when run as a script
 
 from sdmpi.config import enumerate_tasks
 from sdmpi.dynamics import Realisation, drift
@@ -196,19 +195,5 @@ def measure(job_path, overrides, steps):
             "peak_rss_gib_per_rank": [r["peak_rss_gib"] for r in rows]}
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("job")
-    ap.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE")
-    ap.add_argument("--steps", type=int, default=2)
-    ap.add_argument("--label", default=None)
-    ap.add_argument("--out", default=None)
-    args = ap.parse_args()
-    row = measure(args.job, args.overrides, args.steps)
-    if MPI.COMM_WORLD.rank:
-        return
-    report(row, args.out, args.label or "-".join(args.overrides))
-
-
 if __name__ == "__main__":
-    main()
+    job_benchmark(__doc__, measure, dict(type=int, default=2))

@@ -17,7 +17,6 @@ the runs (ru_maxrss, GiB). Prints a JSON row; --out FILE merges it into FILE und
         --set ensemble.realisations=1 --label n1000_rest_dt5e-4 --out bench/run_cost.json
 """
 
-import argparse
 import resource
 import tempfile
 import time
@@ -28,7 +27,7 @@ import numpy as np
 from mpi4py import MPI
 
 from bench_step import cholesky_matrix, cholesky_ms  # bench/ is on sys.path when run as a script
-from workers import report
+from workers import job_benchmark
 
 from sdmpi.cli import main as sdmpi_main
 
@@ -68,19 +67,5 @@ def measure(job, overrides, steps):
             "peak_rss_gib_per_rank": comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20)}
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("job")
-    ap.add_argument("--steps", type=int, nargs=2, default=[2, 12])
-    ap.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE")
-    ap.add_argument("--label", default=None)
-    ap.add_argument("--out", default=None)
-    args = ap.parse_args()
-    row = measure(args.job, args.overrides, args.steps)
-    if MPI.COMM_WORLD.rank:
-        return
-    report(row, args.out, args.label or "-".join(args.overrides))
-
-
 if __name__ == "__main__":
-    main()
+    job_benchmark(__doc__, measure, dict(type=int, nargs=2, default=[2, 12]))

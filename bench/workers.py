@@ -1,7 +1,9 @@
 """Shared by the benchmarks that measure under mpirun: each runs its own script again as
 a worker (one process group per measurement, so memory and MPI state belong to that
-run) and reads the rows the worker prints."""
+run) and reads the rows the worker prints; or, run under mpirun itself on one job file,
+takes the command line of `job_benchmark`."""
 
+import argparse
 import json
 import os
 import re
@@ -43,3 +45,22 @@ def report(row, out=None, label=None):
         data = json.loads(path.read_text()) if path.exists() else {}
         data[label] = row
         path.write_text(json.dumps(data, indent=1) + "\n")
+
+
+def job_benchmark(doc, measure, steps):
+    """The command line of a benchmark of one job file, run on every rank of mpirun:
+    JOB, --set KEY=VALUE (repeatable), --steps (argparse keywords ``steps``), --label,
+    --out. Calls measure(job, overrides, steps) on every rank; rank 0 reports the row
+    (`report`; the label defaults to the overrides joined by "-")."""
+    from mpi4py import MPI
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("job")
+    ap.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE")
+    ap.add_argument("--steps", **steps)
+    ap.add_argument("--label", default=None)
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args()
+    row = measure(args.job, args.overrides, args.steps)
+    if MPI.COMM_WORLD.rank == 0:
+        report(row, args.out, args.label or "-".join(args.overrides))
