@@ -1,4 +1,4 @@
-"""Hydrodynamics demonstration (what `make run` runs until the ensemble runner exists).
+"""Hydrodynamics demonstration, without a run file (`python postprocess/hydro_demo.py`).
 
 1. An isolated sphere and Hasimoto's simple cubic lattice (periodic Ewald sums).
 2. The high-frequency hydrodynamic viscosity of equilibrium hard-sphere suspensions at

@@ -1,6 +1,7 @@
 """The manual stays current: docs generated from code match it, README.md and docs/ read as a
 manual (no development history, papers by author and year)."""
 
+import os
 import re
 from pathlib import Path
 
@@ -24,3 +25,12 @@ def test_manual_holds_no_development_history():
 
 def test_readme_is_a_front_page():
     assert len((Path(__file__).parents[1] / "README.md").read_text().splitlines()) <= 250
+
+
+def test_scripts_the_manual_runs_are_executable():
+    """The manual runs the scripts of postprocess/ and bench/ by their path
+    (`postprocess/dratler1996.py ...`): every one with a #! line can be run that way."""
+    root = Path(__file__).parents[1]
+    for path in sorted([*(root / "postprocess").glob("*.py"), *(root / "bench").glob("*.py")]):
+        if path.read_text().startswith("#!"):
+            assert os.access(path, os.X_OK), f"chmod +x {path.relative_to(root)}"
