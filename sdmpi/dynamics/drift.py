@@ -106,24 +106,34 @@ def rfd_length(min_gap: float) -> float:
     return RFD_STEP * min_gap * 6 * math.pi
 
 
-def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float,
-              stresslets: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-    """(drift (N, 6), Brownian stresslets (N, 5)) of one random finite difference along the
-    direction m = R_FU^-1 F (N, 6): (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F and
-    -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F, eps = `rfd_length`, to first
-    order in Delta R = R(x + eps m) - R (docs/numerics.md). Their means over F = C z are
-    kT div R_FU^-1 and -kT div(R_SU R_FU^-1). stresslets False: the drift alone (None
-    for the stresslets, whose product is then not formed)."""
-    solver = evaluation.solver
-    zero = np.zeros((evaluation.n_particles, 5))
+def _rfd_difference(evaluation: SolverEvaluation, m: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """(eps, the resistance change Delta R applied to (m, 0) as (N, 11), the velocity change
+    dm = [R_FU^-1(x + eps m) - R_FU^-1(x)] F (N, 6)) of a random finite difference of length
+    eps = `rfd_length` along m = R_FU^-1 F, to first order in Delta R = R(x + eps m) - R."""
     step = rfd_length(evaluation.min_gap)
     direction = np.zeros((evaluation.n_particles, NDOF))
     direction[:, :6] = m
     change = evaluation.resistance_change(evaluation.positions + step * m[:, :3], direction)
-    dm = -solver.velocities(change[:, :6], zero)  # (R + Delta R)_FU^-1 F - m, first order
-    if not stresslets:
-        return (kT / step) * dm, None
-    return (kT / step) * dm, (kT / step) * (solver.stresslets(dm, zero) - change[:, 6:])
+    dm = -evaluation.solver.velocities(change[:, :6], np.zeros((evaluation.n_particles, 5)))
+    return step, change, dm
+
+
+def rfd_drift(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> np.ndarray:
+    """The drift (N, 6) of one random finite difference along m = R_FU^-1 F:
+    (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F, whose mean over F = C z is kT div R_FU^-1
+    (`_rfd_difference`; docs/numerics.md)."""
+    step, _, dm = _rfd_difference(evaluation, m)
+    return (kT / step) * dm
+
+
+def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> tuple[np.ndarray, np.ndarray]:
+    """(drift (N, 6), Brownian stresslets (N, 5)) of one random finite difference along the
+    direction m = R_FU^-1 F: the drift of `rfd_drift` and
+    -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F, whose mean over F = C z is
+    -kT div(R_SU R_FU^-1) (docs/numerics.md)."""
+    step, change, dm = _rfd_difference(evaluation, m)
+    zero = np.zeros((evaluation.n_particles, 5))
+    return (kT / step) * dm, (kT / step) * (evaluation.solver.stresslets(dm, zero) - change[:, 6:])
 
 
 class RandomFiniteDifference:
@@ -142,7 +152,7 @@ class RandomFiniteDifference:
 class SplitRandomFiniteDifference:
     """``rfd-split``: the drift by a random finite difference along the step's displacement
     direction m = R_FU^-1 C z, as ``rfd``, and the Brownian stresslets by a second one along
-    m' = R_FU^-1 C z_stress of an independent draw (`rfd_terms`). The estimator noise of the
+    m' = R_FU^-1 C z_stress of an independent draw (`rfd_drift`, `rfd_terms`). The estimator noise of the
     stresslets is then independent of the step's displacement and of every later
     configuration (with ``rfd`` both are functions of z), a control for the stress
     autocorrelation at rest (docs/numerics.md). One more resistance change and solve per
@@ -155,7 +165,7 @@ class SplitRandomFiniteDifference:
         solver = evaluation.solver
         m = solver.brownian_velocities(z)
         noise = math.sqrt(2 * kT / dt) * m
-        drift, _ = rfd_terms(evaluation, m, kT, stresslets=False)
+        drift = rfd_drift(evaluation, m, kT)
         _, stress = rfd_terms(evaluation, solver.brownian_velocities(z_stress), kT)
         return BrownianTerms(noise + drift + near(m), stress)
 
