@@ -28,6 +28,9 @@ Outputs in OUTDIR:
 * ``windows.csv``: eta, eta_h, eta_p averaged over consecutive strain windows of width
   ``--window`` (default 10) from the start (start-up included; the paper's running averages, Figs. 6,
   7, 9), per model and phi_a, averaged over the realisations that reach the window's end;
+* ``realisation_windows.csv``: the same windows per realisation (``realisation``, the
+  job's realisation index), with the overlaps per configuration over each window (mean
+  and largest; start-up included);
 * ``neighbours.png`` (without ``--no-plots``): n(2.01) against strain.
 
 The CSV files are byte-identical when the same run files are processed again. Exit
@@ -53,6 +56,7 @@ from sdmpi.analysis.reduce import (TABLE_COMPONENTS, ReduceError, medium_viscosi
                                    open_run, read_stress, steady_quantities)
 from sdmpi.analysis.report import write_all  # noqa: E402
 from sdmpi.analysis.trajectories import pair_counts, read  # noqa: E402
+from sdmpi.ensemble.store import task_key  # noqa: E402
 
 #: the paper's neighbour cut-offs r_c (centre distance, a; its Fig. 13)
 CUTOFFS = (2.00, 2.01, 2.05)
@@ -163,9 +167,10 @@ def neighbour_rows(name, files):
 
 
 def task_windows(summary, f, task, width):
-    """{window index: (eta, eta_h, eta_p)} of one task: the means over consecutive strain
-    windows of this width from t = 0 (start-up included) up to a stop, whole windows
-    only, eta = eta_m + the contributions (the paper's eq. 6)."""
+    """{window index: (eta, eta_h, eta_p, overlaps mean, overlaps max)} of one task: the
+    means over consecutive strain windows of this width from t = 0 (start-up included) up
+    to a stop, whole windows only, eta = eta_m + the contributions (the paper's eq. 6), and
+    the overlaps per configuration (n_overlaps) of the same samples."""
     job = summary.job
     _, _, stop = analysed_samples(summary, f, task)
     done = int(summary.progress[task.task_id])
@@ -173,32 +178,41 @@ def task_windows(summary, f, task, width):
     per = max(int(round(width / (task.dt * job.shear.rate))), 1)
     stress = read_stress(f, job, task, end, columns=slice(None))       # (C, end, 6)
     eta = steady_quantities(stress, job.shear.rate)[:, 0]             # (C, end)
+    overlaps = f[f"tasks/{task_key(task.task_id)}/samples"]["n_overlaps"][:end]
     hydro = TABLE_COMPONENTS.index("hydrodynamic") - 1
     inter = TABLE_COMPONENTS.index("interparticle") - 1
     out = {}
     for k in range(end // per):
         part = eta[:, k * per:(k + 1) * per].mean(axis=1)
-        out[k] = (medium_viscosity(job) + part.sum(), part[hydro], part[inter])
+        n = overlaps[k * per:(k + 1) * per]
+        out[k] = (medium_viscosity(job) + part.sum(), part[hydro], part[inter],
+                  float(n.mean()), int(n.max()))
     return out
 
 
 def window_rows(name, files, width):
-    """windows.csv rows of one model: per phi_a and strain window, the mean over the
-    realisations that reach the window's end."""
-    acc = {}
+    """(windows.csv rows, realisation_windows.csv rows) of one model: per phi_a and strain
+    window, eta and its parts averaged over the realisations that reach the window's end;
+    and per realisation and window, eta, its parts and the overlaps per configuration."""
+    acc, per_task = {}, []
     for path in files:
         summary = open_run(path)
         with h5py.File(path, "r", locking=False) as f:
             for task in summary.tasks:
-                for k, values in task_windows(summary, f, task, width).items():
-                    acc.setdefault((task.phi, k), []).append(values)
+                for k, (eta, eta_h, eta_p, n_mean, n_max) in task_windows(summary, f, task, width).items():
+                    acc.setdefault((task.phi, k), []).append((eta, eta_h, eta_p))
+                    per_task.append({"model": name, "phi_a": task.phi, "realisation": task.realisation,
+                                     "strain_from": k * width, "strain_to": (k + 1) * width,
+                                     "eta": eta, "eta_h": eta_h, "eta_p": eta_p,
+                                     "overlaps_mean": n_mean, "overlaps_max": n_max})
     rows = []
     for (phi, k), values in sorted(acc.items(), key=lambda kv: (-kv[0][0], kv[0][1])):
         eta, eta_h, eta_p = np.mean(values, axis=0)
         rows.append({"model": name, "phi_a": phi, "strain_from": k * width,
                      "strain_to": (k + 1) * width, "realisations": len(values),
                      "eta": eta, "eta_h": eta_h, "eta_p": eta_p})
-    return rows
+    per_task.sort(key=lambda r: (-r["phi_a"], r["realisation"], r["strain_from"]))
+    return rows, per_task
 
 
 def write_csv(path, rows, fields):
@@ -232,7 +246,7 @@ def main(argv=None) -> int:
     out = Path(args.output)
     models = {name: files for name, files in (("hydro", args.hydro),
                                               ("repulsion", args.repulsion)) if files}
-    rows, neighbours, windows = [], [], []
+    rows, neighbours, windows, realisation_windows = [], [], [], []
     try:
         for name, files in models.items():
             check_model(name, files)
@@ -243,7 +257,9 @@ def main(argv=None) -> int:
                 print(f"note: {name}: {note}", file=sys.stderr)
             rows += model_rows(name, red, files)
             neighbours += neighbour_rows(name, files)
-            windows += window_rows(name, files, args.window)
+            model_windows, model_realisation_windows = window_rows(name, files, args.window)
+            windows += model_windows
+            realisation_windows += model_realisation_windows
     except (ReduceError, OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -253,9 +269,13 @@ def main(argv=None) -> int:
                                                    *(f"n_{rc:.2f}" for rc in CUTOFFS)])
     write_csv(out / "windows.csv", windows, ["model", "phi_a", "strain_from", "strain_to",
                                              "realisations", "eta", "eta_h", "eta_p"])
+    write_csv(out / "realisation_windows.csv", realisation_windows,
+              ["model", "phi_a", "realisation", "strain_from", "strain_to", "eta", "eta_h", "eta_p",
+               "overlaps_mean", "overlaps_max"])
     if neighbours and not args.no_plots:
         draw_neighbours(neighbours, out / "neighbours.png")
-    print(f"wrote {out}/ (monolayer.csv, ratio.csv, neighbours.csv, windows.csv)")
+    print(f"wrote {out}/ (monolayer.csv, ratio.csv, neighbours.csv, windows.csv, "
+          "realisation_windows.csv)")
     return 0
 
 

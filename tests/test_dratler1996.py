@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from sdmpi.cli import main as sdmpi_main
+from sdmpi.ensemble.store import task_key
 from .tiny_runs import postprocess_script, sdmpi_run
 
 TINY = ["--set", "system.n_particles=9", "--set", "system.phi=[0.5]",
@@ -70,6 +71,22 @@ def test_tables_agree_with_sdmpi_reduce(runs, tmp_path):
         for r in win:
             assert math.isclose(float(r["eta"]), 1 + float(r["eta_h"]) + float(r["eta_p"]),
                                 rel_tol=1e-12)
+    # per realisation: the windows average to windows.csv's, and the overlaps per window are
+    # those of the samples themselves
+    for model, run in zip(("hydro", "repulsion"), runs):
+        per = [r for r in rows(out / "realisation_windows.csv") if r["model"] == model]
+        assert sorted({r["realisation"] for r in per}) == ["0", "1"] and len(per) == 8
+        win = [r for r in rows(out / "windows.csv") if r["model"] == model]
+        for k, w in enumerate(win):
+            both = [float(r["eta"]) for r in per if float(r["strain_from"]) == float(w["strain_from"])]
+            assert math.isclose(np.mean(both), float(w["eta"]), rel_tol=1e-12)
+        with h5py.File(run, "r") as f:
+            for r in per:
+                task = int(r["realisation"])   # one phi_a: task id = realisation
+                k = round(float(r["strain_from"]) / 0.05)
+                n = f[f"tasks/{task_key(task)}/samples"]["n_overlaps"][10 * k:10 * (k + 1)]
+                assert float(r["overlaps_mean"]) == float(n.mean())
+                assert int(r["overlaps_max"]) == int(n.max())
     ratio = rows(out / "ratio.csv")[0]
     eta_h, eta_r = float(table["hydro"]["eta"]), float(table["repulsion"]["eta"])
     assert math.isclose(float(ratio["ratio"]), eta_r / eta_h, rel_tol=1e-14)
@@ -110,7 +127,8 @@ def test_neighbour_counts_equal_a_direct_count(runs, tmp_path):
 def test_tables_are_byte_identical_when_regenerated(runs, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     assert regenerate(runs, a) == 0 and regenerate(runs, b) == 0
-    for name in ("monolayer.csv", "ratio.csv", "neighbours.csv", "windows.csv", "hydro/viscosity.csv",
+    for name in ("monolayer.csv", "ratio.csv", "neighbours.csv", "windows.csv",
+                 "realisation_windows.csv", "hydro/viscosity.csv",
                  "repulsion/errors.csv"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
