@@ -87,7 +87,27 @@ def _add_validate(subparsers) -> None:
     parser.set_defaults(handler=_validate)
 
 
+def _launched_rank() -> int | None:
+    """This process's rank when an MPI launcher started it (mpirun, srun), else None; read
+    from the launcher's environment, without initialising MPI."""
+    from ._kernel_cache import RANK_VARS
+
+    return next((int(os.environ[v]) for v in RANK_VARS if v in os.environ), None)
+
+
 def _validate(args) -> int:
+    """``sdmpi validate``; under mpirun every rank checks the job and rank 0 alone prints
+    (the others' output is dropped), and ``--time-steps`` times the first task on the
+    ranks of one task."""
+    if _launched_rank() in (None, 0):
+        return _validate_job(args)
+    import contextlib
+
+    with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+        return _validate_job(args)
+
+
+def _validate_job(args) -> int:
     from .config import resources
     from .config.checks import scheme_problems
     from .dynamics.setup import job_backend
@@ -154,34 +174,64 @@ def resource_text(job, ranks: int, output) -> str:
     return "\n".join(lines)
 
 
-def cost_text(job, ranks: int, k: int) -> str:
-    """Core-hours and wall time of a job on ``ranks`` ranks, from timing ``k`` steps of
-    its first task on this rank (after one untimed step: kernel compilation or loading,
-    first solves). Every step of a job costs about the same (same N, same solver); the
-    wall time is the largest load of the LPT assignment (sdmpi.ensemble.farm)."""
+def _timing_group(ranks_per_task: int):
+    """(communicator, member) of the ranks that time a task: the first ``ranks_per_task``
+    ranks when this process was launched with at least that many (member False on the
+    others), else (None, True): this process times it alone."""
+    if _launched_rank() is None or ranks_per_task == 1:
+        return None, True
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    if world.size < ranks_per_task:
+        return None, True
+    member = world.rank < ranks_per_task
+    return world.Split(color=0 if member else MPI.UNDEFINED, key=world.rank), member
+
+
+def _seconds_per_step(job, task, k: int, comm) -> float:
+    """Wall seconds per step of ``k`` steps of a task's realisation (after one untimed
+    step), on ``comm``'s ranks (the slowest rank's time) or, for None, on this process."""
     import time
 
     from .dynamics import Realisation
+
+    real = Realisation(job, task, comm)
+    real.advance(1)
+    if comm is not None:
+        comm.Barrier()
+    t0 = time.perf_counter()
+    real.advance(k)
+    per_step = (time.perf_counter() - t0) / k
+    return per_step if comm is None else max(comm.allgather(per_step))
+
+
+def cost_text(job, ranks: int, k: int) -> str:
+    """Core-hours and wall time of a job on ``ranks`` ranks, from timing ``k`` steps of
+    its first task (after one untimed step: kernel compilation or loading, first solves)
+    on the ranks of one task (ensemble.ranks_per_task) when launched with at least that
+    many (``mpirun -n P sdmpi validate``), else on this process alone. Every step of a job
+    costs about the same (same N, same solver); the wall time is the largest load of the
+    LPT assignment (sdmpi.ensemble.farm)."""
     from .ensemble.farm import assign
     from .ensemble.progress import hms
 
     tasks = enumerate_tasks(job)
-    print(f"timing {k} step(s) of task 0 (after one untimed step that compiles or loads "
-          "the kernels)...", file=sys.stderr, flush=True)
-    real = Realisation(job, tasks[0])
-    real.advance(1)
-    t0 = time.perf_counter()
-    real.advance(k)
-    per_step = (time.perf_counter() - t0) / k
     rpt, groups = job.ensemble.ranks_per_task, max(ranks // job.ensemble.ranks_per_task, 1)
+    comm, member = _timing_group(rpt)
+    timing = rpt if comm is not None else 1
+    print(f"timing {k} step(s) of task 0 on {timing} rank(s) (after one untimed step that "
+          "compiles or loads the kernels)...", file=sys.stderr, flush=True)
+    per_step = _seconds_per_step(job, tasks[0], k, comm) if member else 0.0
     steps = {t.task_id: float(t.n_steps) for t in tasks}
     makespan = max(sum(steps[tid] for tid in group) for group in assign(steps, groups))
     core_hours = sum(steps.values()) * per_step * rpt / 3600.0
-    note = "" if rpt == 1 else (f"; timed on one rank, the {rpt} ranks of a task share "
-                                "its solves, so its steps will be faster")
-    return (f"  cost (measured: {per_step:.3g} s per step of task 0 on this machine{note}): "
-            f"{core_hours:.3g} core-hours, wall time {hms(makespan * per_step)} on "
-            f"{ranks} rank(s)")
+    note = ("" if timing == rpt else
+            f"; a task runs on {rpt} ranks, whose step takes another time: "
+            f"mpirun -n {rpt} sdmpi validate ... times it on them")
+    return (f"  cost (measured: {per_step:.3g} s per step of task 0 on {timing} rank(s) of "
+            f"this machine{note}): {core_hours:.3g} core-hours, wall time "
+            f"{hms(makespan * per_step)} on {ranks} rank(s)")
 
 
 def hydrodynamics_line(job) -> str:

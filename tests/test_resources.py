@@ -6,6 +6,8 @@ import errno
 import json
 import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +20,7 @@ from sdmpi.ensemble.store import run_file_bytes
 from . import runs as ens
 
 DEMO = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
+KRYLOV_JOB = Path(__file__).parents[1] / "jobs" / "large_n_krylov.toml"
 
 
 def test_run_file_size_estimate(ensemble_job, tmp_path):
@@ -130,9 +133,28 @@ def test_validate_measures_the_cost(capsys):
     out = capsys.readouterr().out
     assert "run file: about" in out and "memory: about" in out
     line = next(x for x in out.splitlines() if "cost (measured:" in x)
-    assert "s per step of task 0 on this machine): " in line and "core-hours" in line
+    assert "s per step of task 0 on 1 rank(s) of this machine): " in line and "core-hours" in line
     assert line.endswith("on 2 rank(s)")
     assert main(["validate", DEMO, "--ranks", "3", "--set", "ensemble.ranks_per_task=2"]) == 2
+
+
+@ens.needs_mpi
+def test_validate_times_a_task_on_its_ranks_under_mpirun():
+    """A job of two ranks per task: alone, validate times one rank and says how to time the
+    task's two; under mpirun -n 2 it times the task on both, and rank 0 alone
+    prints."""
+    small = ["--set", "system.n_particles=64", "--set", "ensemble.realisations=1"]
+    cmd = [sys.executable, "-m", "sdmpi", "validate", str(KRYLOV_JOB), *small, "--time-steps", "1"]
+    alone = subprocess.run(cmd, capture_output=True, text=True, env=ens.child_env(), timeout=600)
+    assert alone.returncode == 0, alone.stderr
+    line = next(x for x in alone.stdout.splitlines() if "cost (measured:" in x)
+    assert "on 1 rank(s) of this machine; a task runs on 2 ranks, whose step takes another" in line
+    both = subprocess.run([ens.MPIRUN, "--oversubscribe", "-n", "2", *cmd], capture_output=True,
+                          text=True, env=ens.child_env(), timeout=600)
+    assert both.returncode == 0, both.stderr
+    lines = [x for x in both.stdout.splitlines() if "cost (measured:" in x]
+    assert len(lines) == 1 and "s per step of task 0 on 2 rank(s) of this machine): " in lines[0]
+    assert both.stdout.count("job 'large-n-krylov': valid") == 1
 
 
 def test_full_file_system_is_recognised():
