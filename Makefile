@@ -17,7 +17,7 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 
-.PHONY: setup run test pip-check bench schaink2000 finite-size finite-size-n343 dratler1996 dratler1996-sensitivity dratler1996-size clean
+.PHONY: setup run test pip-check bench schaink2000 finite-size finite-size-n343 large-n-1000 dratler1996 dratler1996-sensitivity dratler1996-size clean
 
 setup: $(VENV)/.installed
 
@@ -103,6 +103,20 @@ finite-size-n343: setup
 	mkdir -p out/finite_size
 	$(FS_RUN) jobs/finite_size_n343.toml -o out/finite_size/n343.h5
 	$(FS_TABLES)
+
+# A 5 000-step realisation of jobs/large_n_krylov.toml (N = 1000, phi = 0.45, oscillatory,
+# petsc-krylov on 2 ranks; docs/performance.md "A 5 000-step realisation at N = 1000"): the
+# cost estimate of `sdmpi validate --time-steps` on the task's 2 ranks (kept from the first
+# call), the run into out/large_n/ (run again to resume after a stop), its trust report.
+LN_SET = --set ensemble.realisations=1 --set integration.steps_per_period=2500 --set integration.periods=2
+large-n-1000: setup
+	mkdir -p out/large_n
+	test -s out/large_n/n1000_estimate.txt || mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi validate \
+	  jobs/large_n_krylov.toml $(LN_SET) --time-steps 3 > out/large_n/n1000_estimate.txt
+	cat out/large_n/n1000_estimate.txt
+	mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi run jobs/large_n_krylov.toml $(LN_SET) \
+	  -o out/large_n/n1000.h5
+	$(VENV)/bin/sdmpi reduce out/large_n/n1000.h5 -o out/large_n/n1000 --no-plots
 
 # The Dratler & Schowalter (1996) monolayer study (docs/validation/dratler1996/README.md):
 # both models at the paper's length on RANKS ranks into out/dratler1996/, then its tables
