@@ -582,6 +582,7 @@ class KrylovSolver(SolverBackend):
         self.lubricated = resistance.lubricated
         self.noise_shape = (NDOF * n + 12 * (0 if self.lubricated is None else len(self.lubricated.i)),)
         self.pair_factors = resistance.pair_factors
+        self._resistance = resistance  # (forces_drawn frees its pair factors too)
         self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
 
         # this rank's block rows of the lubrication matrix L (11 x 11 blocks: the
@@ -724,6 +725,13 @@ class KrylovSolver(SolverBackend):
         self.schur.zeroEntries()
         self.schur.setValuesBlockedCSR(*self.schur_blocks())
         self.schur.assemble()
+
+    def forces_drawn(self) -> None:
+        """Frees the lubrication pairs' factors C_p (12 x 12 doubles per pair touching this
+        rank's spheres), here and in the resistance the solver was built from, which the
+        Brownian forces alone use (`brownian_forces` then refuses): the step's start
+        would otherwise hold them through the Brownian midpoint's set-up and solve."""
+        self.pair_factors = self._resistance.pair_factors = None
 
     def _baij(self, csr, comm):
         """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this
@@ -911,7 +919,7 @@ class KrylovSolver(SolverBackend):
         """
         if self.pair_factors is None:
             raise ValueError("petsc-krylov: Brownian forces need the lubrication pairs' factors "
-                             "(a resistance of split_resistance(..., brownian=True))")
+                             "(a resistance of split_resistance(..., brownian=True), before forces_drawn)")
         n = self.n
         z1 = noise[:NDOF * n]
         z2 = noise[NDOF * n:].reshape(-1, 12)
