@@ -222,6 +222,25 @@ def test_resistance_for_solves_only():
         only.brownian_forces(rng.standard_normal(only.noise_shape))
 
 
+def test_solves_after_freeing_the_krylov_vectors_are_unchanged():
+    """A solver frees its Krylov vectors after every solve (KSPReset, its operator set
+    again): its next GMRES solve (45 iterations at 1e-12, beyond PETSc's default restart
+    of 30, so a lost GMRES_RESTART would show) and CG mobility solve (stresslets of
+    velocities not from a solve) equal a fresh solver's bit for bit, iterations too."""
+    start, _ = near_contact_start()
+    n = start.n_particles
+    rng = np.random.default_rng(9)
+    first, forces, einf = rng.standard_normal((n, 6)), rng.standard_normal((n, 6)), rng.standard_normal((n, 5))
+    moving = rng.standard_normal((n, 6))
+    used, fresh = (make_solver("petsc-krylov", start, tolerance=1e-12) for _ in range(2))
+    used.stresslets(used.velocities(first, einf) + 1.0, einf)
+    before = used.stats["iterations"]
+    u = used.velocities(forces, einf)
+    assert np.array_equal(u, fresh.velocities(forces, einf))
+    assert used.stats["iterations"] - before == fresh.stats["iterations"] > 30
+    assert np.array_equal(used.stresslets(moving, einf), fresh.stresslets(moving, einf))
+
+
 def test_solver_frees_its_petsc_objects():
     """A solver its caller drops destroys its PETSc objects (`KrylovSolver.__del__`): the
     shell matrix and preconditioner hold their python contexts from PETSc's side, and
@@ -380,6 +399,36 @@ def test_midpoint_brownian_stress_reuses_the_start_solve():
                         for _ in range(3)]
     for loose, tight in zip(samples[1e-5], samples[1e-12]):
         assert np.abs(loose - tight).max() < 1.5e-4 * np.abs(tight).max()
+
+
+def test_step_draw_frees_the_pair_factors_before_the_midpoint(monkeypatch):
+    """The step's draw (`ResistanceEvaluation.brownian`, the evaluation's last) frees the
+    start's pair factors, in its solver and its resistance, once the midpoint scheme has
+    drawn the forces and before it builds the midpoint; its terms equal bit for bit those
+    of a sample of the same noise drawn without freeing (`brownian_terms`), which keeps
+    them for more draws."""
+    kt, dt, n = 6 * np.pi, 5e-4, len(CONFIG)
+    model = ResistanceModel(np.ones(n), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=1e-4,
+                            backend="petsc-krylov", tolerance=1e-8, scheme="midpoint")
+    step, sample = model.at(CONFIG, 0.1), model.at(CONFIG, 0.1)
+    held = []
+    displaced = model.displaced
+
+    def record(evaluation, positions, separate):
+        held.append((evaluation.solver.pair_factors, evaluation.resistance.pair_factors))
+        return displaced(evaluation, positions, separate)
+
+    monkeypatch.setattr(model, "displaced", record)
+    terms = step.brownian(np.random.default_rng(4), kt, dt)
+    assert held == [(None, None)]
+    with pytest.raises(ValueError, match="pairs' factors"):
+        step.solver.brownian_forces(np.zeros(step.solver.noise_shape))
+    z = np.random.default_rng(4).standard_normal(sample.solver.noise_shape)
+    kept = sample.brownian_terms(z, kt, dt)
+    assert held[1][0] is not None and held[1][1] is not None
+    assert np.array_equal(terms.velocities, kept.velocities)
+    assert np.array_equal(terms.stresslets, kept.stresslets)
+    sample.brownian_terms(z, kt, dt)  # drawn again
 
 
 # ---------------------------------------------------------------- ranks_per_task = 2

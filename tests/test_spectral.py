@@ -194,10 +194,12 @@ def rank_check():
     pos, radii, box, _ = configuration(0.5, 0.3, True)
     lattice = Lattice(box, 0.3)
     x = np.random.default_rng(4).standard_normal(11 * N)
-    y = SpectralFarField(pos, radii, lattice, tol=1e-5, comm=comm).matvec(x)
+    far = SpectralFarField(pos, radii, lattice, tol=1e-5, comm=comm)
+    y = far.matvec(x)
     y1 = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
     return {"ranks": comm.size, "diff": float(np.abs(y - y1).max() / np.abs(y1).max()),
-            "digest": hashlib.sha256(y.tobytes()).hexdigest()}
+            "digest": hashlib.sha256(y.tobytes()).hexdigest(),
+            "own_indices": bool(far._pi.base is None and far._pj.base is None)}
 
 
 @pytest.mark.mpi
@@ -210,6 +212,27 @@ def test_independent_of_ranks():
 
     rows = rows_on_two_ranks(Path(__file__).stem)
     assert len(rows) == 2 and all(r["diff"] < 1e-13 for r in rows), rows
+    assert all(r["own_indices"] for r in rows), rows  # its share's indices, not views of all
+
+
+def test_real_space_indices_are_32_bit_and_give_the_same_product():
+    """The operator keeps its pair images' indices as 32-bit copies (half the bytes the
+    product streams besides the blocks); its real-space product equals, bit for bit, the
+    one over the pair search's own 64-bit indices."""
+    from sdmpi.hydro.geometry import find_pairs
+    from sdmpi.hydro.spectral import _pairs_product
+
+    pos, radii, box, _ = configuration(0.5, 0.3, True)
+    lattice = Lattice(box, 0.3)
+    far = SpectralFarField(pos, radii, lattice, tol=1e-5)
+    pi, pj, _ = find_pairs(lattice.wrap(pos), radii, lattice, far.params.rcut, 0.0)
+    assert far._pi.dtype == far._pj.dtype == np.int32 and pi.dtype == np.int64
+    assert np.array_equal(far._pi, pi) and np.array_equal(far._pj, pj)
+    x = np.random.default_rng(5).standard_normal(11 * N)
+    wide, narrow = np.zeros(11 * N), np.zeros(11 * N)
+    _pairs_product(pi, pj, far._blocks, x, wide)
+    far.real_space(x, narrow)
+    assert np.abs(wide).max() > 0 and np.array_equal(wide, narrow)
 
 
 def test_real_space_shares_balance_rank_zeros_ffts():

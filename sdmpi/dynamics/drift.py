@@ -84,6 +84,12 @@ class SolverEvaluation(Protocol):
         """[R(positions) - R] vector (N, 11) to first order about this configuration."""
         raise NotImplementedError
 
+    def forces_drawn(self) -> None:
+        """The scheme has drawn the Brownian forces of its sample (its later solves need
+        none): where this is the evaluation's last draw, its solver frees what only they
+        need, before the scheme builds more (`displaced`)."""
+        raise NotImplementedError
+
 
 class DriftScheme(Protocol):
     """A drift scheme (``brownian.scheme``), registered in `sdmpi.registry.DRIFT_SCHEMES`
@@ -185,6 +191,7 @@ class Midpoint:
         # the start's and the midpoint's solve errors cancel in the difference), scaled
         start = math.sqrt(2 * kT / dt) * solver.stresslets(m, zero)
         correction = near(m)
+        evaluation.forces_drawn()
         step = 0.5 * dt * math.sqrt(2 * kT / dt)
         mid, found = evaluation.displaced(evaluation.positions + step * m[:, :3])
         mid.take_preconditioner(solver)  # petsc-krylov: refactorise the start's factor

@@ -203,6 +203,7 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         self.n_particles = resistance.n_particles
         self._stats = [solver.stats]  # of its solver and the displaced ones (not the solvers:
         # a displaced solver is freed as soon as its caller is done with it)
+        self._last_draw = False  # brownian() is drawing: the evaluation's last draw
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
         """U', Omega' = R_FU^-1 (F + R_FE e_inf) by the backend's solver."""
@@ -238,7 +239,12 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
     def brownian(self, rng: np.random.Generator, kT: float, dt: float) -> BrownianTerms:
         """The step's Brownian terms (`brownian_terms`) for noise drawn from rng: z, then z'
         of the near-contact correction where the model has one, then the stresslets' own
-        draw where the drift scheme takes one (`sdmpi.registry.DriftSpec.stress_draw`)."""
+        draw where the drift scheme takes one (`sdmpi.registry.DriftSpec.stress_draw`).
+        The evaluation's last draw (the step's): once the scheme has drawn its forces, the
+        solver frees what only they need (`forces_drawn`; on petsc-krylov the pairs'
+        factors, after which further draws are refused), so that a Brownian midpoint is
+        built without them (`brownian_terms` draws any number of samples)."""
+        self._last_draw = True
         shape = self.solver.noise_shape
         z = rng.standard_normal(shape)
         z_near = rng.standard_normal(shape) if self.model.near_contact else None
@@ -268,6 +274,13 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
             return 0.0 if z_near is None else near_contact_velocities(self, m, z_near, kT, dt)
 
         return self.model.drift.brownian(self, z, kT, dt, near, z_stress)
+
+    def forces_drawn(self) -> None:
+        """The drift scheme has drawn its sample's Brownian forces: in the evaluation's last
+        draw (`brownian`) the solver frees what only they need
+        (`sdmpi.hydro.backend.SolverBackend.forces_drawn`), else nothing."""
+        if self._last_draw:
+            self.solver.forces_drawn()
 
     def displaced(self, positions: np.ndarray) -> tuple[Any, int]:
         """The solver at ``positions`` with this evaluation's pair sets and strain, for solves

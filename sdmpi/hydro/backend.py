@@ -115,3 +115,8 @@ class SolverBackend(Protocol):
         """Take over what can be reused of ``previous``, a solver of the same backend at a
         nearby configuration (the Brownian step's start for its midpoint). Generic form:
         nothing (a direct backend factorises afresh)."""
+
+    def forces_drawn(self) -> None:
+        """No more Brownian forces will be drawn from this solver (a step's are drawn): free
+        what only `brownian_forces` needs; solves go on as before. Generic form: nothing (a
+        direct backend's factor serves its solves too)."""

@@ -582,6 +582,7 @@ class KrylovSolver(SolverBackend):
         self.lubricated = resistance.lubricated
         self.noise_shape = (NDOF * n + 12 * (0 if self.lubricated is None else len(self.lubricated.i)),)
         self.pair_factors = resistance.pair_factors
+        self._resistance = resistance  # (forces_drawn frees its pair factors too)
         self.stats = {"iterations": 0, "residual": 0.0, "lanczos": 0}
 
         # this rank's block rows of the lubrication matrix L (11 x 11 blocks: the
@@ -725,6 +726,13 @@ class KrylovSolver(SolverBackend):
         self.schur.setValuesBlockedCSR(*self.schur_blocks())
         self.schur.assemble()
 
+    def forces_drawn(self) -> None:
+        """Frees the lubrication pairs' factors C_p (12 x 12 doubles per pair touching this
+        rank's spheres), here and in the resistance the solver was built from, which the
+        Brownian forces alone use (`brownian_forces` then refuses): the step's start
+        would otherwise hold them through the Brownian midpoint's set-up and solve."""
+        self.pair_factors = self._resistance.pair_factors = None
+
     def _baij(self, csr, comm):
         """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this
         rank's block rows csr (`_block_csr`) on comm."""
@@ -770,8 +778,12 @@ class KrylovSolver(SolverBackend):
     def _run(self, ksp, rhs):
         """Solve with ksp for this rank's part of rhs, from zero; returns this rank's
         solution. Records the iterations and the relative preconditioned residual
-        |P^-1 r|/|P^-1 b|."""
-        b, x = ksp.getOperators()[0].createVecs()
+        |P^-1 r|/|P^-1 b|. Then frees ksp's Krylov vectors (KSPReset, the operator set
+        again; the next solve allocates them afresh): a solver holds none between its
+        solves, so the step's start holds none through the Brownian midpoint's (one
+        vector of 17 doubles per sphere of this rank per GMRES iteration)."""
+        mat = ksp.getOperators()[0]
+        b, x = mat.createVecs()
         b.setArray(rhs)
         ksp.solve(b, x)
         reason = ksp.getConvergedReason()
@@ -779,11 +791,14 @@ class KrylovSolver(SolverBackend):
         ksp.getPC().apply(b, pb)
         bnorm = pb.norm()
         residual = ksp.getResidualNorm() / bnorm if bnorm > 0 else 0.0
+        iterations = ksp.getIterationNumber()
+        ksp.reset()
+        ksp.setOperators(mat)
         if reason < 0:
             raise KrylovError(f"petsc-krylov: the solve did not converge (PETSc reason {reason}, "
-                              f"relative residual {residual:.3g} after {ksp.getIterationNumber()} "
+                              f"relative residual {residual:.3g} after {iterations} "
                               f"iterations, tolerance {self.tol:g})")
-        self.stats["iterations"] += ksp.getIterationNumber()
+        self.stats["iterations"] += iterations
         self.stats["residual"] = max(self.stats["residual"], residual)
         return x.getArray().copy()
 
@@ -911,7 +926,7 @@ class KrylovSolver(SolverBackend):
         """
         if self.pair_factors is None:
             raise ValueError("petsc-krylov: Brownian forces need the lubrication pairs' factors "
-                             "(a resistance of split_resistance(..., brownian=True))")
+                             "(a resistance of split_resistance(..., brownian=True), before forces_drawn)")
         n = self.n
         z1 = noise[:NDOF * n]
         z2 = noise[NDOF * n:].reshape(-1, 12)

@@ -582,7 +582,8 @@ class SpectralFarField:
         if size > 1:
             bounds = np.cumsum(np.concatenate([[0], real_space_shares(len(pi), par.grid, size)]))
             pi, pj, shift = (a[bounds[rank]:bounds[rank + 1]] for a in (pi, pj, shift))
-        self._pi, self._pj = pi, pj
+        # 32-bit copies (not views of all ranks' images): the product streams them with the blocks
+        self._pi, self._pj = pi.astype(np.int32), pj.astype(np.int32)
         precision = np.float32 if tol >= SINGLE_PRECISION_TOL else np.float64
         self._blocks = np.empty((len(pi), NDOF, NDOF), dtype=precision)
         _pair_blocks(pos, rad, pi, pj, np.ascontiguousarray(shift), _cached_radial_table(par.xi),
