@@ -222,25 +222,6 @@ def test_resistance_for_solves_only():
         only.brownian_forces(rng.standard_normal(only.noise_shape))
 
 
-def test_solves_after_freeing_the_krylov_vectors_are_unchanged():
-    """A solver frees its Krylov vectors after every solve (KSPReset, its operator set
-    again): its next GMRES solve (45 iterations at 1e-12, beyond PETSc's default restart
-    of 30, so a lost GMRES_RESTART would show) and CG mobility solve (stresslets of
-    velocities not from a solve) equal a fresh solver's bit for bit, iterations too."""
-    start, _ = near_contact_start()
-    n = start.n_particles
-    rng = np.random.default_rng(9)
-    first, forces, einf = rng.standard_normal((n, 6)), rng.standard_normal((n, 6)), rng.standard_normal((n, 5))
-    moving = rng.standard_normal((n, 6))
-    used, fresh = (make_solver("petsc-krylov", start, tolerance=1e-12) for _ in range(2))
-    used.stresslets(used.velocities(first, einf) + 1.0, einf)
-    before = used.stats["iterations"]
-    u = used.velocities(forces, einf)
-    assert np.array_equal(u, fresh.velocities(forces, einf))
-    assert used.stats["iterations"] - before == fresh.stats["iterations"] > 30
-    assert np.array_equal(used.stresslets(moving, einf), fresh.stresslets(moving, einf))
-
-
 def test_solver_frees_its_petsc_objects():
     """A solver its caller drops destroys its PETSc objects (`KrylovSolver.__del__`): the
     shell matrix and preconditioner hold their python contexts from PETSc's side, and
