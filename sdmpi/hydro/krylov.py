@@ -778,12 +778,8 @@ class KrylovSolver(SolverBackend):
     def _run(self, ksp, rhs):
         """Solve with ksp for this rank's part of rhs, from zero; returns this rank's
         solution. Records the iterations and the relative preconditioned residual
-        |P^-1 r|/|P^-1 b|. Then frees ksp's Krylov vectors (KSPReset, the operator set
-        again; the next solve allocates them afresh): a solver holds none between its
-        solves, so the step's start holds none through the Brownian midpoint's (one
-        vector of 17 doubles per sphere of this rank per GMRES iteration)."""
-        mat = ksp.getOperators()[0]
-        b, x = mat.createVecs()
+        |P^-1 r|/|P^-1 b|."""
+        b, x = ksp.getOperators()[0].createVecs()
         b.setArray(rhs)
         ksp.solve(b, x)
         reason = ksp.getConvergedReason()
@@ -791,14 +787,11 @@ class KrylovSolver(SolverBackend):
         ksp.getPC().apply(b, pb)
         bnorm = pb.norm()
         residual = ksp.getResidualNorm() / bnorm if bnorm > 0 else 0.0
-        iterations = ksp.getIterationNumber()
-        ksp.reset()
-        ksp.setOperators(mat)
         if reason < 0:
             raise KrylovError(f"petsc-krylov: the solve did not converge (PETSc reason {reason}, "
-                              f"relative residual {residual:.3g} after {iterations} "
+                              f"relative residual {residual:.3g} after {ksp.getIterationNumber()} "
                               f"iterations, tolerance {self.tol:g})")
-        self.stats["iterations"] += iterations
+        self.stats["iterations"] += ksp.getIterationNumber()
         self.stats["residual"] = max(self.stats["residual"], residual)
         return x.getArray().copy()
 
