@@ -28,8 +28,8 @@ Outputs in OUTDIR:
 * ``windows.csv``: eta, eta_h, eta_p averaged over consecutive strain windows of width
   ``--window`` (default 10) from the start (start-up included; the paper's running averages, Figs. 6,
   7, 9), per model and phi_a, averaged over the realisations that reach the window's end;
-* ``realisation_windows.csv``: the same windows per realisation (``realisation``, the
-  job's realisation index), with the overlaps per configuration over each window (mean
+* ``realisation_windows.csv``: the same windows per realisation (``seed``, the run file's
+  job.seed, and ``realisation``, the job's realisation index), with the overlaps per configuration over each window (mean
   and largest; start-up included);
 * ``neighbours.png`` (without ``--no-plots``): n(2.01) against strain.
 
@@ -201,7 +201,8 @@ def window_rows(name, files, width):
             for task in summary.tasks:
                 for k, (eta, eta_h, eta_p, n_mean, n_max) in task_windows(summary, f, task, width).items():
                     acc.setdefault((task.phi, k), []).append((eta, eta_h, eta_p))
-                    per_task.append({"model": name, "phi_a": task.phi, "realisation": task.realisation,
+                    per_task.append({"model": name, "phi_a": task.phi, "seed": summary.job.job.seed,
+                                     "realisation": task.realisation,
                                      "strain_from": k * width, "strain_to": (k + 1) * width,
                                      "eta": eta, "eta_h": eta_h, "eta_p": eta_p,
                                      "overlaps_mean": n_mean, "overlaps_max": n_max})
@@ -211,7 +212,7 @@ def window_rows(name, files, width):
         rows.append({"model": name, "phi_a": phi, "strain_from": k * width,
                      "strain_to": (k + 1) * width, "realisations": len(values),
                      "eta": eta, "eta_h": eta_h, "eta_p": eta_p})
-    per_task.sort(key=lambda r: (-r["phi_a"], r["realisation"], r["strain_from"]))
+    per_task.sort(key=lambda r: (-r["phi_a"], r["seed"], r["realisation"], r["strain_from"]))
     return rows, per_task
 
 
@@ -270,7 +271,7 @@ def main(argv=None) -> int:
     write_csv(out / "windows.csv", windows, ["model", "phi_a", "strain_from", "strain_to",
                                              "realisations", "eta", "eta_h", "eta_p"])
     write_csv(out / "realisation_windows.csv", realisation_windows,
-              ["model", "phi_a", "realisation", "strain_from", "strain_to", "eta", "eta_h", "eta_p",
+              ["model", "phi_a", "seed", "realisation", "strain_from", "strain_to", "eta", "eta_h", "eta_p",
                "overlaps_mean", "overlaps_max"])
     if neighbours and not args.no_plots:
         draw_neighbours(neighbours, out / "neighbours.png")

@@ -71,7 +71,8 @@ def _add_validate(subparsers) -> None:
                     "once, each with the key, the offending value, why, and what is "
                     "allowed. Writes nothing.",
         epilog="exit status: 0 if the job is valid (resource warnings included: the job may "
-               "run elsewhere), 2 if not (or the file is unreadable)")
+               "run elsewhere), 2 if not (or the file is unreadable), 1 if --time-steps "
+               "could not step the first task (the message says why)")
     add_job_arguments(parser)
     parser.add_argument("--ranks", type=int, default=None, metavar="P",
                         help="MPI ranks the job will run on, all on this machine (for the "
@@ -83,7 +84,9 @@ def _add_validate(subparsers) -> None:
     parser.add_argument("--time-steps", type=int, default=0, metavar="K",
                         help="time K steps of the first task (after one untimed step that "
                              "compiles or loads the kernels) and estimate the run's "
-                             "core-hours and wall time from them; default 0: no timing")
+                             "core-hours and wall time from them; default 0: no timing. A "
+                             "job of R > 1 ranks per task is timed on its R ranks under "
+                             "mpirun -n R, on one rank without mpirun")
     parser.set_defaults(handler=_validate)
 
 
@@ -98,7 +101,7 @@ def _launched_rank() -> int | None:
 def _validate(args) -> int:
     """``sdmpi validate``; under mpirun every rank checks the job and rank 0 alone prints
     (the others' output is dropped), and ``--time-steps`` times the first task on the
-    ranks of one task."""
+    job's ensemble.ranks_per_task ranks, as many as mpirun must start."""
     if _launched_rank() in (None, 0):
         return _validate_job(args)
     import contextlib
@@ -145,8 +148,20 @@ def _validate_job(args) -> int:
             return EXIT_BAD_INPUT
     print(summary(job))
     print(resource_text(job, args.ranks, args.output))
+    if args.time_steps and _launched_rank() is not None:
+        from mpi4py import MPI
+
+        if MPI.COMM_WORLD.size != rpt:
+            print(f"sdmpi validate: --time-steps under mpirun times one task on its "
+                  f"ensemble.ranks_per_task = {rpt} rank(s): start it with mpirun -n {rpt} (here "
+                  f"{MPI.COMM_WORLD.size}), or without mpirun to time one rank", file=sys.stderr)
+            return EXIT_BAD_INPUT
     if args.time_steps:
-        print(cost_text(job, args.ranks, args.time_steps))
+        try:
+            print(cost_text(job, args.ranks, args.time_steps))
+        except Exception as err:  # the realisation cannot step: its message says why
+            print(f"sdmpi validate: timing task 0 failed: {type(err).__name__}: {err}", file=sys.stderr)
+            return EXIT_FAILED
     else:
         print("  cost: give --time-steps K (e.g. 3) to time K steps here and estimate the "
               "core-hours and wall time")
@@ -175,18 +190,14 @@ def resource_text(job, ranks: int, output) -> str:
 
 
 def _timing_group(ranks_per_task: int):
-    """(communicator, member) of the ranks that time a task: the first ``ranks_per_task``
-    ranks when this process was launched with at least that many (member False on the
-    others), else (None, True): this process times it alone."""
+    """The communicator of the ranks that time a task: MPI_COMM_WORLD when this process was
+    launched (mpirun) on the task's ``ranks_per_task`` > 1 ranks (`_validate_job` has
+    checked their number), else None: this process times it alone."""
     if _launched_rank() is None or ranks_per_task == 1:
-        return None, True
+        return None
     from mpi4py import MPI
 
-    world = MPI.COMM_WORLD
-    if world.size < ranks_per_task:
-        return None, True
-    member = world.rank < ranks_per_task
-    return world.Split(color=0 if member else MPI.UNDEFINED, key=world.rank), member
+    return MPI.COMM_WORLD
 
 
 def _seconds_per_step(job, task, k: int, comm) -> float:
@@ -196,21 +207,30 @@ def _seconds_per_step(job, task, k: int, comm) -> float:
 
     from .dynamics import Realisation
 
-    real = Realisation(job, task, comm)
-    real.advance(1)
-    if comm is not None:
-        comm.Barrier()
-    t0 = time.perf_counter()
-    real.advance(k)
-    per_step = (time.perf_counter() - t0) / k
+    try:
+        real = Realisation(job, task, comm)
+        real.advance(1)
+        if comm is not None:
+            comm.Barrier()
+        t0 = time.perf_counter()
+        real.advance(k)
+        per_step = (time.perf_counter() - t0) / k
+    except Exception as err:
+        if comm is None:
+            raise
+        # the other ranks may wait in a collective: stop them all (sys.__stderr__: a rank
+        # other than 0 prints through it)
+        print(f"sdmpi validate: rank {comm.rank}: timing task 0 failed: {type(err).__name__}: "
+              f"{err}", file=sys.__stderr__, flush=True)
+        comm.Abort(EXIT_FAILED)
     return per_step if comm is None else max(comm.allgather(per_step))
 
 
 def cost_text(job, ranks: int, k: int) -> str:
     """Core-hours and wall time of a job on ``ranks`` ranks, from timing ``k`` steps of
     its first task (after one untimed step: kernel compilation or loading, first solves)
-    on the ranks of one task (ensemble.ranks_per_task) when launched with at least that
-    many (``mpirun -n P sdmpi validate``), else on this process alone. Every step of a job
+    on the ranks of one task (ensemble.ranks_per_task) when launched on them
+    (``mpirun -n R sdmpi validate``), else on this process alone. Every step of a job
     costs about the same (same N, same solver); the wall time is the largest load of the
     LPT assignment (sdmpi.ensemble.farm)."""
     from .ensemble.farm import assign
@@ -218,11 +238,11 @@ def cost_text(job, ranks: int, k: int) -> str:
 
     tasks = enumerate_tasks(job)
     rpt, groups = job.ensemble.ranks_per_task, max(ranks // job.ensemble.ranks_per_task, 1)
-    comm, member = _timing_group(rpt)
+    comm = _timing_group(rpt)
     timing = rpt if comm is not None else 1
     print(f"timing {k} step(s) of task 0 on {timing} rank(s) (after one untimed step that "
           "compiles or loads the kernels)...", file=sys.stderr, flush=True)
-    per_step = _seconds_per_step(job, tasks[0], k, comm) if member else 0.0
+    per_step = _seconds_per_step(job, tasks[0], k, comm)
     steps = {t.task_id: float(t.n_steps) for t in tasks}
     makespan = max(sum(steps[tid] for tid in group) for group in assign(steps, groups))
     core_hours = sum(steps.values()) * per_step * rpt / 3600.0

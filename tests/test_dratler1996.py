@@ -11,6 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
+from sdmpi.analysis.reduce import open_run
 from sdmpi.cli import main as sdmpi_main
 from sdmpi.ensemble.store import task_key
 from .tiny_runs import postprocess_script, sdmpi_run
@@ -76,8 +77,9 @@ def test_tables_agree_with_sdmpi_reduce(runs, tmp_path):
     for model, run in zip(("hydro", "repulsion"), runs):
         per = [r for r in rows(out / "realisation_windows.csv") if r["model"] == model]
         assert sorted({r["realisation"] for r in per}) == ["0", "1"] and len(per) == 8
+        assert {r["seed"] for r in per} == {str(open_run(run).job.job.seed)}
         win = [r for r in rows(out / "windows.csv") if r["model"] == model]
-        for k, w in enumerate(win):
+        for w in win:
             both = [float(r["eta"]) for r in per if float(r["strain_from"]) == float(w["strain_from"])]
             assert math.isclose(np.mean(both), float(w["eta"]), rel_tol=1e-12)
         with h5py.File(run, "r") as f:

@@ -141,8 +141,8 @@ def test_validate_measures_the_cost(capsys):
 @ens.needs_mpi
 def test_validate_times_a_task_on_its_ranks_under_mpirun():
     """A job of two ranks per task: alone, validate times one rank and says how to time the
-    task's two; under mpirun -n 2 it times the task on both, and rank 0 alone
-    prints."""
+    task's two; under mpirun -n 2 it times the task on both, and rank 0 alone prints;
+    under mpirun -n 3 it refuses (exit 2) and names the count."""
     small = ["--set", "system.n_particles=64", "--set", "ensemble.realisations=1"]
     cmd = [sys.executable, "-m", "sdmpi", "validate", str(KRYLOV_JOB), *small, "--time-steps", "1"]
     alone = subprocess.run(cmd, capture_output=True, text=True, env=ens.child_env(), timeout=600)
@@ -155,6 +155,9 @@ def test_validate_times_a_task_on_its_ranks_under_mpirun():
     lines = [x for x in both.stdout.splitlines() if "cost (measured:" in x]
     assert len(lines) == 1 and "s per step of task 0 on 2 rank(s) of this machine): " in lines[0]
     assert both.stdout.count("job 'large-n-krylov': valid") == 1
+    three = subprocess.run([ens.MPIRUN, "--oversubscribe", "-n", "3", *cmd], capture_output=True,
+                           text=True, env=ens.child_env(), timeout=600)
+    assert three.returncode == 2 and "start it with mpirun -n 2 (here 3)" in three.stderr
 
 
 def test_full_file_system_is_recognised():
