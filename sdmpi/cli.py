@@ -95,7 +95,7 @@ def _launched_rank() -> int | None:
     from the launcher's environment, without initialising MPI."""
     from ._kernel_cache import RANK_VARS
 
-    return next((int(os.environ[v]) for v in RANK_VARS if v in os.environ), None)
+    return next((int(os.environ[v]) for v in RANK_VARS if os.environ.get(v, "").isdigit()), None)
 
 
 def _validate(args) -> int:
@@ -151,7 +151,7 @@ def _validate_job(args) -> int:
     if args.time_steps and _launched_rank() is not None:
         from mpi4py import MPI
 
-        if MPI.COMM_WORLD.size != rpt:
+        if MPI.COMM_WORLD.size not in (1, rpt):
             print(f"sdmpi validate: --time-steps under mpirun times one task on its "
                   f"ensemble.ranks_per_task = {rpt} rank(s): start it with mpirun -n {rpt} (here "
                   f"{MPI.COMM_WORLD.size}), or without mpirun to time one rank", file=sys.stderr)
@@ -191,13 +191,13 @@ def resource_text(job, ranks: int, output) -> str:
 
 def _timing_group(ranks_per_task: int):
     """The communicator of the ranks that time a task: MPI_COMM_WORLD when this process was
-    launched (mpirun) on the task's ``ranks_per_task`` > 1 ranks (`_validate_job` has
-    checked their number), else None: this process times it alone."""
+    launched (mpirun) on the task's ``ranks_per_task`` > 1 ranks (`_validate_job` refuses
+    other counts above one), else None: this process times it alone."""
     if _launched_rank() is None or ranks_per_task == 1:
         return None
     from mpi4py import MPI
 
-    return MPI.COMM_WORLD
+    return MPI.COMM_WORLD if MPI.COMM_WORLD.size > 1 else None
 
 
 def _seconds_per_step(job, task, k: int, comm) -> float:

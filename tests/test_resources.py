@@ -141,11 +141,14 @@ def test_validate_measures_the_cost(capsys):
 @ens.needs_mpi
 def test_validate_times_a_task_on_its_ranks_under_mpirun():
     """A job of two ranks per task: alone, validate times one rank and says how to time the
-    task's two; under mpirun -n 2 it times the task on both, and rank 0 alone prints;
+    task's two (also as the single process of a Slurm batch script); under mpirun -n 2 it
+    times the task on both, and rank 0 alone prints;
     under mpirun -n 3 it refuses (exit 2) and names the count."""
     small = ["--set", "system.n_particles=64", "--set", "ensemble.realisations=1"]
     cmd = [sys.executable, "-m", "sdmpi", "validate", str(KRYLOV_JOB), *small, "--time-steps", "1"]
-    alone = subprocess.run(cmd, capture_output=True, text=True, env=ens.child_env(), timeout=600)
+    # a plain process of a Slurm batch script (SLURM_PROCID=0, one rank) times alone too
+    alone = subprocess.run(cmd, capture_output=True, text=True, env=ens.child_env({"SLURM_PROCID": "0"}),
+                           timeout=600)
     assert alone.returncode == 0, alone.stderr
     line = next(x for x in alone.stdout.splitlines() if "cost (measured:" in x)
     assert "on 1 rank(s) of this machine; a task runs on 2 ranks, whose step takes another" in line
