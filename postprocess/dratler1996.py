@@ -29,8 +29,8 @@ Outputs in OUTDIR:
   ``--window`` (default 10) from the start (start-up included; the paper's running averages, Figs. 6,
   7, 9), per model and phi_a, averaged over the realisations that reach the window's end;
 * ``realisation_windows.csv``: the same windows per realisation (``seed``, the run file's
-  job.seed, and ``realisation``, the job's realisation index), with the overlaps per configuration over each window (mean
-  and largest; start-up included);
+  job.seed, and ``realisation``, the job's realisation index), with the overlaps per
+  configuration over each window (mean and largest; start-up included);
 * ``neighbours.png`` (without ``--no-plots``): n(2.01) against strain.
 
 The CSV files are byte-identical when the same run files are processed again. Exit
