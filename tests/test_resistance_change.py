@@ -3,6 +3,7 @@ far-field product and the lubrication product against assembled matrices, the re
 full assemblies, and the rfd drift and Brownian stresslets against the same difference
 taken between two full evaluations."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -107,6 +108,29 @@ def test_resistance_change_is_first_order_in_the_displacement():
         ref = full.product(v).ravel() - base.product(v).ravel()
         got = resistance_change(base, moved, v, 1e-4).ravel()
         assert np.linalg.norm(got - ref) < 0.1 * scale * np.linalg.norm(ref)
+
+
+def test_resistance_change_of_a_rounded_inverse():
+    """Delta R v with M_inf^-1 rounded: S^-1 (of the block inversion) times (1 + 1e-7 P) for
+    a random symmetric P, as a single-precision inversion rounds it, at a displacement of
+    1e-6 (a change of 2.7e-6 of R v). Marked inexact (`GrandResistance.exact_inverse`
+    False), the far-field change is the difference of two products with the same plan,
+    [M_inf(x') - M_inf(x)] w, and carries the rounding only relatively (measured 1.8e-9 of
+    the change; tolerance 1e-5). Marked exact, M_inf(x) w is taken as v, which the rounding
+    breaks by ~1e-7 |v|, against a change of ~1e-6 |v| (measured 6e-3 of the change; the
+    test asks > 1e-3): why single-precision blocks must say so."""
+    base = grand_resistance(CONFIG, RADII, BOX, STRAIN)
+    assert base.exact_inverse
+    rng = np.random.default_rng(6)
+    noise = rng.standard_normal(base.s_inverse.shape)
+    s_rounded = base.s_inverse * (1 + 1e-7 * (noise + noise.T) / 2)
+    v = rng.standard_normal((len(CONFIG), 11))
+    moved = base.positions + _displacement(1e-6)
+    ref = resistance_change(base, moved, v, 1e-4)
+    for exact, bound in ((False, lambda err: err < 1e-5), (True, lambda err: err > 1e-3)):
+        rounded = dataclasses.replace(base, s_inverse=s_rounded, exact_inverse=exact)
+        got = resistance_change(rounded, moved, v, 1e-4)
+        assert bound(np.linalg.norm(got - ref) / np.linalg.norm(ref)), exact
 
 
 def test_rfd_drift_matches_the_difference_of_two_full_evaluations():

@@ -31,13 +31,16 @@ import numba
 import numpy as np
 from scipy.linalg import blas, lapack
 
-from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldIndefinite, FarFieldPlan, far_field_mobility,
-                       far_field_product, plan_far_field)
+from .farfield import (DEFAULT_EWALD_TOL, NDOF, SINGLE_PRECISION_TOL, FarFieldIndefinite, FarFieldPlan,
+                       far_field_mobility, far_field_product, plan_far_field)
 from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator, particle_ranges
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
                           lubrication_product, lubrication_reach, lubrication_rows)
 
+#: the fewest spheres from which M_inf's block inversion runs in single precision (with
+#: ewald_tol >= `farfield.SINGLE_PRECISION_TOL`; `single_precision_inverse`)
+SINGLE_PRECISION_MIN_N = 64
 
 @dataclass
 class HydroPlan:
@@ -68,6 +71,10 @@ class GrandResistance:
     #: the lubrication pairs' orientation and tables (`lubrication.lubrication_partitions`),
     #: for `lubrication.lubrication_product` at displaced positions; None: looked up again
     lubrication_setup: tuple | None = None
+    #: S^-1, X, U_b are the double-precision block inverse of M_inf at these positions, so
+    #: that M_inf (M^-1 v) = v to round-off (`resistance_change` relies on it); False for
+    #: an inversion in single precision or blocks of another configuration
+    exact_inverse: bool = False
 
     @property
     def n_particles(self) -> int:
@@ -277,12 +284,13 @@ def _partition(matrix, r_fu, r_fe, r_se):
 def _spd_inverse_of_upper(upper):
     """The inverse (Fortran-ordered, both triangles) of the symmetric positive definite
     matrix held in the upper triangle of the Fortran-ordered array upper, in its memory
-    (FarFieldIndefinite if it is not: the Schur complement of M_inf)."""
-    chol, info = lapack.dpotrf(upper, lower=False, clean=False, overwrite_a=True)
+    and precision (FarFieldIndefinite if it is not: the Schur complement of M_inf)."""
+    potrf, potri = lapack.get_lapack_funcs(("potrf", "potri"), (upper,))
+    chol, info = potrf(upper, lower=False, clean=False, overwrite_a=True)
     if info != 0:
         raise FarFieldIndefinite(f"the far-field mobility M_inf is not positive definite "
                                  f"(potrf info {info}, Schur complement)")
-    inv, info = lapack.dpotri(chol, lower=False, overwrite_c=True)
+    inv, info = potri(chol, lower=False, overwrite_c=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"potri failed (info {info})")
     _mirror_upper(inv)
@@ -375,14 +383,16 @@ def grand_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
                                                 min_gap, max_overlap, plan, far_field=True, ewald_tol=ewald_tol)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
+    exact = far is None and not single_precision_inverse(len(pos), ewald_tol)
     if far is None:
-        far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far))
+        far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far), single=not exact)
     lub = lubrication_partitions(radii, pairs, len(pos)) if plan.near_images is not None else None
-    return from_blocks(far, lub, pairs, plan, pos, radii)
+    return from_blocks(far, lub, pairs, plan, pos, radii, exact)
 
 
 def from_blocks(far: tuple[np.ndarray, np.ndarray, np.ndarray], lub: tuple | None, pairs: PairList,
-                plan: HydroPlan, positions: np.ndarray, radii: np.ndarray) -> GrandResistance:
+                plan: HydroPlan, positions: np.ndarray, radii: np.ndarray,
+                exact_inverse: bool = False) -> GrandResistance:
     """The GrandResistance of the far-field blocks far (`far_field_blocks`) and the
     lubrication lub: (dense partitions, setup) from `lubrication.lubrication_partitions`
     (None: none).
@@ -394,20 +404,35 @@ def from_blocks(far: tuple[np.ndarray, np.ndarray, np.ndarray], lub: tuple | Non
         plan: the pair sets of the configuration.
         positions: (N, 3) sphere centres (wrapped).
         radii: (N,) sphere radii.
+        exact_inverse: far is the double-precision inverse of M_inf at these positions
+            (`GrandResistance.exact_inverse`).
 
     Returns:
         The resistance R in block form.
     """
     s_inverse, x_ab, chol_bb = far
     dense, setup = (None, None) if lub is None else lub
-    return GrandResistance(s_inverse, x_ab, chol_bb, dense, pairs, plan, positions, radii, setup)
+    return GrandResistance(s_inverse, x_ab, chol_bb, dense, pairs, plan, positions, radii, setup, exact_inverse)
 
 
-def far_field_blocks(mob: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def single_precision_inverse(n_particles: int, ewald_tol: float) -> bool:
+    """Whether `grand_resistance` inverts M_inf of n_particles spheres summed to ewald_tol in
+    single precision: from `farfield.SINGLE_PRECISION_TOL` (its rounding, ~2e-6 of S^-1,
+    stays below a fifth of the tolerance) and `SINGLE_PRECISION_MIN_N` spheres on (below,
+    the inversion is too small a part of a step to pay for the second far-field product it
+    costs `resistance_change`)."""
+    return ewald_tol >= SINGLE_PRECISION_TOL and n_particles >= SINGLE_PRECISION_MIN_N
+
+
+def far_field_blocks(mob: np.ndarray, single: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S^-1, X = M_ab U_b^-1, U_b) of the far-field mobility mob (11N x 11N) (module docstring).
 
     Args:
         mob: (11N, 11N) far-field mobility M_inf (Stokes units, viscosity 1).
+        single: factorise and invert in single precision (LAPACK's s-kernels, ~0.6 of the
+            time; relative rounding of S^-1 ~2e-6 at N = 125, for M_inf summed no more
+            accurately than `farfield.SINGLE_PRECISION_TOL`); the blocks are returned in
+            double precision either way.
 
     Returns:
         S^-1 (6N, 6N), X (6N, 5N, Fortran-ordered), U_b (5N, 5N) upper Cholesky factor of M_bb.
@@ -416,16 +441,23 @@ def far_field_blocks(mob: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
         FarFieldIndefinite: M_inf is not positive definite.
     """
     n = mob.shape[0] // NDOF
-    m_aa, m_ab, m_bb = np.empty((6 * n, 6 * n)), np.empty((6 * n, 5 * n)), np.empty((5 * n, 5 * n))
+    dtype = np.float32 if single else np.float64
+    m_aa, m_ab, m_bb = (np.empty(shape, dtype) for shape in ((6 * n, 6 * n), (6 * n, 5 * n), (5 * n, 5 * n)))
     _partition(mob, m_aa, m_ab, m_bb)
-    chol_bb, info = lapack.dpotrf(m_bb.T, lower=False, clean=True, overwrite_a=True)
+    potrf, = lapack.get_lapack_funcs(("potrf",), (m_bb,))
+    trsm, syrk = blas.get_blas_funcs(("trsm", "syrk"), (m_bb,))
+    chol_bb, info = potrf(m_bb.T, lower=False, clean=True, overwrite_a=True)
     if info != 0:
         raise FarFieldIndefinite(f"the far-field mobility M_inf is not positive definite "
                                  f"(potrf info {info}, strain block)")
     # X = M_ab U_b^-1 (6N x 5N; the right-side solve is the faster kernel), S = M_aa - X X^T
-    x = blas.dtrsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
-    schur = blas.dsyrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
-    return _spd_inverse_of_upper(schur).T, x, chol_bb
+    x = trsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
+    schur = syrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
+    s_inverse = _spd_inverse_of_upper(schur).T
+    if single:
+        return (s_inverse.astype(np.float64), np.asfortranarray(x, dtype=np.float64),
+                np.asfortranarray(chol_bb, dtype=np.float64))
+    return s_inverse, x, chol_bb
 
 
 def resistance_change(base: GrandResistance, moved: np.ndarray, vector: np.ndarray, min_gap: float) -> np.ndarray:
@@ -433,12 +465,16 @@ def resistance_change(base: GrandResistance, moved: np.ndarray, vector: np.ndarr
     displacement moved - base.positions (small, e.g. a random finite difference), with the
     pair sets of base (its plan) and without assembling or inverting anything at moved:
 
-        Delta R v = -M^-1 [M_inf(moved) w - v] + L(moved) v - L(base) v,   w = M^-1 v,
+        Delta R v = -M^-1 [M_inf(moved) - M_inf(base)] w + L(moved) v - L(base) v,   w = M^-1 v,
 
-    M^-1 from base's block form (so M_inf w = v, to the solve's residual, ~1e-9 of the
-    change at a displacement of 1e-5), M_inf(moved) w by `farfield.far_field_product` with
-    base's far-field plan (the same images and wave vectors as base's M_inf, so that the
-    difference carries the Ewald truncation of the change, not of M_inf), L(moved) v pair
+    M^-1 from base's block form, both far-field products by `farfield.far_field_product`
+    with base's far-field plan (the same images and wave vectors as base's M_inf, so that
+    the difference carries the Ewald truncation of the change, not of M_inf). The change
+    is a difference of two products, not M_inf(moved) w - v: the latter relies on
+    M_inf w = v, which an inverse rounded to ~1e-7 (`far_field_blocks` in single
+    precision) breaks by ~1e-7 |v|, as large as the whole change of a random finite
+    difference (~1e-6 of R v); the difference carries M^-1's rounding only relatively.
+    L(moved) v pair
     by pair with base's pair images and tables (`lubrication.lubrication_product`,
     separations floored at min_gap as in `close_pairs`) and L(base) v by base's dense
     partitions. The lubrication difference carries a round-off of ~eps max|L v| (eps =
@@ -456,7 +492,9 @@ def resistance_change(base: GrandResistance, moved: np.ndarray, vector: np.ndarr
     """
     vector = np.ascontiguousarray(vector, dtype=float)
     far_v = base.far_inverse_product(vector)
-    out = -base.far_inverse_product(far_field_product(moved, base.radii, base.plan.far, far_v) - vector)
+    far = base.plan.far
+    at_base = vector if base.exact_inverse else far_field_product(base.positions, base.radii, far, far_v)
+    out = -base.far_inverse_product(far_field_product(moved, base.radii, far, far_v) - at_base)
     if base.plan.near_images is not None and base.lubrication_dense is not None:
         pairs = close_pairs(moved, base.radii, None, min_gap=min_gap, images=base.plan.near_images)
         out += lubrication_product(base.radii, pairs, vector, base.lubrication_setup)

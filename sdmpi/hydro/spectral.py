@@ -59,8 +59,8 @@ except ImportError:  # a scipy without it: the public functions (same numbers, a
     pypocketfft = None
 
 from .basis import BASIS
-from .farfield import (NDOF, _cached_radial_table, _pair_block, _power_bounds, _truncation_parameter,
-                       self_mobility)
+from .farfield import (NDOF, SINGLE_PRECISION_TOL, _cached_radial_table, _pair_block, _power_bounds,
+                       _truncation_parameter, self_mobility)
 from .geometry import Lattice, find_pairs
 from .workspace import work_array
 
@@ -127,13 +127,6 @@ _POW_ALIAS, _POW_WINDOW = 4, 4  # powers of the polynomial prefactors
 # ---------------------------------------------------------------------------------
 # real space: sparse pair blocks
 # ---------------------------------------------------------------------------------
-
-
-#: Ewald tolerances from which the real-space blocks are stored in single precision
-#: (rounding ~6e-8 relative, <= 1% of the tolerance; exactly symmetric all the same, as
-#: each block serves both M_ij x_j and M_ij^T x_i): the real-space product streams its
-#: blocks from memory, so half the bytes make it faster (docs/numerics.md)
-SINGLE_PRECISION_TOL = 1e-5
 
 
 @numba.njit(cache=True)
