@@ -25,10 +25,9 @@ import json
 import pkgutil
 import time
 
+import sdmpi  # before numpy: it chooses OpenBLAS's kernels as `sdmpi run` does
 from numba.core.registry import CPUDispatcher
 from scipy.linalg import blas, lapack
-
-import sdmpi
 
 from sdmpi.config import enumerate_tasks, load_job
 from sdmpi.dynamics import Realisation
@@ -91,8 +90,9 @@ def instrument(totals):
 
 def instrument_kernels(clock):
     """Wrap every compiled kernel (module docstring: the numba dispatchers of sdmpi's
-    modules and the double-precision routines of scipy.linalg.lapack and .blas, through
-    which sdmpi calls them) so that its CPU time is added to clock[0] (calls made while one
+    modules, the double-precision routines of scipy.linalg.lapack and .blas and the
+    routines their get_lapack_funcs and get_blas_funcs return, through which sdmpi calls
+    them) so that its CPU time is added to clock[0] (calls made while one
     is already timed count once)."""
     depth = [0]
 
@@ -110,6 +110,12 @@ def instrument_kernels(clock):
         for name in dir(module):
             if name.startswith("d") and callable(getattr(module, name)):
                 setattr(module, name, timed(getattr(module, name), add, depth))
+    # the routines looked up by type (single or double precision, `resistance.far_field_blocks`)
+    for module, lookup in ((lapack, "get_lapack_funcs"), (blas, "get_blas_funcs")):
+        def timed_lookup(names, arrays=(), *args, _find=getattr(module, lookup), **kwargs):
+            found = _find(names, arrays, *args, **kwargs)
+            return timed(found, add, depth) if callable(found) else [timed(f, add, depth) for f in found]
+        setattr(module, lookup, timed_lookup)
 
 
 def step_realisation(n):
