@@ -197,9 +197,11 @@ def rank_check():
     far = SpectralFarField(pos, radii, lattice, tol=1e-5, comm=comm)
     y = far.matvec(x)
     y1 = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
+    far.release_real_space()
     return {"ranks": comm.size, "diff": float(np.abs(y - y1).max() / np.abs(y1).max()),
             "digest": hashlib.sha256(y.tobytes()).hexdigest(),
-            "own_indices": bool(far._pi.base is None and far._pj.base is None)}
+            "own_indices": bool(far._pi.base is None and far._pj.base is None and far._shift.base is None),
+            "released_same": bool(np.array_equal(far.matvec(x), y))}
 
 
 @pytest.mark.mpi
@@ -207,12 +209,14 @@ def rank_check():
 def test_independent_of_ranks():
     """Two ranks (spreading and interpolation split by particles, FFTs on rank 0, the
     real-space pairs shared by `real_space_shares`) give the one-rank result up to the
-    order of floating-point sums (1e-13), the same bits on every rank."""
+    order of floating-point sums (1e-13), the same bits on every rank, and again after
+    each rank released its real-space blocks."""
     from .test_petsc_dense import rows_on_two_ranks
 
     rows = rows_on_two_ranks(Path(__file__).stem)
     assert len(rows) == 2 and all(r["diff"] < 1e-13 for r in rows), rows
     assert all(r["own_indices"] for r in rows), rows  # its share's indices, not views of all
+    assert all(r["released_same"] for r in rows), rows  # blocks released and computed again
 
 
 def test_real_space_indices_are_32_bit_and_give_the_same_product():
@@ -233,6 +237,23 @@ def test_real_space_indices_are_32_bit_and_give_the_same_product():
     _pairs_product(pi, pj, far._blocks, x, wide)
     far.real_space(x, narrow)
     assert np.abs(wide).max() > 0 and np.array_equal(wide, narrow)
+
+
+@pytest.mark.parametrize("tol", [1e-4, 1e-6])   # blocks in single, double precision
+def test_released_real_space_blocks_are_computed_again_bit_for_bit(tol):
+    """`release_real_space` frees the real-space blocks (the step's start does while its
+    Brownian midpoint is built and solved); the next product computes them again from the
+    operator's own copies of the positions and pair images: the same blocks and products,
+    bit for bit, even when the caller's positions array has changed meanwhile."""
+    pos, radii, box, _ = configuration(0.5, 0.3, True)
+    pos = pos.copy()
+    far = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=tol)
+    x = np.random.default_rng(8).standard_normal(11 * N)
+    blocks, y = far._blocks.copy(), far.matvec(x)
+    far.release_real_space()
+    assert far._blocks is None
+    pos += 0.1   # the caller moves on; the operator keeps its configuration
+    assert np.array_equal(far.matvec(x), y) and np.array_equal(far._blocks, blocks)
 
 
 def test_real_space_shares_balance_rank_zeros_ffts():

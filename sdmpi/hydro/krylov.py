@@ -376,6 +376,9 @@ class DenseFarField:
         """
         return self.matrix @ x
 
+    def release_real_space(self) -> None:
+        """Nothing: the dense matrix (small N) is kept (`spectral.SpectralFarField.release_real_space`)."""
+
 
 def far_field_kind(kind: str | None, n_particles: int, periodic: bool = True) -> str:
     """The far field `far_field_operator` builds for `kind` (None: spectral in a periodic
@@ -729,9 +732,12 @@ class KrylovSolver(SolverBackend):
     def forces_drawn(self) -> None:
         """Frees the lubrication pairs' factors C_p (12 x 12 doubles per pair touching this
         rank's spheres), here and in the resistance the solver was built from, which the
-        Brownian forces alone use (`brownian_forces` then refuses): the step's start
-        would otherwise hold them through the Brownian midpoint's set-up and solve."""
+        Brownian forces alone use (`brownian_forces` then refuses), and the spectral far
+        field's real-space blocks, which its next product computes again
+        (`spectral.SpectralFarField.release_real_space`): the step's start would otherwise
+        hold them through the Brownian midpoint's set-up and solve."""
         self.pair_factors = self._resistance.pair_factors = None
+        self.far.release_real_space()
 
     def _baij(self, csr, comm):
         """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this

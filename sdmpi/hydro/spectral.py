@@ -577,10 +577,25 @@ class SpectralFarField:
             pi, pj, shift = (a[bounds[rank]:bounds[rank + 1]] for a in (pi, pj, shift))
         # 32-bit copies (not views of all ranks' images): the product streams them with the blocks
         self._pi, self._pj = pi.astype(np.int32), pj.astype(np.int32)
-        precision = np.float32 if tol >= SINGLE_PRECISION_TOL else np.float64
-        self._blocks = np.empty((len(pi), NDOF, NDOF), dtype=precision)
-        _pair_blocks(pos, rad, pi, pj, np.ascontiguousarray(shift), _cached_radial_table(par.xi),
-                     par.xi, BASIS, self._blocks)
+        self._positions, self._shift = pos.copy(), np.array(shift)  # own copies: to compute the blocks again
+        self._precision = np.float32 if tol >= SINGLE_PRECISION_TOL else np.float64
+        self._blocks = self._computed_blocks()
+
+    def _computed_blocks(self) -> np.ndarray:
+        """The 11 x 11 real-space blocks of this rank's pair images (P, 11, 11), in single
+        precision from `farfield.SINGLE_PRECISION_TOL` on."""
+        blocks = np.empty((len(self._pi), NDOF, NDOF), dtype=self._precision)
+        xi = self.params.xi
+        _pair_blocks(self._positions, self._radii, self._pi, self._pj, self._shift, _cached_radial_table(xi),
+                     xi, BASIS, blocks)
+        return blocks
+
+    def release_real_space(self) -> None:
+        """Frees the real-space blocks (484 bytes a pair image in single precision, the
+        largest part of the operator); the next product computes them again, the same
+        bits. For an operator that waits while another is built and used (the start of a
+        Brownian step during its midpoint)."""
+        self._blocks = None
 
     def work_grids(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """The work grids of a product: the grid padded along z for spreading and
@@ -611,6 +626,8 @@ class SpectralFarField:
             x: (11N,) generalized forces (F, L, S per sphere).
             y: (11N,) generalized velocities (U, Omega, E), added to in place.
         """
+        if self._blocks is None:
+            self._blocks = self._computed_blocks()
         _pairs_product(self._pi, self._pj, self._blocks, x, y)
 
     def wave_space(self, x: np.ndarray, y: np.ndarray, meanwhile: Callable[[], Any] | None = None) -> None:
