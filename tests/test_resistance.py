@@ -290,3 +290,27 @@ def test_single_precision_inversion_keeps_the_rfd_drift_and_brownian_stress(monk
     for (drift, stress), (drift_ref, stress_ref) in zip(*terms):
         assert np.linalg.norm(drift - drift_ref) < 1e-5 * np.linalg.norm(drift_ref)
         assert np.linalg.norm(stress - stress_ref) < 1e-5 * np.linalg.norm(stress_ref)
+
+
+def test_single_precision_inversion_falls_back_to_double_where_it_loses_definiteness():
+    """An M_inf whose smallest eigenvalues lie within single precision's rounding of zero
+    (here 1e-9 of the largest, of a random orthogonal basis) but are resolved in double
+    precision: its single-precision Cholesky finds a non-positive pivot, and the inverse is
+    taken in double precision instead (exact), equal to the dense inverse to 1e-6
+    relative; the single-precision blocks alone refuse it (FarFieldIndefinite)."""
+    from sdmpi.hydro.farfield import FarFieldIndefinite
+    from sdmpi.hydro.resistance import _far_field_inverse, far_field_blocks
+
+    n = 4
+    rng = np.random.default_rng(3)
+    basis, _ = np.linalg.qr(rng.standard_normal((11 * n, 11 * n)))
+    eigenvalues = np.geomspace(1e-9, 1.0, 11 * n)
+    mob = (basis * eigenvalues) @ basis.T
+    mob = (mob + mob.T) / 2
+    with pytest.raises(FarFieldIndefinite):
+        far_field_blocks(mob, single=True)
+    (s_inverse, _, _), exact = _far_field_inverse(mob, single=True)
+    assert exact
+    rigid = (np.arange(11 * n) % 11) < 6
+    reference = np.linalg.inv(mob)[np.ix_(rigid, rigid)]
+    assert np.abs(s_inverse - reference).max() < 1e-6 * np.abs(reference).max()

@@ -383,9 +383,10 @@ def grand_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
                                                 min_gap, max_overlap, plan, far_field=True, ewald_tol=ewald_tol)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
-    exact = far is None and not single_precision_inverse(len(pos), ewald_tol)
+    exact = False  # far given: blocks of another configuration
     if far is None:
-        far = far_field_blocks(far_field_mobility(pos, radii, plan=plan.far), single=not exact)
+        far, exact = _far_field_inverse(far_field_mobility(pos, radii, plan=plan.far),
+                                        single_precision_inverse(len(pos), ewald_tol))
     lub = lubrication_partitions(radii, pairs, len(pos)) if plan.near_images is not None else None
     return from_blocks(far, lub, pairs, plan, pos, radii, exact)
 
@@ -422,6 +423,19 @@ def single_precision_inverse(n_particles: int, ewald_tol: float) -> bool:
     the inversion is too small a part of a step to pay for the second far-field product it
     costs `resistance_change`)."""
     return ewald_tol >= SINGLE_PRECISION_TOL and n_particles >= SINGLE_PRECISION_MIN_N
+
+
+def _far_field_inverse(mob: np.ndarray, single: bool) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], bool]:
+    """(`far_field_blocks` of mob, whether they are its double-precision inverse): in single
+    precision if asked, and in double precision where single precision finds a pivot that
+    is not positive (eigenvalues of M_inf within its rounding, ~1e-7 of the largest, of
+    zero, which double precision may still resolve)."""
+    if single:
+        try:
+            return far_field_blocks(mob, single=True), False
+        except FarFieldIndefinite:
+            pass
+    return far_field_blocks(mob), True
 
 
 def far_field_blocks(mob: np.ndarray, single: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
