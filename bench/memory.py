@@ -139,7 +139,8 @@ def holdings(solver):
     if isinstance(far, spectral.SpectralFarField):
         st = far._stencils
         out["far field: real-space pair blocks"] = _nbytes(far._blocks)   # None while released
-        out["far field: real-space pair indices and shifts"] = _nbytes(far._pi, far._pj, far._shift, far._positions)
+        out["far field: real-space pair indices, shifts and positions"] = _nbytes(far._pi, far._pj, far._shift,
+                                                                              far._positions)
         out["far field: window stencils"] = _nbytes(*st.arrays())
         out["far field: k-space kernel"] = _nbytes(getattr(far, "_scale", None))
     else:

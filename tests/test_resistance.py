@@ -201,22 +201,25 @@ def test_single_precision_inversion_stays_far_below_the_ewald_tolerance(monkeypa
     from scipy.linalg import cho_factor, cho_solve
 
     from sdmpi.hydro import resistance
-    from sdmpi.hydro.farfield import SINGLE_PRECISION_TOL, far_field_mobility
-    from sdmpi.hydro.resistance import far_field_blocks
+    from sdmpi.hydro.farfield import far_field_mobility
+    from sdmpi.hydro.resistance import SINGLE_PRECISION_TOL, far_field_blocks
 
     pos, side = _dense_random(27, 0.45, seed=11)
     box, radii = np.full(3, side), np.ones(27)
     tol = 1e-3
     assert tol >= SINGLE_PRECISION_TOL > 1e-6
     monkeypatch.setattr(resistance, "SINGLE_PRECISION_MIN_N", 27)
-    blocks = {}
+    mobilities = {}
     for ewald_tol, single in ((tol, True), (1e-6, False)):
         res = grand_resistance(pos, radii, box, 0.0, ewald_tol=ewald_tol)
         assert res.exact_inverse is not single
         mob = far_field_mobility(res.positions, radii, plan=res.plan.far)
         same = grand_resistance(pos, radii, box, 0.0, ewald_tol=ewald_tol, far=far_field_blocks(mob, single))
         assert np.array_equal(res.r_fu, same.r_fu)   # the tolerance chose the precision
-        blocks[ewald_tol] = mob
+        assert not same.exact_inverse                # blocks passed in: not taken as exact
+        mobilities[ewald_tol] = mob
+    with pytest.raises(ValueError, match="double precision"):   # finite differences refused
+        resistance.mobility_divergence(lambda x, plan: None, grand_resistance(pos, radii, box, 0.0, ewald_tol=tol))
     monkeypatch.setattr(resistance, "SINGLE_PRECISION_MIN_N", 28)
     assert grand_resistance(pos, radii, box, 0.0, ewald_tol=tol).exact_inverse   # and the size
     forces = np.random.default_rng(12).standard_normal(6 * 27)
@@ -224,7 +227,7 @@ def test_single_precision_inversion_stays_far_below_the_ewald_tolerance(monkeypa
     einf[:, 1] = 1.0   # a shear rate of strain
     out = []
     for single in (False, True):
-        res = grand_resistance(pos, radii, box, 0.0, ewald_tol=tol, far=far_field_blocks(blocks[tol], single))
+        res = grand_resistance(pos, radii, box, 0.0, ewald_tol=tol, far=far_field_blocks(mobilities[tol], single))
         u = cho_solve(cho_factor(res.r_fu), forces + res.strain_forces(einf)).reshape(27, 6)
         out.append((u, res.stresslets(u, einf)))
     for a, b in zip(*out):

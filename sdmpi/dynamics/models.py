@@ -241,9 +241,10 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         of the near-contact correction where the model has one, then the stresslets' own
         draw where the drift scheme takes one (`sdmpi.registry.DriftSpec.stress_draw`).
         The evaluation's last draw (the step's): once the scheme has drawn its forces, the
-        solver frees what only they need (`forces_drawn`; on petsc-krylov the pairs'
-        factors, after which further draws are refused), so that a Brownian midpoint is
-        built without them (`brownian_terms` draws any number of samples)."""
+        solver frees what only they need and what it can compute again (`forces_drawn`;
+        on petsc-krylov the pairs' factors, after which further draws are refused, and
+        the spectral far field's real-space blocks), so that a Brownian midpoint is built
+        without them (`brownian_terms` draws any number of samples)."""
         self._last_draw = True
         shape = self.solver.noise_shape
         z = rng.standard_normal(shape)

@@ -119,5 +119,5 @@ class SolverBackend(Protocol):
     def forces_drawn(self) -> None:
         """No more Brownian forces will be drawn from this solver (a step's are drawn), and
         a solver at the Brownian midpoint is built next: free what only `brownian_forces`
-        needs, and what later solves can compute again; solves go on as before (the same
-        results). Generic form: nothing (a direct backend's factor serves its solves too)."""
+        needs, and what later solves can compute again; later solves give the same
+        results. Generic form: nothing (a direct backend's factor serves its solves too)."""

@@ -45,14 +45,6 @@ from .workspace import work_array
 NDOF = 11  # generalized velocity components per particle: 3 U, 3 Omega, 5 E
 #: default relative accuracy of the Ewald sums (every entry point)
 DEFAULT_EWALD_TOL = 1e-6
-#: Ewald tolerances from which far-field work runs in single precision (docs/numerics.md):
-#: the spectral backend's real-space blocks (rounding ~6e-8 relative, <= 1% of the
-#: tolerance; exactly symmetric all the same, as each block serves both M_ij x_j and
-#: M_ij^T x_i; the product streams them from memory, so half the bytes make it faster) and
-#: the dense backend's block inversion of M_inf (`resistance.far_field_blocks`: relative
-#: rounding ~2e-6 of S^-1, <= 20% of the tolerance; LAPACK's single-precision kernels take
-#: ~0.6 of the time)
-SINGLE_PRECISION_TOL = 1e-5
 
 
 # ---------------------------------------------------------------------------------

@@ -31,16 +31,20 @@ import numba
 import numpy as np
 from scipy.linalg import blas, lapack
 
-from .farfield import (DEFAULT_EWALD_TOL, NDOF, SINGLE_PRECISION_TOL, FarFieldIndefinite, FarFieldPlan,
-                       far_field_mobility, far_field_product, plan_far_field)
+from .farfield import (DEFAULT_EWALD_TOL, NDOF, FarFieldIndefinite, FarFieldPlan, far_field_mobility,
+                       far_field_product, plan_far_field)
 from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator, particle_ranges
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
                           lubrication_product, lubrication_reach, lubrication_rows)
 
-#: the fewest spheres from which M_inf's block inversion runs in single precision (with
-#: ewald_tol >= `farfield.SINGLE_PRECISION_TOL`; `single_precision_inverse`)
+#: M_inf's block inversion runs in single precision for Ewald sums from this tolerance on
+#: (its rounding, ~1e-6 of S^-1 at N = 27-343, stays below a tenth of the tolerance; LAPACK's
+#: single-precision kernels take ~0.6 of the time) and from SINGLE_PRECISION_MIN_N spheres
+#: on (`single_precision_inverse`; docs/numerics.md)
+SINGLE_PRECISION_TOL = 1e-5
 SINGLE_PRECISION_MIN_N = 64
+
 
 @dataclass
 class HydroPlan:
@@ -383,10 +387,11 @@ def grand_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
                                                 min_gap, max_overlap, plan, far_field=True, ewald_tol=ewald_tol)
     if plan.far is None:
         plan.far = plan_far_field(pos, radii, lattice, ewald_tol)
-    exact = False  # far given: blocks of another configuration
     if far is None:
-        far, exact = _far_field_inverse(far_field_mobility(pos, radii, plan=plan.far),
-                                        single_precision_inverse(len(pos), ewald_tol))
+        single = lattice is not None and single_precision_inverse(len(pos), ewald_tol)
+        far, exact = _far_field_inverse(far_field_mobility(pos, radii, plan=plan.far), single)
+    else:
+        exact = False  # blocks of another configuration
     lub = lubrication_partitions(radii, pairs, len(pos)) if plan.near_images is not None else None
     return from_blocks(far, lub, pairs, plan, pos, radii, exact)
 
@@ -418,10 +423,9 @@ def from_blocks(far: tuple[np.ndarray, np.ndarray, np.ndarray], lub: tuple | Non
 
 def single_precision_inverse(n_particles: int, ewald_tol: float) -> bool:
     """Whether `grand_resistance` inverts M_inf of n_particles spheres summed to ewald_tol in
-    single precision: from `farfield.SINGLE_PRECISION_TOL` (its rounding, ~2e-6 of S^-1,
-    stays below a fifth of the tolerance) and `SINGLE_PRECISION_MIN_N` spheres on (below,
-    the inversion is too small a part of a step to pay for the second far-field product it
-    costs `resistance_change`)."""
+    single precision: from `SINGLE_PRECISION_TOL` and `SINGLE_PRECISION_MIN_N` spheres on
+    (below, the inversion is too small a part of a step to pay for the second far-field
+    product it costs `resistance_change`)."""
     return ewald_tol >= SINGLE_PRECISION_TOL and n_particles >= SINGLE_PRECISION_MIN_N
 
 
@@ -444,8 +448,8 @@ def far_field_blocks(mob: np.ndarray, single: bool = False) -> tuple[np.ndarray,
     Args:
         mob: (11N, 11N) far-field mobility M_inf (Stokes units, viscosity 1).
         single: factorise and invert in single precision (LAPACK's s-kernels, ~0.6 of the
-            time; relative rounding of S^-1 ~2e-6 at N = 125, for M_inf summed no more
-            accurately than `farfield.SINGLE_PRECISION_TOL`); the blocks are returned in
+            time; relative rounding of S^-1 ~1e-6 at N = 27-343, for M_inf summed no more
+            accurately than `SINGLE_PRECISION_TOL`); the blocks are returned in
             double precision either way.
 
     Returns:
@@ -466,11 +470,17 @@ def far_field_blocks(mob: np.ndarray, single: bool = False) -> tuple[np.ndarray,
                                  f"(potrf info {info}, strain block)")
     # X = M_ab U_b^-1 (6N x 5N; the right-side solve is the faster kernel), S = M_aa - X X^T
     x = trsm(1.0, chol_bb, np.asfortranarray(m_ab), side=1, overwrite_b=1)
+    del m_ab  # (its Fortran-ordered copy became x)
     schur = syrk(-1.0, x, beta=1.0, c=m_aa.T, trans=0, lower=0, overwrite_c=1)  # upper triangle
+    del m_aa, m_bb  # (their memory is schur's and chol_bb's)
     s_inverse = _spd_inverse_of_upper(schur).T
-    if single:
-        return (s_inverse.astype(np.float64), np.asfortranarray(x, dtype=np.float64),
-                np.asfortranarray(chol_bb, dtype=np.float64))
+    if not single:
+        return s_inverse, x, chol_bb
+    del schur
+    # to double precision one array at a time, each single-precision one freed before the next
+    s_inverse = s_inverse.astype(np.float64)
+    x = np.asfortranarray(x, dtype=np.float64)
+    chol_bb = np.asfortranarray(chol_bb, dtype=np.float64)
     return s_inverse, x, chol_bb
 
 
@@ -481,15 +491,16 @@ def resistance_change(base: GrandResistance, moved: np.ndarray, vector: np.ndarr
 
         Delta R v = -M^-1 [M_inf(moved) - M_inf(base)] w + L(moved) v - L(base) v,   w = M^-1 v,
 
-    M^-1 from base's block form, both far-field products by `farfield.far_field_product`
+    M^-1 from base's block form, the far-field products by `farfield.far_field_product`
     with base's far-field plan (the same images and wave vectors as base's M_inf, so that
-    the difference carries the Ewald truncation of the change, not of M_inf). The change
-    is a difference of two products, not M_inf(moved) w - v: the latter relies on
-    M_inf w = v, which an inverse rounded to ~1e-7 (`far_field_blocks` in single
-    precision) breaks by ~1e-7 |v|, as large as the whole change of a random finite
-    difference (~1e-6 of R v); the difference carries M^-1's rounding only relatively.
-    L(moved) v pair
-    by pair with base's pair images and tables (`lubrication.lubrication_product`,
+    the difference carries the Ewald truncation of the change, not of M_inf). Where base's
+    blocks are M_inf's double-precision inverse at its positions
+    (`GrandResistance.exact_inverse`), M_inf(base) w is v to round-off and one product
+    suffices; otherwise (an inverse rounded to ~1e-7 by `far_field_blocks` in single
+    precision breaks M_inf w = v by ~1e-7 |v|, as much as the whole change of a random
+    finite difference, ~1e-6 of R v) M_inf(base) w is the second product, and the change
+    carries M^-1's rounding only relatively. L(moved) v pair by pair with base's pair
+    images and tables (`lubrication.lubrication_product`,
     separations floored at min_gap as in `close_pairs`) and L(base) v by base's dense
     partitions. The lubrication difference carries a round-off of ~eps max|L v| (eps =
     2.2e-16), as the entries of L do (tests/test_resistance_change.py). The dropped term,
@@ -522,7 +533,11 @@ def mobility_divergence(resistance_at: Callable[[np.ndarray, HydroPlan], GrandRe
     3N translations, of M = R_FU^-1 and A = R_SU R_FU^-1 at the configuration of the
     GrandResistance base, by centred finite differences of step h with base's pair sets
     (its plan): kT div M is the Brownian drift, -kT div A the mean Brownian stresslets.
-    resistance_at(positions, plan) assembles R (as `grand_resistance` with a plan).
+    resistance_at(positions, plan) assembles R (as `grand_resistance` with a plan). The
+    differences of R_FU^-1 over h need M_inf inverted in double precision (rounding in
+    single precision, ~1e-7, over h = 1e-5 would swamp them): base must be an exact
+    inverse (`GrandResistance.exact_inverse`: fewer than `SINGLE_PRECISION_MIN_N`
+    spheres or Ewald sums below `SINGLE_PRECISION_TOL`).
 
     Args:
         resistance_at: assembles R at (positions (N, 3), plan).
@@ -531,7 +546,14 @@ def mobility_divergence(resistance_at: Callable[[np.ndarray, HydroPlan], GrandRe
 
     Returns:
         div M (6N,) and div A (5N,), in units of M and A per length.
+
+    Raises:
+        ValueError: base's far-field inverse is not exact.
     """
+    if not base.exact_inverse:
+        raise ValueError("mobility_divergence needs M_inf inverted in double precision at the "
+                         f"configuration: fewer than {SINGLE_PRECISION_MIN_N} spheres or an Ewald "
+                         f"tolerance below {SINGLE_PRECISION_TOL:g} (GrandResistance.exact_inverse)")
     n = base.n_particles
     div_m, div_a = np.zeros(6 * n), np.zeros(5 * n)
     for p in range(n):

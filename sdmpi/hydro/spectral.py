@@ -59,8 +59,8 @@ except ImportError:  # a scipy without it: the public functions (same numbers, a
     pypocketfft = None
 
 from .basis import BASIS
-from .farfield import (NDOF, SINGLE_PRECISION_TOL, _cached_radial_table, _pair_block, _power_bounds,
-                       _truncation_parameter, self_mobility)
+from .farfield import (NDOF, _cached_radial_table, _pair_block, _power_bounds, _truncation_parameter,
+                       self_mobility)
 from .geometry import Lattice, find_pairs
 from .workspace import work_array
 
@@ -127,6 +127,13 @@ _POW_ALIAS, _POW_WINDOW = 4, 4  # powers of the polynomial prefactors
 # ---------------------------------------------------------------------------------
 # real space: sparse pair blocks
 # ---------------------------------------------------------------------------------
+
+
+#: Ewald tolerances from which the real-space blocks are stored in single precision
+#: (rounding ~6e-8 relative, <= 1% of the tolerance; exactly symmetric all the same, as
+#: each block serves both M_ij x_j and M_ij^T x_i): the real-space product streams its
+#: blocks from memory, so half the bytes make it faster (docs/numerics.md)
+SINGLE_PRECISION_TOL = 1e-5
 
 
 @numba.njit(cache=True)
@@ -553,7 +560,7 @@ class SpectralFarField:
         rank, size = (0, 1) if comm is None else (comm.rank, comm.size)
         pos = lattice.wrap(pos)
         self.params = par = SpectralParameters.choose(lattice, rad, tol, xi)
-        self._radii = rad
+        self._radii = rad.copy()  # own copy: the real-space blocks are computed again from it
         self._frac = pos @ lattice.reciprocal.T
         unique, which = np.unique(rad, return_inverse=True)
         self._self = np.array([np.diag(self_mobility(a, par.xi)) for a in unique])[which].ravel()
@@ -577,13 +584,14 @@ class SpectralFarField:
             pi, pj, shift = (a[bounds[rank]:bounds[rank + 1]] for a in (pi, pj, shift))
         # 32-bit copies (not views of all ranks' images): the product streams them with the blocks
         self._pi, self._pj = pi.astype(np.int32), pj.astype(np.int32)
-        self._positions, self._shift = pos.copy(), np.array(shift)  # own copies: to compute the blocks again
+        # to compute the blocks again: the wrapped positions (a fresh array) and an own copy of the shifts
+        self._positions, self._shift = pos, np.array(shift)
         self._precision = np.float32 if tol >= SINGLE_PRECISION_TOL else np.float64
         self._blocks = self._computed_blocks()
 
     def _computed_blocks(self) -> np.ndarray:
         """The 11 x 11 real-space blocks of this rank's pair images (P, 11, 11), in single
-        precision from `farfield.SINGLE_PRECISION_TOL` on."""
+        precision from `SINGLE_PRECISION_TOL` on."""
         blocks = np.empty((len(self._pi), NDOF, NDOF), dtype=self._precision)
         xi = self.params.xi
         _pair_blocks(self._positions, self._radii, self._pi, self._pj, self._shift, _cached_radial_table(xi),
