@@ -317,3 +317,16 @@ def test_single_precision_inversion_falls_back_to_double_where_it_loses_definite
     rigid = (np.arange(11 * n) % 11) < 6
     reference = np.linalg.inv(mob)[np.ix_(rigid, rigid)]
     assert np.abs(s_inverse - reference).max() < 1e-6 * np.abs(reference).max()
+
+
+def test_the_ewald_tolerance_key_states_the_single_precision_thresholds():
+    """hydrodynamics.ewald_tolerance's help (docs/job_keys.md) names the tolerance and the
+    size from which M_inf is inverted in single precision, and the spectral blocks' storage
+    threshold is the same tolerance: the text follows the constants."""
+    from sdmpi.config import schema_text
+    from sdmpi.hydro import resistance, spectral
+
+    text = " ".join(schema_text().split())
+    assert f"from {resistance.SINGLE_PRECISION_TOL:g} on" in text
+    assert f"{resistance.SINGLE_PRECISION_MIN_N} spheres or more" in text
+    assert spectral.SINGLE_PRECISION_TOL == resistance.SINGLE_PRECISION_TOL

@@ -579,7 +579,11 @@ class Hydrodynamics:
                                         f"{_num(LOOSE_EWALD_MIN_SIDE)} (their operators change by "
                                         "< 1e-3 of themselves, docs/performance.md), "
                                         f"{_num(BROWNIAN_EWALD_TOLERANCE_TIGHT)} for other "
-                                        f"Brownian jobs, else {_num(EWALD_TOLERANCE)}",
+                                        f"Brownian jobs, else {_num(EWALD_TOLERANCE)}; from 1e-05 "
+                                        "on, dense and petsc-dense invert M_inf in single "
+                                        "precision for 64 spheres or more and petsc-krylov stores "
+                                        "its real-space blocks in single precision "
+                                        "(docs/numerics.md)",
                                         allowed=Range(0.0, 1e-2, lo_open=True), optional=True)
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms; false leaves "
                             "the far-field mobility alone (prefer model = \"far-field\")")
