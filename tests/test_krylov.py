@@ -385,11 +385,12 @@ def test_midpoint_brownian_stress_reuses_the_start_solve():
 @pytest.mark.parametrize("far_field", ["dense", "spectral"])
 def test_step_draw_frees_the_pair_factors_before_the_midpoint(far_field, monkeypatch):
     """The step's draw (`ResistanceEvaluation.brownian`, the evaluation's last) frees the
-    start's pair factors, in its solver and its resistance, and a spectral far field's
-    real-space blocks, once the midpoint scheme has drawn the forces and before it builds
-    the midpoint; its terms equal bit for bit those of a sample of the same noise drawn
-    without freeing (`brownian_terms`), which keeps them for more draws, and so do the
-    start's later solves (its blocks computed again)."""
+    start's pair factors, in its solver and its resistance, its rows of the lubrication
+    matrix and their PETSc copy L_uu, and a spectral far field's real-space blocks, once
+    the midpoint scheme has drawn the forces and before it builds the midpoint; its terms
+    equal bit for bit those of a sample of the same noise drawn without freeing
+    (`brownian_terms`), which keeps them for more draws, and so do the start's later
+    solves and stresslets (what was freed computed again)."""
     kt, dt, n = 6 * np.pi, 5e-4, len(CONFIG)
     model = ResistanceModel(np.ones(n), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=1e-4,
                             backend="petsc-krylov", tolerance=1e-8, scheme="midpoint", far_field=far_field)
@@ -398,22 +399,26 @@ def test_step_draw_frees_the_pair_factors_before_the_midpoint(far_field, monkeyp
     displaced = model.displaced
 
     def record(evaluation, positions, separate):
-        held.append((evaluation.solver.pair_factors, evaluation.resistance.pair_factors,
-                     getattr(evaluation.solver.far, "_blocks", "dense")))
+        solver = evaluation.solver
+        held.append((solver.pair_factors, evaluation.resistance.pair_factors,
+                     getattr(solver.far, "_blocks", "dense"), solver._lub, evaluation.resistance.lubrication,
+                     solver.l_uu))
         return displaced(evaluation, positions, separate)
 
     monkeypatch.setattr(model, "displaced", record)
     terms = step.brownian(np.random.default_rng(4), kt, dt)
-    assert held == [(None, None, None if far_field == "spectral" else "dense")]
+    assert held == [(None, None, None if far_field == "spectral" else "dense", None, None, None)]
     with pytest.raises(ValueError, match="pairs' factors"):
         step.solver.brownian_forces(np.zeros(step.solver.noise_shape))
     z = np.random.default_rng(4).standard_normal(sample.solver.noise_shape)
     kept = sample.brownian_terms(z, kt, dt)
-    assert held[1][0] is not None and held[1][1] is not None and held[1][2] is not None
+    assert all(item is not None for item in held[1])
     assert np.array_equal(terms.velocities, kept.velocities)
     assert np.array_equal(terms.stresslets, kept.stresslets)
     forces = np.random.default_rng(5).standard_normal((n, 6))
-    assert np.array_equal(step.velocities(forces, np.zeros((n, 5))), sample.velocities(forces, np.zeros((n, 5))))
+    einf = np.random.default_rng(6).standard_normal((n, 5))
+    assert np.array_equal(step.solver.stresslets(forces, einf), sample.solver.stresslets(forces, einf))
+    assert np.array_equal(step.velocities(forces, einf), sample.velocities(forces, einf))
     sample.brownian_terms(z, kt, dt)  # drawn again
 
 

@@ -66,6 +66,7 @@ import numpy as np
 
 from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
+from .lubrication import lubrication_rows
 
 if TYPE_CHECKING:
     from .farfield import FarFieldPlan
@@ -590,12 +591,12 @@ class KrylovSolver(SolverBackend):
 
         # this rank's block rows of the lubrication matrix L (11 x 11 blocks: the
         # resistance holds these alone), and of its rigid-body part L_uu (6 x 6 blocks)
-        self.lub = lub = resistance.lubrication
+        self._lub = lub = resistance.lubrication
         if lub.shape != (NDOF * nl, NDOF * n):
             raise ValueError(f"petsc-krylov: the resistance holds lubrication rows {lub.shape[0] // NDOF} "
                              f"spheres long, this rank's are {nl} (a resistance of another communicator)")
-        self.l_uu = self._baij(_block_csr(lub.indptr, lub.indices, lub.data[:, :6, :6]), self.comm)
-        self.u_in, self.u_out = self.l_uu.createVecs()
+        self.l_uu = self.u_in = self.u_out = None
+        self._rigid_lubrication()
         # far-field self blocks of the preconditioner (isolated spheres, scaled by
         # self_resistance_scale, weighted by self_resistance_weights; this rank's
         # particles), and this rank's block rows of the Schur complement G: L_uu with
@@ -642,6 +643,25 @@ class KrylovSolver(SolverBackend):
         self.destroy()
 
     # ------------------------------------------------------------------ helpers
+
+    @property
+    def lub(self) -> Any:
+        """This rank's block rows of the lubrication matrix L (scipy BSR, 11 x 11 blocks),
+        computed again from the resistance's pairs after `forces_drawn` freed them
+        (`lubrication.lubrication_rows`: the same bits)."""
+        if self._lub is None:
+            r = self._resistance
+            self._lub = r.lubrication = lubrication_rows(r.positions, r.radii, self.lubricated, (self.p0, self.p1))[0]
+        return self._lub
+
+    def _rigid_lubrication(self) -> None:
+        """L_uu, the rigid-body part of this rank's rows of L, as a PETSc BAIJ matrix with
+        its work vectors (for the mixed system's product), built unless it is there.
+        Collective."""
+        if self.l_uu is None:
+            lub = self.lub
+            self.l_uu = self._baij(_block_csr(lub.indptr, lub.indices, lub.data[:, :6, :6]), self.comm)
+            self.u_in, self.u_out = self.l_uu.createVecs()
 
     def schur_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """G (6N x 6N) in blocked CSR (`_block_csr`): its kept blocks (_g_keep) of L_uu +
@@ -732,12 +752,19 @@ class KrylovSolver(SolverBackend):
     def forces_drawn(self) -> None:
         """Frees the lubrication pairs' factors C_p (12 x 12 doubles per pair touching this
         rank's spheres), here and in the resistance the solver was built from, which the
-        Brownian forces alone use (`brownian_forces` then refuses), and the spectral far
-        field's real-space blocks, which its next product computes again
-        (`spectral.SpectralFarField.release_real_space`): the step's start would otherwise
-        hold them through the Brownian midpoint's set-up and solve."""
+        Brownian forces alone use (`brownian_forces` then refuses); and what the next solve
+        computes again, the same bits: the spectral far field's real-space blocks
+        (`spectral.SpectralFarField.release_real_space`), this rank's rows of the
+        lubrication matrix L and its PETSc copy L_uu (`lub`, `_rigid_lubrication`). The
+        step's start would otherwise hold them through the Brownian midpoint's set-up and
+        solve (at N = 10 000 on 2 ranks ~0.45 GiB per rank)."""
         self.pair_factors = self._resistance.pair_factors = None
         self.far.release_real_space()
+        if self.lubricated is not None:  # (without lubrication L is its diagonal: kept)
+            self._lub = self._resistance.lubrication = None
+            for name in ("l_uu", "u_in", "u_out"):
+                getattr(self, name).destroy()
+                setattr(self, name, None)
 
     def _baij(self, csr, comm):
         """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this
@@ -817,6 +844,7 @@ class KrylovSolver(SolverBackend):
             KrylovError: GMRES did not converge.
         """
         p0, p1 = self.p0, self.p1
+        self._rigid_lubrication()
         v_e = self._generalized(np.zeros((self.n, 6)), einf)
         l_v = (self.lub @ v_e).reshape(-1, NDOF)[:, :6]
         rhs = np.concatenate([v_e[NDOF * p0:NDOF * p1], (forces[p0:p1] - l_v).ravel()])
