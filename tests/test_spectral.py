@@ -70,19 +70,41 @@ def test_error_follows_tol():
     assert errs[0] > 1e-4 > 1e-6 > errs[1], errs
 
 
-def test_linear_and_symmetric():
+@pytest.mark.parametrize("tol, rounding", [(1e-6, 1e-12), (1e-4, 1e-6)])  # double, single precision
+def test_linear_and_symmetric(tol, rounding):
     """Every stage (sparse real-space blocks with M_ji = M_ij^T, spreading and its exact
     adjoint the interpolation, a real even k-space filter, diagonal self terms) is linear
-    and symmetric by construction, so both hold to rounding (1e-12 relative)."""
+    and symmetric by construction, so both hold to rounding: 1e-12 relative in double
+    precision, 1e-6 with the grids in single precision (from SINGLE_PRECISION_TOL; float32
+    rounding 6e-8 per operation, and the sums over a grid point's ~10 particles)."""
     pos, radii, box, _ = configuration(0.5, -0.45, True)
-    op = SpectralFarField(pos, radii, Lattice(box, -0.45), tol=1e-4)
+    op = SpectralFarField(pos, radii, Lattice(box, -0.45), tol=tol)
     rng = np.random.default_rng(3)
     x1, x2 = rng.standard_normal((2, 11 * N))
     y1, y2 = op.matvec(x1), op.matvec(x2)
     scale = np.linalg.norm(y1) * np.linalg.norm(x2)
-    assert abs(y1 @ x2 - x1 @ y2) <= 1e-12 * scale
+    assert abs(y1 @ x2 - x1 @ y2) <= rounding * scale
     combo = op.matvec(2.5 * x1 - 0.7 * x2)
-    assert np.linalg.norm(combo - (2.5 * y1 - 0.7 * y2)) <= 1e-12 * np.linalg.norm(combo)
+    assert np.linalg.norm(combo - (2.5 * y1 - 0.7 * y2)) <= rounding * np.linalg.norm(combo)
+
+
+def test_single_precision_grids_round_the_product_only(monkeypatch):
+    """From SINGLE_PRECISION_TOL on the blocks and the work grids (spreading, FFTs, the
+    grid sent between ranks) are single precision: the product differs from the same
+    operator's in double precision by rounding, 1e-6 relative at most (measured 1.2e-7),
+    1% of the smallest tolerance that uses it."""
+    from sdmpi.hydro import spectral
+
+    pos, radii, box, _ = configuration(0.5, 0.3, True)
+    x = np.random.default_rng(9).standard_normal(11 * N)
+    single = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=1e-5)
+    assert all(g is None or g.dtype in (np.float32, np.complex64) for g in single.work_grids())
+    y = single.matvec(x)
+    monkeypatch.setattr(spectral, "SINGLE_PRECISION_TOL", 1.0)
+    double = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=1e-5)
+    assert all(g is None or g.dtype in (np.float64, np.complex128) for g in double.work_grids())
+    ref = double.matvec(x)
+    assert 0 < np.linalg.norm(y - ref) <= 1e-6 * np.linalg.norm(ref)
 
 
 def test_operators_sharing_the_work_grids_give_their_own_products():
@@ -103,18 +125,19 @@ def test_operators_sharing_the_work_grids_give_their_own_products():
     assert all(np.shares_memory(a, b) for a, b in zip(first.work_grids(), twin.work_grids()) if a is not None)
 
 
-def test_public_fft_fallback_gives_the_same_product(monkeypatch):
+@pytest.mark.parametrize("tol, rounding", [(1e-6, 1e-13), (1e-5, 1e-6)])  # double, single precision
+def test_public_fft_fallback_gives_the_same_product(monkeypatch, tol, rounding):
     """Without scipy's private pocketfft module (transforms into given arrays, pruned to
     the lines of the kept modes) the public scipy.fft functions (full 3-D transforms) give
-    the same product to rounding (1e-13)."""
+    the same product to rounding (1e-13 in double precision, 1e-6 in single)."""
     from sdmpi.hydro import spectral
 
     pos, radii, box, _ = configuration(0.5, 0.3, True)
-    op = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=1e-5)
+    op = SpectralFarField(pos, radii, Lattice(box, 0.3), tol=tol)
     x = np.random.default_rng(8).standard_normal(11 * N)
     y = op.matvec(x)
     monkeypatch.setattr(spectral, "pypocketfft", None)
-    assert np.linalg.norm(op.matvec(x) - y) <= 1e-13 * np.linalg.norm(y)
+    assert np.linalg.norm(op.matvec(x) - y) <= rounding * np.linalg.norm(y)
 
 
 @pytest.mark.parametrize("n, strain, tol", [(27, 0.0, 1e-4), (27, 0.9, 1e-6), (8, -0.45, 1e-2)])
@@ -194,11 +217,14 @@ def rank_check():
     pos, radii, box, _ = configuration(0.5, 0.3, True)
     lattice = Lattice(box, 0.3)
     x = np.random.default_rng(4).standard_normal(11 * N)
-    far = SpectralFarField(pos, radii, lattice, tol=1e-5, comm=comm)
+    single = SpectralFarField(pos, radii, lattice, tol=1e-5, comm=comm).matvec(x)
+    single1 = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
+    far = SpectralFarField(pos, radii, lattice, tol=1e-6, comm=comm)
     y = far.matvec(x)
-    y1 = SpectralFarField(pos, radii, lattice, tol=1e-5).matvec(x)
+    y1 = SpectralFarField(pos, radii, lattice, tol=1e-6).matvec(x)
     far.release_real_space()
     return {"ranks": comm.size, "diff": float(np.abs(y - y1).max() / np.abs(y1).max()),
+            "diff_single": float(np.abs(single - single1).max() / np.abs(single1).max()),
             "digest": hashlib.sha256(y.tobytes()).hexdigest(),
             "own_indices": bool(far._pi.base is None and far._pj.base is None and far._shift.base is None),
             "released_same": bool(np.array_equal(far.matvec(x), y))}
@@ -209,12 +235,13 @@ def rank_check():
 def test_independent_of_ranks():
     """Two ranks (spreading and interpolation split by particles, FFTs on rank 0, the
     real-space pairs shared by `real_space_shares`) give the one-rank result up to the
-    order of floating-point sums (1e-13), the same bits on every rank, and again after
-    each rank released its real-space blocks."""
+    order of floating-point sums (1e-13 in double precision, 1e-6 with single-precision
+    grids), the same bits on every rank, and again after each rank released its
+    real-space blocks."""
     from .test_petsc_dense import rows_on_two_ranks
 
     rows = rows_on_two_ranks(Path(__file__).stem)
-    assert len(rows) == 2 and all(r["diff"] < 1e-13 for r in rows), rows
+    assert len(rows) == 2 and all(r["diff"] < 1e-13 and r["diff_single"] < 1e-6 for r in rows), rows
     assert all(r["own_indices"] for r in rows), rows  # its share's indices, not views of all
     assert all(r["released_same"] for r in rows), rows  # blocks released and computed again
 
@@ -264,14 +291,17 @@ def test_real_space_shares_balance_rank_zeros_ffts():
     from sdmpi.hydro.spectral import _FFT_COST_PER_GRID_POINT, real_space_shares
 
     grid = (48, 50, 50)
-    fft = _FFT_COST_PER_GRID_POINT * np.prod(grid)
-    for pairs, size in ((59692, 2), (243000, 2), (243000, 4), (7, 2)):
-        shares = real_space_shares(pairs, grid, size)
-        assert len(shares) == size and shares.sum() == pairs and np.all(shares >= 0)
-        if shares[0] > 0:
-            assert np.all(np.abs(shares[0] + fft - shares[1:]) <= 1)
-        else:
-            assert np.all(shares[1:] <= fft + 1)
+    for precision, cost in _FFT_COST_PER_GRID_POINT.items():
+        fft = cost * np.prod(grid)
+        for pairs, size in ((59692, 2), (243000, 2), (243000, 4), (7, 2)):
+            shares = real_space_shares(pairs, grid, size, precision)
+            assert len(shares) == size and shares.sum() == pairs and np.all(shares >= 0)
+            if shares[0] > 0:
+                assert np.all(np.abs(shares[0] + fft - shares[1:]) <= 1)
+            else:
+                assert np.all(shares[1:] <= fft + 1)
+    # cheaper single-precision FFTs: rank 0 takes more pairs
+    assert real_space_shares(59692, grid, 2, np.float32)[0] > real_space_shares(59692, grid, 2)[0]
     assert real_space_shares(1000, grid, 2)[0] == 0  # FFTs outweigh: all pairs on rank 1
     assert np.array_equal(real_space_shares(10, grid, 1), [10])
 

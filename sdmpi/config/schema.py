@@ -582,7 +582,8 @@ class Hydrodynamics:
                                         f"Brownian jobs, else {_num(EWALD_TOLERANCE)}; from 1e-05 "
                                         "on, dense and petsc-dense invert M_inf in single "
                                         "precision for 64 spheres or more and petsc-krylov stores "
-                                        "its real-space blocks in single precision "
+                                        "its real-space blocks and wave-space grids in single "
+                                        "precision "
                                         "(docs/numerics.md)",
                                         allowed=Range(0.0, 1e-2, lo_open=True), optional=True)
     lubrication: bool = key(True, "bool", "add pairwise lubrication (near-field) terms; false leaves "

@@ -129,10 +129,11 @@ _POW_ALIAS, _POW_WINDOW = 4, 4  # powers of the polynomial prefactors
 # ---------------------------------------------------------------------------------
 
 
-#: Ewald tolerances from which the real-space blocks are stored in single precision
-#: (rounding ~6e-8 relative, <= 1% of the tolerance; exactly symmetric all the same, as
-#: each block serves both M_ij x_j and M_ij^T x_i): the real-space product streams its
-#: blocks from memory, so half the bytes make it faster (docs/numerics.md)
+#: Ewald tolerances from which the real-space blocks are stored, and the wave-space grids
+#: spread, transformed and sent, in single precision (the product's rounding ~1e-7
+#: relative, <= 1% of the tolerance; the sums over a particle's stencil and pairs run in
+#: double): half the bytes to stream, transform and send make the product ~12% faster on
+#: 2 ranks (docs/numerics.md)
 SINGLE_PRECISION_TOL = 1e-5
 
 
@@ -497,14 +498,16 @@ def _kept_modes(scale):
 
 
 #: cost of the FFTs + k-space kernel per grid point, in units of the real-space product
-#: per pair image (measured with bench/bench_spectral.py: docs/numerics.md)
-_FFT_COST_PER_GRID_POINT = 0.4
+#: per pair image, by the precision of blocks and grids (measured with
+#: bench/bench_spectral.py and paired products on 2 ranks: docs/numerics.md)
+_FFT_COST_PER_GRID_POINT = {np.float64: 0.4, np.float32: 0.3}
 
 
-def real_space_shares(n_pairs: int, grid: tuple[int, int, int], size: int) -> np.ndarray:
+def real_space_shares(n_pairs: int, grid: tuple[int, int, int], size: int,
+                      precision: type = np.float64) -> np.ndarray:
     """Pair images per rank (size ranks) such that rank 0's share plus its FFTs (cost
-    _FFT_COST_PER_GRID_POINT per grid point) equals every other rank's share: with R the
-    pair images and F the FFTs in pair units, r_k = (R + F)/size for k >= 1 and
+    _FFT_COST_PER_GRID_POINT[precision] per grid point) equals every other rank's share:
+    with R the pair images and F the FFTs in pair units, r_k = (R + F)/size for k >= 1 and
     r_0 = r_k - F (none if negative). A fixed cost model, not a timing: the split, and so
     the rounding of the result, depends only on the configuration and the rank count.
 
@@ -512,11 +515,12 @@ def real_space_shares(n_pairs: int, grid: tuple[int, int, int], size: int) -> np
         n_pairs: the number of real-space pair images R.
         grid: grid points (M1, M2, M3).
         size: the number of ranks.
+        precision: np.float64 or np.float32, that of the blocks and grids.
 
     Returns:
         (size,) int64 pair images per rank, summing to n_pairs.
     """
-    fft = _FFT_COST_PER_GRID_POINT * float(np.prod(grid))
+    fft = _FFT_COST_PER_GRID_POINT[precision] * float(np.prod(grid))
     first = int(round(min(n_pairs, max(0.0, (n_pairs + fft) / size - fft))))
     rest = np.diff(np.linspace(0, n_pairs - first, size).round().astype(np.int64))
     return np.concatenate([[first], rest])
@@ -578,15 +582,16 @@ class SpectralFarField:
             self._kept = _kept_modes(self._scale)
         # real space: pair images on one rank, else shared so that every rank's real-space
         # work plus rank 0's FFTs balance (real_space_shares)
+        self._precision = np.float32 if tol >= SINGLE_PRECISION_TOL else np.float64
         pi, pj, shift = find_pairs(pos, rad, lattice, par.rcut, 0.0)
         if size > 1:
-            bounds = np.cumsum(np.concatenate([[0], real_space_shares(len(pi), par.grid, size)]))
+            shares = real_space_shares(len(pi), par.grid, size, self._precision)
+            bounds = np.cumsum(np.concatenate([[0], shares]))
             pi, pj, shift = (a[bounds[rank]:bounds[rank + 1]] for a in (pi, pj, shift))
         # 32-bit copies (not views of all ranks' images): the product streams them with the blocks
         self._pi, self._pj = pi.astype(np.int32), pj.astype(np.int32)
         # to compute the blocks again: the wrapped positions (a fresh array) and an own copy of the shifts
         self._positions, self._shift = pos, np.array(shift)
-        self._precision = np.float32 if tol >= SINGLE_PRECISION_TOL else np.float64
         self._blocks = self._computed_blocks()
 
     def _computed_blocks(self) -> np.ndarray:
@@ -606,7 +611,8 @@ class SpectralFarField:
         self._blocks = None
 
     def work_grids(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """The work grids of a product: the grid padded along z for spreading and
+        """The work grids of a product, in the operator's precision (single from
+        `SINGLE_PRECISION_TOL` on): the grid padded along z for spreading and
         interpolation (M1, M2, M3 + pad, 3); with several ranks a contiguous copy of its
         periodic part for MPI (M1, M2, M3, 3), else None; on the rank that does the FFTs
         their output (M1, M2, M3//2 + 1, 3) complex, else None. Views of this thread's
@@ -619,12 +625,13 @@ class SpectralFarField:
             (padded grid, MPI grid or None, FFT output or None).
         """
         m1, m2, m3 = self.params.grid
-        padded = work_array("spectral_padded_grid", (m1, m2, m3 + self._stencils.pad, 3))
+        real = self._precision
+        padded = work_array("spectral_padded_grid", (m1, m2, m3 + self._stencils.pad, 3), real)
         parallel = self.comm is not None and self.comm.size > 1
-        grid = work_array("spectral_grid", (m1, m2, m3, 3)) if parallel else None
+        grid = work_array("spectral_grid", (m1, m2, m3, 3), real) if parallel else None
         fk = None
         if self.comm is None or self.comm.rank == 0:
-            fk = work_array("spectral_fft", (*self._scale.shape, 6)).view(complex)
+            fk = work_array("spectral_fft", (*self._scale.shape, 6), real).view(np.result_type(real, 1j))
         return padded, grid, fk
 
     def real_space(self, x: np.ndarray, y: np.ndarray) -> None:

@@ -15,22 +15,24 @@ import numpy as np
 _LOCAL = threading.local()
 
 
-def work_array(name: str, shape: tuple[int, ...]) -> np.ndarray:
-    """An uninitialised float64 C-contiguous array of `shape`, a view of this thread's
-    buffer `name` (valid until the next call with that name).
+def work_array(name: str, shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
+    """An uninitialised C-contiguous array of `shape` and `dtype`, a view of this thread's
+    buffer `name` of that dtype (valid until the next call with that name and dtype).
 
     Args:
         name: key of the per-thread buffer.
         shape: shape of the array wanted.
+        dtype: its element type (each dtype its own buffer).
 
     Returns:
-        Uninitialised float64 array of `shape` (a view into the buffer `name`).
+        Uninitialised array of `shape` (a view into the buffer `name`).
     """
     size = 1
     for s in shape:
         size *= s
     buffers = _LOCAL.__dict__
-    buf = buffers.get(name)
+    key = (name, np.dtype(dtype).str)
+    buf = buffers.get(key)
     if buf is None or buf.size < size:
-        buf = buffers[name] = np.empty(size)
+        buf = buffers[key] = np.empty(size, dtype=dtype)
     return buf[:size].reshape(shape)
