@@ -12,8 +12,8 @@ it) around each part:
 * --steps steps, and within them the calls of PARTS (entry resident set, peak within the
   call, resident set at its return; a call inside another counts for both).
 
-At the step's peak moment (the Brownian midpoint's GMRES solve, while the start's
-evaluation is alive) it sums the bytes of what the live solvers hold (`holdings`): the
+At the Brownian midpoint's GMRES solve (the start's evaluation and the midpoint's alive)
+it sums the bytes of what the live solvers hold (`holdings`): the
 spectral far field's real-space pair blocks, pair lists, window stencils, grids; the
 lubrication matrix rows and pair factors of the split resistance; the preconditioner's G
 pattern, its PETSc BAIJ matrix and incomplete factor (PETSc's count of their values); the
@@ -139,14 +139,15 @@ def holdings(solver):
     if isinstance(far, spectral.SpectralFarField):
         st = far._stencils
         out["far field: real-space pair blocks"] = _nbytes(far._blocks)   # None while released
-        out["far field: real-space pair indices, shifts and positions"] = _nbytes(far._pi, far._pj, far._shift,
-                                                                              far._positions)
+        out["far field: real-space pair indices, image indices and positions"] = _nbytes(
+            far._pi, far._pj, far._images, far._positions)
         out["far field: window stencils"] = _nbytes(*st.arrays())
         out["far field: k-space kernel"] = _nbytes(getattr(far, "_scale", None))
     else:
         out["far field: dense matrix"] = _nbytes(far.matrix)
-    lub = solver.lub
-    out["lubrication matrix (11x11 blocks, this rank's rows)"] = _nbytes(lub.data, lub.indices, lub.indptr)
+    lub = solver._lub  # None while released (`KrylovSolver.forces_drawn`; the property would compute it again)
+    out["lubrication matrix (11x11 blocks, this rank's rows)"] = (0 if lub is None else
+                                                                  _nbytes(lub.data, lub.indices, lub.indptr))
     if solver.lubricated is not None:
         out["lubrication pair list"] = _nbytes(*vars(solver.lubricated).values())
     out["lubrication pair factors (12x12, pairs touching this rank's rows)"] = _nbytes(*(solver.pair_factors or ()))

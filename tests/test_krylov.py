@@ -295,17 +295,19 @@ def test_long_waves_cut_the_lanczos_iterations(monkeypatch):
     assert iterations[0] < 0.85 * iterations[1], iterations
 
 
-@pytest.mark.parametrize("n", [20, 90])
-def test_long_wave_factor_with_unequal_radii(n):
+@pytest.mark.parametrize("n, chunk", [(20, 512), (90, 512), (90, 7)])
+def test_long_wave_factor_with_unequal_radii(n, chunk, monkeypatch):
     """P^T C P = I (krylov.LongWaveFactor against C built pair by pair) for radii 0.5-1.5
     in a sheared box, with fewer rows than long-wave columns (n = 20: 60 < 184) and more
-    (n = 90); P^T is the transpose of P. (Split over two ranks: krylov_check, in
+    (n = 90), V formed in one block of particles or in blocks of 7 (the last one short);
+    P^T is the transpose of P. (Split over two ranks: krylov_check, in
     test_agrees_with_dense_two_ranks.)"""
     from .krylov_check import long_wave_preconditioner
 
     from sdmpi.hydro.geometry import Lattice
     from sdmpi.hydro.krylov import LongWaveFactor
 
+    monkeypatch.setattr(LongWaveFactor, "CHUNK", chunk)
     rng = np.random.default_rng(n)
     lattice = Lattice(np.array([9.0, 8.0, 10.0]), 0.35)
     pos, radii = rng.uniform(0, 8, (n, 3)), rng.uniform(0.5, 1.5, n)
@@ -390,7 +392,11 @@ def test_step_draw_frees_the_pair_factors_before_the_midpoint(far_field, monkeyp
     the midpoint scheme has drawn the forces and before it builds the midpoint; its terms
     equal bit for bit those of a sample of the same noise drawn without freeing
     (`brownian_terms`), which keeps them for more draws, and so do the start's later
-    solves and stresslets (what was freed computed again)."""
+    solves and stresslets (what was freed computed again). (L is freed from
+    RELEASE_MIN_BYTES on: here from any size.)"""
+    from sdmpi.hydro import workspace
+
+    monkeypatch.setattr(workspace, "RELEASE_MIN_BYTES", 0)
     kt, dt, n = 6 * np.pi, 5e-4, len(CONFIG)
     model = ResistanceModel(np.ones(n), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=1e-4,
                             backend="petsc-krylov", tolerance=1e-8, scheme="midpoint", far_field=far_field)

@@ -226,7 +226,7 @@ def rank_check():
     return {"ranks": comm.size, "diff": float(np.abs(y - y1).max() / np.abs(y1).max()),
             "diff_single": float(np.abs(single - single1).max() / np.abs(single1).max()),
             "digest": hashlib.sha256(y.tobytes()).hexdigest(),
-            "own_indices": bool(far._pi.base is None and far._pj.base is None and far._shift.base is None),
+            "own_indices": bool(far._pi.base is None and far._pj.base is None and far._images.base is None),
             "released_same": bool(np.array_equal(far.matvec(x), y))}
 
 
@@ -264,6 +264,32 @@ def test_real_space_indices_are_32_bit_and_give_the_same_product():
     _pairs_product(pi, pj, far._blocks, x, wide)
     far.real_space(x, narrow)
     assert np.abs(wide).max() > 0 and np.array_equal(wide, narrow)
+
+
+@pytest.mark.parametrize("strain", [0.0, 0.3, -0.45])
+def test_blocks_from_image_indices_equal_those_of_the_pair_search_shifts(strain):
+    """The operator keeps each pair image's lattice indices (int8, `geometry.image_indices`)
+    instead of its shift: the shifts formed from them have the bits of `find_pairs`'s, so
+    every real-space block equals, bit for bit, the block at the pair search's own
+    separation x_j + shift - x_i (`farfield._pair_block`, one by one)."""
+    from sdmpi.hydro.basis import BASIS
+    from sdmpi.hydro.farfield import _cached_radial_table, _pair_block, _power_bounds
+    from sdmpi.hydro.geometry import find_pairs
+
+    pos, radii, box, _ = configuration(0.5, strain, True)
+    lattice = Lattice(box, strain)
+    far = SpectralFarField(pos, radii, lattice, tol=1e-6)  # double precision: every bit compared
+    wrapped = lattice.wrap(pos)
+    pi, pj, shift = find_pairs(wrapped, radii, lattice, far.params.rcut, 0.0)
+    assert far._images.dtype == np.int8 and len(np.unique(far._images, axis=0)) > 5
+    xi = far.params.xi
+    table = _cached_radial_table(xi)
+    bounds = _power_bounds(table)
+    for p in range(len(pi)):
+        block = np.zeros((11, 11))
+        rvec = wrapped[pi[p]] - wrapped[pj[p]] - shift[p]
+        _pair_block(rvec, radii[pi[p]], radii[pj[p]], table, bounds, xi, BASIS, np.empty(80), block)
+        assert np.array_equal(block, far._blocks[p]), p
 
 
 @pytest.mark.parametrize("tol", [1e-4, 1e-6])   # blocks in single, double precision

@@ -335,6 +335,43 @@ def _within(pos, radii, pi, pj, shift, reach_abs, reach_rel):
     return out_i, out_j, out_s
 
 
+def image_cell(lattice: Lattice) -> np.ndarray:
+    """(Lx, Ly, Lz, strain Ly): the numbers from which `find_pairs` forms a pair image's
+    shift n0 L1 + n1 L2 + n2 L3 = (n0 Lx + n1 strain Ly, n1 Ly, n2 Lz) (`_record`).
+
+    Args:
+        lattice: the periodic lattice.
+
+    Returns:
+        (4,) the cell numbers (length).
+    """
+    lx, ly, lz = lattice.box
+    return np.array([lx, ly, lz, lattice.strain * ly])
+
+
+def image_indices(shift: np.ndarray, lattice: Lattice) -> np.ndarray:
+    """The lattice indices (n0, n1, n2) of `find_pairs`'s shifts (P, 3), as int8: the shift
+    formed again from them and `image_cell` with `_record`'s arithmetic has the same bits
+    (3 bytes a pair image to keep instead of 24).
+
+    Args:
+        shift: (P, 3) shifts of pair images (length), from find_pairs on lattice.
+        lattice: the periodic lattice.
+
+    Returns:
+        (P, 3) int8 lattice indices.
+
+    Raises:
+        ValueError: an index outside int8's range (a cut-off of more than ~127 boxes).
+    """
+    cell = image_cell(lattice)
+    n1 = np.rint(shift[:, 1] / cell[1])
+    n = np.stack([np.rint((shift[:, 0] - n1 * cell[3]) / cell[0]), n1, np.rint(shift[:, 2] / cell[2])], axis=1)
+    if n.size and np.abs(n).max() > np.iinfo(np.int8).max:
+        raise ValueError(f"pair images up to {int(np.abs(n).max())} boxes away: more than int8 holds")
+    return n.astype(np.int8)
+
+
 def find_pairs(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None, reach_abs: float,
                reach_rel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs (i <= j) and lattice images within reach_abs + reach_rel (a_i + a_j):
@@ -361,8 +398,7 @@ def find_pairs(positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None
     if lattice is None:
         cell, periodic, counts = np.ones(4), False, None
     else:
-        lx, ly, lz = lattice.box
-        cell, periodic = np.array([lx, ly, lz, lattice.strain * ly]), True
+        cell, periodic = image_cell(lattice), True
         counts = _cell_counts(lattice, reach) if reach > 0 else None
     size = _expected_pairs(len(pos), lattice, reach)
     while True:  # a second scan only if the estimate was short

@@ -67,6 +67,8 @@ import numpy as np
 from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
 from .lubrication import lubrication_rows
+from . import workspace
+from .workspace import release_free_memory
 
 if TYPE_CHECKING:
     from .farfield import FarFieldPlan
@@ -263,14 +265,16 @@ class LongWaveFactor:
 
     U = Q W = V B, B = E s^-1/2 W (translational rows). Then F = P (P^T M P)^-1/2 z has
     covariance M^-1 (for any invertible P: P^T C P = I only makes it converge fast).
-    Each rank forms its particles' rows of V; the Gram matrix is summed over comm, and
-    rank 0's B and L are broadcast, so that all ranks use one basis. right (P x) and left
-    (P^T x) act on this rank's particles p0..p1 (11 per particle) and sum over the ranks
-    of comm. In unbounded fluid (lattice None), or with LONG_WAVES = 0, P = D^-1/2."""
+    Each rank forms its particles' rows of V (by blocks of particles, twice, never all at
+    once); the Gram matrix is summed over comm, and rank 0's B and L are broadcast, so
+    that all ranks use one basis. right (P x) and left (P^T x) act on this rank's
+    particles p0..p1 (11 per particle) and sum over the ranks of comm. In unbounded fluid (lattice None), or with LONG_WAVES = 0, P = D^-1/2."""
 
     #: Gram eigenvalues below this fraction of the largest are dropped (V is rank-deficient
     #: with fewer rows than columns; P^T C P = I to 2e-15 measured also then, N = 5-90)
     GRAM_CUTOFF = 1e-13
+    #: particles per block of V's rows (~2 MB of V at a time)
+    CHUNK = 512
 
     def __init__(self, positions: np.ndarray, radii: np.ndarray, lattice: Lattice | None, p0: int, p1: int,
                  comm: Any = None) -> None:
@@ -282,17 +286,27 @@ class LongWaveFactor:
         if len(k) == 0:
             return
         k_norm = np.linalg.norm(k, axis=1)
-        a = radii[p0:p1]
-        phase = positions[p0:p1] @ k.T  # (n, m)
-        # j0(k a) times D^-1/2 on the translational rows (sqrt(6 pi a), as in d_root)
-        amplitude = np.sinc(np.outer(a, k_norm) / np.pi) * self.d_root.reshape(-1, NDOF)[:, :1]
         axis = np.eye(3)[np.argmin(np.abs(k), axis=1)]  # polarisations e1, e2 orthogonal to k
         e1 = np.cross(k, axis)
         e1 /= np.linalg.norm(e1, axis=1)[:, None]
         e2 = np.cross(k / k_norm[:, None], e1)
-        v = np.stack([amplitude[:, None, :] * trig(phase)[:, None, :] * e.T[None]
-                      for trig in (np.cos, np.sin) for e in (e1, e2)], -1).reshape(3 * len(a), 4 * len(k))
-        gram = _rank_sum(comm, v.T @ v)  # columns (wave, 4)
+        root = self.d_root.reshape(-1, NDOF)[:, 0]
+
+        def rows(chunk):  # V's translational rows (3 n, 4m) of this rank's particles p0 + chunk
+            phase = positions[p0:p1][chunk] @ k.T  # (n, m)
+            # j0(k a) times D^-1/2 on the translational rows (sqrt(6 pi a), as in d_root)
+            amplitude = np.sinc(np.outer(radii[p0:p1][chunk], k_norm) / np.pi) * root[chunk, None]
+            return np.stack([amplitude[:, None, :] * trig(phase)[:, None, :] * e.T[None]
+                             for trig in (np.cos, np.sin) for e in (e1, e2)], -1).reshape(-1, 4 * len(k))
+
+        # V by blocks of particles, formed twice (for its Gram matrix, then for U = V B)
+        # rather than held: U's rows alone stay (N = 10 000, 2 ranks: 22 MB a rank)
+        chunks = [slice(c, c + self.CHUNK) for c in range(0, p1 - p0, self.CHUNK)]
+        gram = np.zeros((4 * len(k), 4 * len(k)))  # columns (wave, 4)
+        for chunk in chunks:
+            block = rows(chunk)
+            gram += block.T @ block
+        gram = _rank_sum(comm, gram)
         weights = np.repeat(2.0 / (lattice.volume * k_norm ** 2), 4)
         shared = None
         if comm is None or comm.rank == 0:
@@ -305,7 +319,9 @@ class LongWaveFactor:
         if comm is not None and comm.size > 1:
             shared = comm.bcast(shared, root=0)
         basis, lam = shared
-        self.u = v @ basis
+        self.u = np.empty((3 * (p1 - p0), basis.shape[1]))
+        for chunk in chunks:
+            self.u[3 * chunk.start:3 * min(chunk.stop, p1 - p0)] = rows(chunk) @ basis
         self.c = (1.0 + np.maximum(lam, 0.0)) ** -0.5 - 1.0
 
     def _x_root(self, x):
@@ -624,6 +640,7 @@ class KrylovSolver(SolverBackend):
         self.ksp.setGMRESRestart(GMRES_RESTART)
         self._mobility_ksp = None
         self._last = None  # (velocities, einf, lambda rows) of the last solve
+        release_free_memory()  # the set-up's temporaries, before the solves allocate theirs
 
     def destroy(self) -> None:
         """Frees the PETSc objects now (otherwise when the solver is garbage collected:
@@ -755,16 +772,21 @@ class KrylovSolver(SolverBackend):
         Brownian forces alone use (`brownian_forces` then refuses); and what the next solve
         computes again, the same bits: the spectral far field's real-space blocks
         (`spectral.SpectralFarField.release_real_space`), this rank's rows of the
-        lubrication matrix L and its PETSc copy L_uu (`lub`, `_rigid_lubrication`). The
-        step's start would otherwise hold them through the Brownian midpoint's set-up and
-        solve (at N = 10 000 on 2 ranks ~0.45 GiB per rank)."""
+        lubrication matrix L and its PETSc copy L_uu (`lub`, `_rigid_lubrication`; where
+        they exceed `workspace.RELEASE_MIN_BYTES`: smaller ones cost more time, ~1% of a
+        step at N = 1000, than they hold). The step's start would otherwise hold them
+        through the Brownian midpoint's set-up and solve (at N = 10 000 on 2 ranks ~0.45 GiB
+        per rank), and the allocator hands what they held back to the system
+        (`workspace.release_free_memory`)."""
         self.pair_factors = self._resistance.pair_factors = None
         self.far.release_real_space()
-        if self.lubricated is not None:  # (without lubrication L is its diagonal: kept)
+        # (without lubrication L is its diagonal: kept)
+        if self.lubricated is not None and self._lub.data.nbytes > workspace.RELEASE_MIN_BYTES:
             self._lub = self._resistance.lubrication = None
             for name in ("l_uu", "u_in", "u_out"):
                 getattr(self, name).destroy()
                 setattr(self, name, None)
+        release_free_memory()
 
     def _baij(self, csr, comm):
         """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this

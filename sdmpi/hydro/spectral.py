@@ -61,7 +61,7 @@ except ImportError:  # a scipy without it: the public functions (same numbers, a
 from .basis import BASIS
 from .farfield import (NDOF, _cached_radial_table, _pair_block, _power_bounds, _truncation_parameter,
                        self_mobility)
-from .geometry import Lattice, find_pairs
+from .geometry import Lattice, find_pairs, image_cell, image_indices
 from .workspace import work_array
 
 
@@ -138,18 +138,22 @@ SINGLE_PRECISION_TOL = 1e-5
 
 
 @numba.njit(cache=True)
-def _pair_blocks(pos, radii, pi, pj, shift, table, xi, basis, blocks):
+def _pair_blocks(pos, radii, pi, pj, images, cell, table, xi, basis, blocks):
     """blocks[p] = 11x11 real-space block of pair image p (receiver pi, source pj at
     separation x_pj + shift - x_pi), as in `farfield._real_space_sum`, computed in double
-    precision and stored in blocks' precision."""
+    precision and stored in blocks' precision. The shift n0 L1 + n1 L2 + n2 L3 from the
+    image's lattice indices images[p] and `geometry.image_cell`'s numbers, formed as
+    `geometry.find_pairs` forms it (the same bits)."""
     bounds = _power_bounds(table)
     work = np.empty(80)
     rvec = np.empty(3)
     block = np.empty((NDOF, NDOF))
     for p in range(pi.shape[0]):
         i, j = pi[p], pj[p]
-        for c in range(3):
-            rvec[c] = pos[i, c] - pos[j, c] - shift[p, c]
+        n0, n1, n2 = images[p, 0], images[p, 1], images[p, 2]
+        rvec[0] = pos[i, 0] - pos[j, 0] - (n0 * cell[0] + n1 * cell[3])
+        rvec[1] = pos[i, 1] - pos[j, 1] - n1 * cell[1]
+        rvec[2] = pos[i, 2] - pos[j, 2] - n2 * cell[2]
         block[:, :] = 0.0
         _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, block)
         for a in range(NDOF):
@@ -590,8 +594,9 @@ class SpectralFarField:
             pi, pj, shift = (a[bounds[rank]:bounds[rank + 1]] for a in (pi, pj, shift))
         # 32-bit copies (not views of all ranks' images): the product streams them with the blocks
         self._pi, self._pj = pi.astype(np.int32), pj.astype(np.int32)
-        # to compute the blocks again: the wrapped positions (a fresh array) and an own copy of the shifts
-        self._positions, self._shift = pos, np.array(shift)
+        # to compute the blocks again: the wrapped positions (a fresh array) and the pair
+        # images' lattice indices (int8, 3 bytes an image; geometry.image_indices)
+        self._positions, self._images, self._cell = pos, image_indices(shift, lattice), image_cell(lattice)
         self._blocks = self._computed_blocks()
 
     def _computed_blocks(self) -> np.ndarray:
@@ -599,8 +604,8 @@ class SpectralFarField:
         precision from `SINGLE_PRECISION_TOL` on."""
         blocks = np.empty((len(self._pi), NDOF, NDOF), dtype=self._precision)
         xi = self.params.xi
-        _pair_blocks(self._positions, self._radii, self._pi, self._pj, self._shift, _cached_radial_table(xi),
-                     xi, BASIS, blocks)
+        _pair_blocks(self._positions, self._radii, self._pi, self._pj, self._images, self._cell,
+                     _cached_radial_table(xi), xi, BASIS, blocks)
         return blocks
 
     def release_real_space(self) -> None:
