@@ -6,8 +6,8 @@ per (backend, N, ranks, tolerances)) and the log-log cost plot to bench/krylov_c
 Per run: one realisation of the demo job (oscillatory shear, Brownian, phi = 0.45,
 N spheres, dt = 5e-4 t_D; solver.tolerance, solver.lanczos_tolerance and
 hydrodynamics.ewald_tolerance from --tolerance (1e-8), --lanczos-tolerance (= --tolerance)
-and --ewald-tolerance (1e-6); far field by N as in `krylov`: dense below 400 particles,
-spectral from there on), one warm-up step (numba compilation, PETSc set-up), then
+and --ewald-tolerance (1e-6); far field by N as in `krylov`: dense below
+`krylov.DENSE_FAR_FIELD_MAX_N` particles, spectral from there on), one warm-up step (numba compilation, PETSc set-up), then
 `--steps` timed steps. Recorded: wall time per step (max over ranks), Krylov and Lanczos
 iterations per step, peak resident memory summed over the ranks (ru_maxrss), the
 far-field operator used, a 297 x 297 LAPACK Cholesky timed on every rank before and
