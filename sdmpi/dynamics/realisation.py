@@ -44,7 +44,6 @@ import numpy as np
 from ..hydro.basis import to_five
 from ..hydro.farfield import FarFieldIndefinite
 from ..hydro.geometry import Lattice
-from ..hydro.workspace import release_free_memory
 from .collisions import Collisions, separate
 from .forces import ForceTerms
 from .integrators import Motion, Step
@@ -230,7 +229,6 @@ class Realisation:
         t0, t1 = k * self.dt, (k + 1) * self.dt
         strain, rate = self.protocol.strain(t0), self.protocol.rate(t0)
         step_rate = self.integrator.disturbance_rate(t0, t1)
-        release_free_memory()  # what the last step's evaluation held, before this one is built
         pos, started = self._start(strain, Lattice(self.box, strain))
         if self.geometry.stops(k, started.deepest, self.task.task_id):
             self.step += 1
@@ -247,7 +245,6 @@ class Realisation:
         stress_b, midpoint_overlaps, noise = np.zeros(6), 0, np.zeros((n, 6))
         if self.kT > 0:
             brownian = at.brownian(self.rng, self.kT, self.dt)
-            release_free_memory()  # what the Brownian midpoint held, before the collision solves
             noise = brownian.velocities
             stress_b = bulk_stress(brownian.stresslets, self.volume)
             midpoint_overlaps = brownian.midpoint_overlaps

@@ -68,7 +68,6 @@ from .backend import SolverBackend
 from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
 from .lubrication import lubrication_rows
 from . import workspace
-from .workspace import release_free_memory
 
 if TYPE_CHECKING:
     from .farfield import FarFieldPlan
@@ -268,7 +267,8 @@ class LongWaveFactor:
     Each rank forms its particles' rows of V (by blocks of particles, twice, never all at
     once); the Gram matrix is summed over comm, and rank 0's B and L are broadcast, so
     that all ranks use one basis. right (P x) and left (P^T x) act on this rank's
-    particles p0..p1 (11 per particle) and sum over the ranks of comm. In unbounded fluid (lattice None), or with LONG_WAVES = 0, P = D^-1/2."""
+    particles p0..p1 (11 per particle) and sum over the ranks of comm. In unbounded
+    fluid (lattice None), or with LONG_WAVES = 0, P = D^-1/2."""
 
     #: Gram eigenvalues below this fraction of the largest are dropped (V is rank-deficient
     #: with fewer rows than columns; P^T C P = I to 2e-15 measured also then, N = 5-90)
@@ -640,7 +640,7 @@ class KrylovSolver(SolverBackend):
         self.ksp.setGMRESRestart(GMRES_RESTART)
         self._mobility_ksp = None
         self._last = None  # (velocities, einf, lambda rows) of the last solve
-        release_free_memory()  # the set-up's temporaries, before the solves allocate theirs
+        workspace.release_free_memory()  # the set-up's temporaries, before the solves allocate theirs
 
     def destroy(self) -> None:
         """Frees the PETSc objects now (otherwise when the solver is garbage collected:
@@ -667,6 +667,7 @@ class KrylovSolver(SolverBackend):
         computed again from the resistance's pairs after `forces_drawn` freed them
         (`lubrication.lubrication_rows`: the same bits)."""
         if self._lub is None:
+            workspace.release_free_memory()  # what solvers that have gone held (the midpoint's)
             r = self._resistance
             self._lub = r.lubrication = lubrication_rows(r.positions, r.radii, self.lubricated, (self.p0, self.p1))[0]
         return self._lub
@@ -786,7 +787,7 @@ class KrylovSolver(SolverBackend):
             for name in ("l_uu", "u_in", "u_out"):
                 getattr(self, name).destroy()
                 setattr(self, name, None)
-        release_free_memory()
+        workspace.release_free_memory()
 
     def _baij(self, csr, comm):
         """A PETSc BAIJ matrix (6x6 blocks, PETSc's block kernels) of 6N columns from this

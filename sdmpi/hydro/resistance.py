@@ -37,6 +37,7 @@ from .geometry import Lattice, pairs_in_reach
 from .krylov import DenseFarField, far_field_operator, particle_ranges
 from .lubrication import (DEFAULT_CUTOFF, DEFAULT_MIN_GAP, PairList, close_pairs, lubrication_partitions,
                           lubrication_product, lubrication_reach, lubrication_rows)
+from .workspace import release_free_memory
 
 #: M_inf's block inversion runs in single precision for Ewald sums from this tolerance on
 #: (its rounding, ~1e-6 of S^-1 at N = 27-343, stays below a tenth of the tolerance; LAPACK's
@@ -645,6 +646,7 @@ def split_resistance(positions: np.ndarray, radii: np.ndarray, box: np.ndarray |
     Returns:
         The matrix-free resistance (Stokes units, viscosity 1).
     """
+    release_free_memory()  # what resistances and solvers that have gone held (the last step's)
     radii = np.asarray(radii, dtype=float)
     lattice, pos, pairs, plan = _pairs_and_plan(positions, radii, box, strain, lubrication, cutoff,
                                                 min_gap, max_overlap, plan)

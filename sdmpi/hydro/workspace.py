@@ -74,7 +74,7 @@ def release_free_memory() -> int:
     preconditioner arrays of a solver that has gone) for later allocations, so the
     resident set would otherwise stay at the largest set-up's level while the next one is
     built beside it. Costs ~10-20 ms per 0.4 GB returned, plus the page faults of later
-    allocations (a step of petsc-krylov calls it 5 times; at N = 1000 the free heap, 35-50
+    allocations (a step of petsc-krylov calls it 5-6 times; at N = 1000 the free heap, 35-50
     MiB, stays below the threshold and nothing is handed back).
 
     Returns:
