@@ -384,6 +384,41 @@ def test_midpoint_brownian_stress_reuses_the_start_solve():
         assert np.abs(loose - tight).max() < 1.5e-4 * np.abs(tight).max()
 
 
+def test_single_precision_spectral_far_field_keeps_the_brownian_step(monkeypatch):
+    """The spectral far field in single precision (blocks and grids, from
+    spectral.SINGLE_PRECISION_TOL: here Ewald tolerance 1e-5) against the same operator
+    in double, on a stored configuration (27 spheres, phi = 0.5, near-contact pairs), the
+    solves at 1e-10: the velocities and stresslets of the imposed flow and the midpoint
+    drift and Brownian stresslets of 4 noise samples agree to 1e-5 relative, a tenth of
+    the Ewald tolerance (measured: velocities 1.5e-7, stresslets 5e-8, Brownian velocities
+    2e-7, Brownian stresslets, a difference of two solves, 1.4-2.7e-6)."""
+    from .petsc_check import STRAIN, configuration
+
+    from sdmpi.hydro import spectral
+
+    pos, side = configuration(0.5, 1)
+    n, kt, dt = len(pos), 6 * np.pi, 5e-4
+    einf = np.tile([1.0, 0.0, 0.0, 0.0, 0.0], (n, 1))
+    results = []
+    for single_from in (1e-5, 1.0):   # single, double precision
+        monkeypatch.setattr(spectral, "SINGLE_PRECISION_TOL", single_from)
+        model = ResistanceModel(np.ones(n), np.full(3, side), lubrication=True, ewald_tol=1e-5, cutoff=2.0,
+                                min_gap=1e-4, backend="petsc-krylov", tolerance=1e-10, scheme="midpoint",
+                                far_field="spectral")
+        rng = np.random.default_rng(12)
+        out = []
+        for _ in range(4):
+            at = model.at(pos, STRAIN)
+            assert at.solver.far._precision == (np.float32 if single_from < 1 else np.float64)
+            u = at.velocities(np.zeros((n, 6)), einf)
+            out += [u, at.stresslets(u, einf)]
+            terms = at.brownian(rng, kt, dt)
+            out += [terms.velocities, terms.stresslets]
+        results.append(out)
+    for single, double in zip(*results):
+        assert np.linalg.norm(single - double) < 1e-5 * np.linalg.norm(double)
+
+
 @pytest.mark.parametrize("far_field", ["dense", "spectral"])
 def test_step_draw_frees_the_pair_factors_before_the_midpoint(far_field, monkeypatch):
     """The step's draw (`ResistanceEvaluation.brownian`, the evaluation's last) frees the
