@@ -20,8 +20,9 @@ self blocks divided by `self_resistance_scale(phi)`, weighted by
     y = G^-1 (g - P_u D^-1 f),   x = D^-1 (f + P_u^T y),   G = L_uu + P_u D^-1 P_u^T,
 
 G applied through a block incomplete factor with FILL_LEVELS levels of fill, keeping the
-lubrication coupling of pairs closer than PRECONDITIONER_MAX_GAP, computed by every rank
-for itself (iteration counts independent of the rank count); the Brownian midpoint's
+lubrication coupling of pairs closer than PRECONDITIONER_MAX_GAP, held and applied by
+rank 0 of the communicator (g gathered there, G^-1 g scattered back: the factor of the
+whole G, so the iteration counts do not depend on the rank count); the Brownian midpoint's
 solver takes over the start's factor (`take_preconditioner`).
 
 Brownian forces with covariance R_FU = P_u M^-1 P_u^T + L_uu, without a dense root:
@@ -81,8 +82,10 @@ LANCZOS_MAX_ITERATIONS = 500
 #: GMRES restart length
 GMRES_RESTART = 200
 #: the preconditioner's solve with G: an incomplete factor with FILL_LEVELS levels of fill
-#: of the whole G, computed by every rank for itself (sequential PETSc: the iteration
-#: counts do not depend on the split; no gather of G), on the pattern of G's full 6x6
+#: of the whole G, on rank 0 of the communicator alone (sequential PETSc: the iteration
+#: counts do not depend on the split; the other ranks, which would compute the same
+#: numbers, keep its memory, 0.13 GiB at N = 10 000, for their real-space blocks), on the
+#: pattern of G's full 6x6
 #: blocks (zeros inside the blocks kept: ICC(0) on the pattern of the nonzero entries alone
 #: stalls). Block ILU on BAIJ (block size 6) gives the factor of ICC on the AIJ matrix
 #: with full blocks, in PETSc's block kernels, storing L and U. Equal while no pivot needs
@@ -193,25 +196,28 @@ def particle_ranges(n: int, size: int) -> np.ndarray:
     return np.linspace(0, n, size + 1).round().astype(int)
 
 
-def allgather_rows(comm: Any, local: np.ndarray) -> np.ndarray:
+def gather_rows(comm: Any, local: np.ndarray, root: int = 0) -> np.ndarray | None:
     """The arrays local of the ranks of comm stacked along their first axis in rank order
-    (None or one rank: local itself); the other axes and the dtype as local's, equal on
-    every rank. Collective.
+    on rank root, None on the others (None or one rank: local itself); the other axes and
+    the dtype as local's, equal on every rank. Collective.
 
     Args:
         comm: the MPI communicator, or None.
         local: this rank's array (m, ...).
+        root: the rank that receives them.
 
     Returns:
-        (sum of m, ...) every rank's rows.
+        On root (sum of m, ...) every rank's rows; None elsewhere.
     """
     local = np.ascontiguousarray(local)
     if comm is None or comm.size == 1:
         return local
-    counts = np.array(comm.allgather(local.shape[0]))
-    out = np.empty((counts.sum(), *local.shape[1:]), dtype=local.dtype)
+    counts = comm.gather(local.shape[0], root=root)
     width = int(np.prod(local.shape[1:], dtype=np.int64))
-    comm.Allgatherv(local.reshape(-1), [out.reshape(-1), counts * width])
+    out = None
+    if comm.rank == root:
+        out = np.empty((sum(counts), *local.shape[1:]), dtype=local.dtype)
+    comm.Gatherv(local.reshape(-1), None if out is None else [out.reshape(-1), np.array(counts) * width], root=root)
     return out
 
 
@@ -628,9 +634,11 @@ class KrylovSolver(SolverBackend):
         self._g_pattern = (lub.indptr, lub.indices, block_rows)
         self._g_keep = (lub.indices == block_rows) | _near_blocks(resistance.pairs, block_rows, lub.indices, n)
         # G as a sequential PETSc matrix, its incomplete factor (the KSP `inner`) and work
-        # vectors: built at the first preconditioner application, or taken over from a
-        # solver of the same pattern (take_preconditioner)
+        # vectors, on rank 0 (None on the others): built at the first preconditioner
+        # application, or taken over from a solver of the same pattern
+        # (take_preconditioner); _g_ready: whether they are there (on every rank)
         self.schur = self.inner = self._g_in = self._g_out = None
+        self._g_ready = False
 
         m = NDOF * n + 6 * n
         ml = self.nl11 + 6 * nl
@@ -681,14 +689,14 @@ class KrylovSolver(SolverBackend):
             self.l_uu = self._baij(_block_csr(lub.indptr, lub.indices, lub.data[:, :6, :6]), self.comm)
             self.u_in, self.u_out = self.l_uu.createVecs()
 
-    def schur_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """G (6N x 6N) in blocked CSR (`_block_csr`): its kept blocks (_g_keep) of L_uu +
-        D_uu^-1, every rank's block rows gathered in order, columns sorted within each (as
-        lubrication_sparse stores them). Collective.
+    def schur_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """G (6N x 6N) in blocked CSR (`_block_csr`) on rank 0: its kept blocks (_g_keep) of
+        L_uu + D_uu^-1, every rank's block rows gathered in order, columns sorted within
+        each (as lubrication_sparse stores them). Collective.
 
         Returns:
-            Block row pointers (N + 1,) int32, block columns (nb,) int32, and the
-            blocks (36 nb,) row-major.
+            On rank 0 block row pointers (N + 1,) int32, block columns (nb,) int32, and
+            the blocks (36 nb,) row-major; None on the other ranks.
         """
         _, cols, rows = self._g_pattern
         keep = self._g_keep
@@ -696,28 +704,33 @@ class KrylovSolver(SolverBackend):
         blocks = self.lub.data[keep, :6, :6]  # a copy
         diagonal = cols == rows
         blocks[diagonal] += self.d_inv[rows[diagonal] - self.p0, :6, :6]
-        per_row = allgather_rows(self.comm, np.bincount(rows - self.p0, minlength=self.p1 - self.p0))
-        indptr = np.concatenate([[0], np.cumsum(per_row)])
-        return _block_csr(indptr, allgather_rows(self.comm, cols), allgather_rows(self.comm, blocks))
+        per_row, cols, blocks = (gather_rows(self.comm, a) for a in
+                                 (np.bincount(rows - self.p0, minlength=self.p1 - self.p0), cols, blocks))
+        if per_row is None:
+            return None
+        return _block_csr(np.concatenate([[0], np.cumsum(per_row)]), cols, blocks)
 
     def schur_solver(self) -> Any:
-        """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on this
-        rank alone, built on first use.
+        """The KSP applying the incomplete factor of the whole G (INNER_OPTIONS) on rank 0
+        alone, built on first use. Collective.
 
         Returns:
-            The PETSc KSP (sequential) of G.
+            On rank 0 the PETSc KSP (sequential) of G; None on the other ranks.
         """
-        if self.inner is None:
-            PETSc = self._PETSc
-            self.schur = self._baij(self.schur_blocks(), PETSc.COMM_SELF)
-            self.inner = PETSc.KSP().create(comm=PETSc.COMM_SELF)
-            self.inner.setOperators(self.schur)
-            self.inner.setOptionsPrefix(OPTIONS_PREFIX)
-            options = PETSc.Options(OPTIONS_PREFIX)
-            for key, value in INNER_OPTIONS.items():
-                options.setValue(key, value)
-            self.inner.setFromOptions()
-        if self._g_in is None:
+        if not self._g_ready:
+            csr = self.schur_blocks()
+            if csr is not None:
+                PETSc = self._PETSc
+                self.schur = self._baij(csr, PETSc.COMM_SELF)
+                self.inner = PETSc.KSP().create(comm=PETSc.COMM_SELF)
+                self.inner.setOperators(self.schur)
+                self.inner.setOptionsPrefix(OPTIONS_PREFIX)
+                options = PETSc.Options(OPTIONS_PREFIX)
+                for key, value in INNER_OPTIONS.items():
+                    options.setValue(key, value)
+                self.inner.setFromOptions()
+            self._g_ready = True
+        if self.inner is not None and self._g_in is None:
             self._g_in, self._g_out = self.schur.createVecs()
         return self.inner
 
@@ -734,12 +747,18 @@ class KrylovSolver(SolverBackend):
             KrylovError: the incomplete factorisation failed.
         """
         inner = self.schur_solver()
-        self._g_in.setArray(self._gather(local, self.counts6))
-        inner.solve(self._g_in, self._g_out)
-        if inner.getConvergedReason() < 0:  # e.g. a zero pivot in the incomplete factor
+        g = self._gather_root(local, self.counts6)
+        reason, out = np.zeros(1, dtype=np.int64), None
+        if inner is not None:
+            self._g_in.setArray(g)
+            inner.solve(self._g_in, self._g_out)
+            reason[0], out = inner.getConvergedReason(), self._g_out.getArray(readonly=True)
+        if self.comm.size > 1:
+            self.comm.Bcast(reason, root=0)
+        if reason[0] < 0:  # e.g. a zero pivot in the incomplete factor
             raise KrylovError(f"petsc-krylov: the preconditioner's incomplete factor "
-                              f"failed (PETSc reason {inner.getConvergedReason()})")
-        return self._g_out.getArray(readonly=True)[6 * self.p0:6 * self.p1].copy()
+                              f"failed (PETSc reason {reason[0]})")
+        return self._scatter_root(out, self.counts6)
 
     def take_preconditioner(self, other: KrylovSolver) -> None:
         """Take over other's G matrix and factor when the lubrication has the same block
@@ -758,14 +777,17 @@ class KrylovSolver(SolverBackend):
         """
         mine, theirs = self._g_pattern, other._g_pattern
         same = all(self.comm.allgather(all(np.array_equal(a, b) for a, b in zip(mine, theirs))))
-        if self.inner is not None or other.inner is None or not same:
+        if self._g_ready or not other._g_ready or not same:
             return
         self._g_keep = other._g_keep
-        self.schur, self.inner = other.schur, other.inner
+        self.schur, self.inner = other.schur, other.inner  # (None but on rank 0)
         other.schur = other.inner = None
-        self.schur.zeroEntries()
-        self.schur.setValuesBlockedCSR(*self.schur_blocks())
-        self.schur.assemble()
+        other._g_ready, self._g_ready = False, True
+        csr = self.schur_blocks()
+        if csr is not None:
+            self.schur.zeroEntries()
+            self.schur.setValuesBlockedCSR(*csr)
+            self.schur.assemble()
 
     def forces_drawn(self) -> None:
         """Frees the lubrication pairs' factors C_p (12 x 12 doubles per pair touching this
@@ -818,6 +840,24 @@ class KrylovSolver(SolverBackend):
         full = np.empty(counts.sum())
         self.comm.Allgatherv(np.ascontiguousarray(local, dtype=float), [full, counts])
         return full
+
+    def _gather_root(self, local, counts):
+        """Every rank's part local (counts[r] values on rank r) joined in rank order on
+        rank 0; None on the others."""
+        if self.comm.size == 1:
+            return np.array(local, dtype=float)
+        full = np.empty(counts.sum()) if self.comm.rank == 0 else None
+        self.comm.Gatherv(np.ascontiguousarray(local, dtype=float), None if full is None else [full, counts],
+                          root=0)
+        return full
+
+    def _scatter_root(self, full, counts):
+        """This rank's part (counts[rank] values, in rank order) of rank 0's array full."""
+        if self.comm.size == 1:
+            return np.array(full, dtype=float)
+        part = np.empty(counts[self.comm.rank])
+        self.comm.Scatterv(None if full is None else [np.ascontiguousarray(full), counts], part, root=0)
+        return part
 
     def far_rows(self, lam_local: np.ndarray) -> np.ndarray:
         """This rank's rows of M lambda, from this rank's rows of lambda.
