@@ -114,6 +114,10 @@ FORMS_MAX_GAP = 0.005
 #: least this many times the sum of the two spheres' radii (2: one sphere diameter of
 #: space between unit spheres)
 FORMS_SEPARATION = 2.0
+#: forces (no imposed strain) within this relative distance of a combination of the force
+#: sums the last `mobility_forms` solved take the combination of their solutions instead
+#: of a solve (`KrylovSolver._combined`): rounding only (weights times unit pair forces)
+COMBINED_TOL = 1e-12
 #: the preconditioner's far-field self resistance grows with the volume fraction like
 #: (1 - phi)^-SELF_RESISTANCE_EXPONENT (self_resistance_scale)
 SELF_RESISTANCE_EXPONENT = 2.5
@@ -648,6 +652,7 @@ class KrylovSolver(SolverBackend):
         self.ksp.setGMRESRestart(GMRES_RESTART)
         self._mobility_ksp = None
         self._last = None  # (velocities, einf, lambda rows) of the last solve
+        self._forms = None  # (force sums (G, N, 6), velocities, lambda rows) of mobility_forms' solves
         workspace.release_free_memory()  # the set-up's temporaries, before the solves allocate theirs
 
     def destroy(self) -> None:
@@ -901,11 +906,18 @@ class KrylovSolver(SolverBackend):
     # ------------------------------------------------------------------ interface
 
     def velocities(self, forces: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'.
+        """forces (N, 6) = (F, L); einf (N, 5) -> (N, 6) velocities U', Omega'. Forces
+        without imposed strain that are a combination of the force sums the last
+        `mobility_forms` solved take that combination of their solutions (`_combined`),
+        other forces a GMRES solve.
 
         Raises:
             KrylovError: GMRES did not converge.
         """
+        if not np.any(einf):
+            combined = self._combined(forces)
+            if combined is not None:
+                return combined
         p0, p1 = self.p0, self.p1
         self._rigid_lubrication()
         v_e = self._generalized(np.zeros((self.n, 6)), einf)
@@ -956,10 +968,38 @@ class KrylovSolver(SolverBackend):
         """
         zero = np.zeros((self.n, 5))
         forms = np.zeros(len(forces))
+        sums, velocities, lams = [], [], []
         for group in self.form_groups(forces):
-            u = self.velocities(forces[group].sum(axis=0), zero)
+            sums.append(forces[group].sum(axis=0))
+            self._forms = None  # (each group solved afresh)
+            u = self.velocities(sums[-1], zero)
             forms[group] = [np.vdot(forces[p], u) for p in group]
+            velocities.append(u)
+            lams.append(self._last[2])
+        self._forms = (np.array(sums), np.array(velocities), np.array(lams)) if sums else None
         return forms
+
+    def _combined(self, forces: np.ndarray) -> np.ndarray | None:
+        """The velocities (N, 6) of ``forces`` (no imposed strain) as the combination
+        sum_g c_g u_g of the solutions u_g of the force sums b_g that the last
+        `mobility_forms` solved, where forces = sum_g c_g b_g to rounding (least squares
+        over the N x 6 entries, residual below COMBINED_TOL of |forces|); None otherwise.
+        The collision forces sum_p w_p f_p of pairs each solved alone (every group of
+        `form_groups` one pair: the collisions of a step far apart) are such a
+        combination, so that their velocities and stresslets (the combined lambda is kept
+        for `stresslets`) need no solve of their own. The combination's residual is at most
+        tol sum_g |c_g| |b_g|, within sqrt(G) tol |forces| for sums on disjoint spheres."""
+        if self._forms is None:
+            return None
+        sums, velocities, lams = self._forms
+        basis = sums.reshape(len(sums), -1).T
+        target = np.asarray(forces, dtype=float).ravel()
+        coefficients = np.linalg.lstsq(basis, target, rcond=None)[0]
+        if np.linalg.norm(basis @ coefficients - target) > COMBINED_TOL * np.linalg.norm(target):
+            return None
+        u = np.tensordot(coefficients, velocities, axes=1)
+        self._last = (u.copy(), np.zeros((self.n, 5)), np.tensordot(coefficients, lams, axes=1))
+        return u
 
     def form_groups(self, forces: np.ndarray) -> list[list[int]]:
         """The force sets (P, N, 6) that `mobility_forms` solves together: each set acting
