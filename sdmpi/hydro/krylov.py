@@ -984,9 +984,8 @@ class KrylovSolver(SolverBackend):
         sum_g c_g u_g of the solutions u_g of the force sums b_g that the last
         `mobility_forms` solved, where forces = sum_g c_g b_g to rounding (least squares
         over the N x 6 entries, residual below COMBINED_TOL of |forces|); None otherwise.
-        The collision forces sum_p w_p f_p of pairs each solved alone (every group of
-        `form_groups` one pair: the collisions of a step far apart) are such a
-        combination, so that their velocities and stresslets (the combined lambda is kept
+        The collision forces sum_p w_p f_p of pairs each solved alone (one corrected
+        pair, or each pair a group of `form_groups` of its own) are such a combination, so that their velocities and stresslets (the combined lambda is kept
         for `stresslets`) need no solve of their own. The combination's residual is at most
         tol sum_g |c_g| |b_g|, within sqrt(G) tol |forces| for sums on disjoint spheres."""
         if self._forms is None:
