@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sdmpi.analysis.reduce import reduce_runs
-from sdmpi.analysis.trust import OVERLAPS_PER_STEP_WARN, trust_rows, warnings_of
+from sdmpi.analysis.trust import OVERLAPS_PER_SPHERE_WARN, trust_rows, warnings_of
 from sdmpi.cli import main
 from sdmpi.config import enumerate_tasks, parse_job
 from .synthetic_run import write_run
@@ -55,7 +55,7 @@ def test_trust_report_equals_a_direct_count_on_a_small_run(tmp_path, capsys):
             # about a tenth of the steps below the 10% quantile
             assert abs(np.mean(gaps < float(row["min_gap_p10"])) - 0.1) <= 1 / len(gaps) + 0.01
             assert float(row["solver_iterations_per_step"]) == 0.0     # dense backend
-            if mids / steps > OVERLAPS_PER_STEP_WARN:
+            if mids / steps / job.system.n_particles > OVERLAPS_PER_SPHERE_WARN:
                 assert "docs/reduce.md#trust-report" in err
                 assert f"omega = {omega:.6g}: {mids / steps:.3g} overlapping pairs corrected " \
                     "per step at the Brownian midpoint" in err
@@ -150,5 +150,24 @@ def test_monolayer_overlaps_are_reported_as_kept():
            "min_gap_min": 0.0}
     for geometry, word in (("monolayer", "kept"), ("bulk", "corrected")):
         red = SimpleNamespace(columns=("phi", "rate"),
-                              job=SimpleNamespace(system=SimpleNamespace(geometry=geometry)))
+                              job=SimpleNamespace(system=SimpleNamespace(geometry=geometry, n_particles=27)))
         assert f"2 overlapping pairs {word} per step at the start" in warnings_of(red, [row])[0]
+
+
+def test_overlap_warning_is_per_sphere():
+    """The pairs near contact grow with N, and so the corrections per step of a given dt:
+    the warning compares the corrections per step and sphere with OVERLAPS_PER_SPHERE_WARN.
+    0.5 corrections per step warn at N = 27 (0.0185 per sphere), not at N = 1000 (5e-4);
+    4 per step at N = 1000 (4e-3) do."""
+    from types import SimpleNamespace
+
+    def warned(n, per_step):
+        red = SimpleNamespace(columns=("phi", "rate"),
+                              job=SimpleNamespace(system=SimpleNamespace(geometry="bulk", n_particles=n)))
+        row = {"phi": 0.45, "rate": 1.0, "overlaps_per_step": per_step,
+               "midpoint_overlaps_per_step": 0.0, "min_gap_min": 0.0}
+        return warnings_of(red, [row])
+
+    assert warned(27, 0.5) and not warned(1000, 0.5)
+    assert "(0.004 per sphere, above 0.00075)" in warned(1000, 4.0)[0]
+    assert not warned(27, 0.02)  # at the threshold: no warning

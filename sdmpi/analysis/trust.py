@@ -23,9 +23,10 @@ file (docs/store.md):
   too small near contact) shows as a rise towards the first shell.
 
 Fields that a file does not hold are NaN. Warnings are raised when the overlap
-corrections per step exceed :data:`OVERLAPS_PER_STEP_WARN` at the start or at the
-midpoint (the time step is too large for the closest pairs), or when the smallest gap is
-deeper than :data:`DEEP_OVERLAP` radii.
+corrections per step and sphere exceed :data:`OVERLAPS_PER_SPHERE_WARN` at the start or at
+the midpoint (the time step is too large for the closest pairs; the pairs near contact,
+and so the corrections of a given dt, grow in proportion to N), or when the smallest gap
+is deeper than :data:`DEEP_OVERLAP` radii.
 """
 
 from __future__ import annotations
@@ -37,8 +38,9 @@ import numpy as np
 
 from .tables import csv_value
 
-#: warn when more overlapping pairs than this are corrected per step (on average)
-OVERLAPS_PER_STEP_WARN = 0.02
+#: warn when more overlapping pairs than this are corrected per step and sphere (on
+#: average; 0.02 per step at N = 27)
+OVERLAPS_PER_SPHERE_WARN = 7.5e-4
 #: warn when a step starts with an overlap deeper than this (surface gap, radii)
 DEEP_OVERLAP = -0.05
 
@@ -150,13 +152,15 @@ def warnings_of(red, rows) -> list[str]:
     out = []
     # monolayers keep and count their overlaps (Dratler & Schowalter 1996), others correct them
     handled = "kept" if red.job.system.geometry == "monolayer" else "corrected"
+    n = red.job.system.n_particles
     for row in rows:
         where = f"phi = {row['phi']:g}, {red.columns[1]} = {row[red.columns[1]]:.6g}"
         for key, name in (("overlaps_per_step", "start"),
                           ("midpoint_overlaps_per_step", "Brownian midpoint")):
-            if row[key] > OVERLAPS_PER_STEP_WARN:
+            if row[key] / n > OVERLAPS_PER_SPHERE_WARN:
                 out.append(f"{where}: {row[key]:.3g} overlapping pairs {handled} per step at "
-                           f"the {name} (above {OVERLAPS_PER_STEP_WARN:g}): the time step is "
+                           f"the {name} ({row[key] / n:.3g} per sphere, above "
+                           f"{OVERLAPS_PER_SPHERE_WARN:g}): the time step is "
                            f"large for the closest pairs; if the moduli matter at this "
                            f"level, check them at a smaller dt (docs/reduce.md#trust-report)")
         if row["min_gap_min"] < DEEP_OVERLAP:
