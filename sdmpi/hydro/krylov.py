@@ -969,9 +969,9 @@ class KrylovSolver(SolverBackend):
         zero = np.zeros((self.n, 5))
         forms = np.zeros(len(forces))
         sums, velocities, lams = [], [], []
+        self._forms = None  # (each group solved afresh)
         for group in self.form_groups(forces):
             sums.append(forces[group].sum(axis=0))
-            self._forms = None  # (each group solved afresh)
             u = self.velocities(sums[-1], zero)
             forms[group] = [np.vdot(forces[p], u) for p in group]
             velocities.append(u)
@@ -985,8 +985,9 @@ class KrylovSolver(SolverBackend):
         `mobility_forms` solved, where forces = sum_g c_g b_g to rounding (least squares
         over the N x 6 entries, residual below COMBINED_TOL of |forces|); None otherwise.
         The collision forces sum_p w_p f_p of pairs each solved alone (one corrected
-        pair, or each pair a group of `form_groups` of its own) are such a combination, so that their velocities and stresslets (the combined lambda is kept
-        for `stresslets`) need no solve of their own. The combination's residual is at most
+        pair, or each pair a group of `form_groups` of its own) are such a combination, so
+        that their velocities and stresslets (the combined lambda is kept for
+        `stresslets`) need no solve of their own. The combination's residual is at most
         tol sum_g |c_g| |b_g|, within sqrt(G) tol |forces| for sums on disjoint spheres."""
         if self._forms is None:
             return None
