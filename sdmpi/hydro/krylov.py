@@ -589,13 +589,14 @@ class KrylovSolver(SolverBackend):
 
     def __init__(self, resistance: Any, comm: Any = None, tol: float = DEFAULT_TOL,
                  lanczos_tol: float | None = None) -> None:
-        from .petsc_dense import _keepalive, _mpi_comm, load_petsc
+        from .petsc_dense import _keepalive, _mpi_comm, collect_garbage, load_petsc
 
         PETSc = load_petsc()
         _LIVE.add(self)
         self._PETSc = PETSc
         self.comm = _mpi_comm(comm)
         _keepalive(PETSc, self.comm)
+        collect_garbage(PETSc, self.comm)
         self.tol = float(tol)
         self.lanczos_tol = self.tol if lanczos_tol is None else float(lanczos_tol)
         self.far = resistance.far
@@ -894,7 +895,10 @@ class KrylovSolver(SolverBackend):
                               f"iterations, tolerance {self.tol:g})")
         self.stats["iterations"] += ksp.getIterationNumber()
         self.stats["residual"] = max(self.stats["residual"], residual)
-        return x.getArray().copy()
+        solution = x.getArray().copy()
+        for vec in (b, x, pb):  # (collective: destroyed now rather than left to collect_garbage)
+            vec.destroy()
+        return solution
 
     @staticmethod
     def _generalized(velocities, einf):

@@ -141,6 +141,21 @@ def _mpi_comm(comm):
     return comm
 
 
+def collect_garbage(PETSc, comm):
+    """Destroy the PETSc objects on ``comm`` that Python has dropped. Collective.
+
+    On a communicator of several ranks petsc4py (3.18 on) does not destroy an object when
+    its Python wrapper is garbage collected, as the destroy is collective and Python may
+    collect in a different order on each rank: it keeps the object until
+    ``PETSc.garbage_cleanup(comm)``. Every solver calls this when it is built (each step
+    builds new ones), so that what earlier steps' solvers and solves dropped is freed
+    instead of accumulating for the whole run. Without it (older petsc4py) nothing is
+    deferred."""
+    cleanup = getattr(PETSc, "garbage_cleanup", None)
+    if cleanup is not None and comm.Get_size() > 1:
+        cleanup(comm)
+
+
 def _keepalive(PETSc, comm):
     """Hold one PETSc object per communicator so that PETSc's duplicated inner
     communicator and ScaLAPACK's BLACS grid, cached on it, outlive each solver."""
@@ -194,6 +209,7 @@ class PetscDenseSolver(SolverBackend):
                 f"this PETSc {info['version']} has: {have}. Use solver.backend = \"dense\"")
         self.comm = _mpi_comm(comm)
         _keepalive(PETSc, self.comm)
+        collect_garbage(PETSc, self.comm)
         self.n = n = resistance.n_particles
         self.noise_shape = (n, 6)
         m = 6 * n
