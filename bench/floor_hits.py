@@ -12,10 +12,13 @@ reach (NEAR_CONTACT_GAP) at the step's start, with c = kT G_p / h_p from the ste
 mobility. A ratio above 1 is the time-step error of the step near contact; it should fall
 towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hits.json.
 
-    python bench/floor_hits.py [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0] [--kappa-one]
+    python bench/floor_hits.py [--n 27] [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0]
+        [--kappa-one] [--backend petsc-krylov --tolerance 1e-4 --ewald-tolerance 1e-4]
 
 --kappa-one gives the near-contact correction the isolated pair's kappa = 1 for every pair
-(`near_contact_structure.use_kappa_one`, for comparison).
+(`near_contact_structure.use_kappa_one`, for comparison). --backend runs another solver
+backend (petsc-krylov: its midpoint scheme, without the near-contact correction), with the
+solver and Lanczos --tolerance and the far field's --ewald-tolerance.
 """
 
 import argparse
@@ -47,10 +50,12 @@ def exact_floor_probability(evaluation, kT, dt, min_gap):
     return float(ncx2.cdf(min_gap / half, 2, h0 / half).sum())
 
 
-def run(seed, n, phi, dt, relax, duration):
+def run(seed, n, phi, dt, relax, duration, backend=None, tolerance=None, ewald_tolerance=None):
     """Observed floor hits and the exact prediction per step, over `duration` t_D after
-    `relax` t_D of one run at rest."""
-    job = job_at_rest("stokesian", n, phi, 10 ** 7, dt, seed=seed)
+    `relax` t_D of one run at rest (backend, tolerance, ewald_tolerance None: the job
+    defaults)."""
+    job = job_at_rest("stokesian", n, phi, 10 ** 7, dt, seed=seed, backend=backend, tolerance=tolerance,
+                      ewald_tolerance=ewald_tolerance)
     real = Realisation(job, enumerate_tasks(job)[0])
     real.advance(int(round(relax / dt)))
     predicted = [0.0]
@@ -79,13 +84,18 @@ def main():
     parser.add_argument("--duration", type=float, default=2.0, help="t_D counted")
     parser.add_argument("--out", default=str(Path(__file__).with_name("floor_hits.json")))
     parser.add_argument("--kappa-one", action="store_true")
+    parser.add_argument("--backend", default=None)
+    parser.add_argument("--tolerance", type=float, default=None)
+    parser.add_argument("--ewald-tolerance", type=float, default=None)
     args = parser.parse_args()
     if args.kappa_one:
         use_kappa_one()
     for seed in args.seeds:
         start = time.perf_counter()
-        row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration)
+        row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration, args.backend, args.tolerance,
+                  args.ewald_tolerance)
         row["kappa"] = "1" if args.kappa_one else "the pair's own"
+        row["backend"] = args.backend or "dense"
         row["seconds"] = round(time.perf_counter() - start)
         print(json.dumps(row), flush=True)
         with open(args.out, "a") as out:

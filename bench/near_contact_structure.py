@@ -70,6 +70,7 @@ realisations = 1
 model = "{model}"
 {collisions}
 {ewald}
+{solver}
 """
 
 
@@ -106,12 +107,16 @@ def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
     return np.array(counts), np.array(etas)
 
 
-def job_at_rest(model, n, phi, steps, dt, collisions=None, ewald_tolerance=None, seed=11):
-    """The job of one run at rest (JOB; collisions, ewald_tolerance None: the defaults)."""
+def job_at_rest(model, n, phi, steps, dt, collisions=None, ewald_tolerance=None, seed=11, backend=None,
+                tolerance=None):
+    """The job of one run at rest (JOB; collisions, ewald_tolerance, backend, tolerance
+    (solver and Lanczos) None: the defaults)."""
     rule = f'collisions = "{collisions}"' if collisions else ""
     ewald = f"ewald_tolerance = {ewald_tolerance}" if ewald_tolerance else ""
+    solver = "[solver]\n" + (f'backend = "{backend}"\n' if backend else "") + (
+        f"tolerance = {tolerance}\nlanczos_tolerance = {tolerance}\n" if tolerance else "")
     return parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule,
-                                ewald=ewald))
+                                ewald=ewald, solver=solver))
 
 
 def use_kappa_one():

@@ -49,24 +49,30 @@ def test_krylov_job_too_big_for_memory(capsys):
                  "--set", "system.n_particles=10000000"]) == 0
     out = capsys.readouterr().out
     assert "WARNING: system.n_particles = 10000000: the job needs about" in out
-    assert "petsc-krylov solver: ~55 KiB per sphere on every rank of a task and 391 KiB" in out
+    assert "petsc-krylov solver: ~39 KiB per sphere on every rank of a task and 68 KiB" in out
 
 
 def test_krylov_memory_estimate_covers_the_measured_peaks():
-    """At every (job, N, ranks) of bench/krylov_shares.json the estimate per rank lies
-    at or above the largest peak resident memory measured on a rank (ru_maxrss), and
-    within 2.1 x of it (the estimate is linear in N, the base of 300 MiB generous: 1.06-1.13
-    x the two-rank peaks, 1.97-2.02 x the one-rank N = 1000 peaks of 0.36 GiB)."""
+    """At every (job, N, ranks) measured, the estimate per rank lies at or above the
+    largest peak resident memory of a rank, and within 1.6 x of it: bench/memory.json (the
+    peak within the parts of two steps, VmHWM) and the one-rank rows of
+    bench/krylov_shares.json (the process's ru_maxrss; its two-rank rows were measured
+    before the start's solver released what its Brownian forces alone need, and
+    bench/memory.json holds those sizes now). With the 300 MiB base the estimate is
+    1.06-1.22 x the peaks."""
     root = Path(__file__).parents[1]
-    rows = [r for r in json.loads((root / "bench" / "krylov_shares.json").read_text()).values()
-            if "peak_rss_gib_per_rank" in r]
-    assert {(r["n"], r["ranks"]) for r in rows} >= {(1000, 1), (1000, 2), (4096, 2)}
-    for row in rows:
+    rows = [(r, max(max(p["peak_gib"] for p in rank["parts"].values()) for rank in r["per_rank"]))
+            for r in json.loads((root / "bench" / "memory.json").read_text()).values()]
+    rows += [(r, max(r["peak_rss_gib_per_rank"]))
+             for r in json.loads((root / "bench" / "krylov_shares.json").read_text()).values()
+             if "peak_rss_gib_per_rank" in r and r["ranks"] == 1]
+    assert {(r["n"], r["ranks"]) for r, _ in rows} >= {(1000, 1), (1000, 2), (4096, 2), (10000, 2)}
+    for row, peak_gib in rows:
         job = load_job(str(root / row["job"]), row["overrides"])
         assert (job.system.n_particles, job.ensemble.ranks_per_task) == (row["n"], row["ranks"])
         need = resources.memory_per_rank(job, "petsc-krylov")
-        peak = max(row["peak_rss_gib_per_rank"]) * 2 ** 30
-        assert peak <= need <= 2.1 * peak, (row["n"], row["ranks"], need / peak)
+        peak = peak_gib * 2 ** 30
+        assert peak <= need <= 1.6 * peak, (row["n"], row["ranks"], need / peak)
 
 
 def test_free_draining_needs_no_dense_matrices(ensemble_job):
