@@ -2,19 +2,23 @@
 count over the run file's samples; warnings above the thresholds; committed samples only."""
 
 import csv
+import json
 import math
+from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
 from sdmpi.analysis.reduce import reduce_runs
-from sdmpi.analysis.trust import OVERLAPS_PER_SPHERE_WARN, trust_rows, warnings_of
+from sdmpi.analysis.trust import FLOOR_RATE, exact_floor_rate, overlap_threshold, trust_rows, warnings_of
 from sdmpi.cli import main
 from sdmpi.config import enumerate_tasks, parse_job
 from .synthetic_run import write_run
 from .test_reduce import MODULI, job_text
 from .tiny_runs import sdmpi_run
+
+ROOT = Path(__file__).parents[1]
 
 
 def read_csv(path):
@@ -55,7 +59,7 @@ def test_trust_report_equals_a_direct_count_on_a_small_run(tmp_path, capsys):
             # about a tenth of the steps below the 10% quantile
             assert abs(np.mean(gaps < float(row["min_gap_p10"])) - 0.1) <= 1 / len(gaps) + 0.01
             assert float(row["solver_iterations_per_step"]) == 0.0     # dense backend
-            if mids / steps / job.system.n_particles > OVERLAPS_PER_SPHERE_WARN:
+            if mids / steps / job.system.n_particles > overlap_threshold(job, float(row["phi"]))[0]:
                 assert "docs/reduce.md#trust-report" in err
                 assert f"omega = {omega:.6g}: {mids / steps:.3g} overlapping pairs corrected " \
                     "per step at the Brownian midpoint" in err
@@ -141,33 +145,63 @@ def test_group_labels_name_the_control_variable():
     assert group_labels(SimpleNamespace(columns=("phi", "rate")), rows) == ["φ = 0.3, γ̇ = 2"]
 
 
+def reduction_of(n, geometry="bulk", model="stokesian", lubrication=True, min_gap=1e-4):
+    """A stand-in for the reduction warnings_of reads: the job's geometry, N and
+    hydrodynamics."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(columns=("phi", "rate"), job=SimpleNamespace(
+        system=SimpleNamespace(geometry=geometry, n_particles=n),
+        hydrodynamics=SimpleNamespace(model=model, lubrication=lubrication, min_gap=min_gap)))
+
+
+def overlap_row(per_step, phi=0.45):
+    return {"phi": phi, "rate": 1.0, "overlaps_per_step": per_step, "midpoint_overlaps_per_step": 0.0,
+            "min_gap_min": 0.0}
+
+
 def test_monolayer_overlaps_are_reported_as_kept():
     """Monolayers keep and count their overlaps (Dratler & Schowalter 1996): the warning
     says so instead of "corrected"."""
-    from types import SimpleNamespace
-
-    row = {"phi": 0.6, "rate": 1.0, "overlaps_per_step": 2.0, "midpoint_overlaps_per_step": 0.0,
-           "min_gap_min": 0.0}
     for geometry, word in (("monolayer", "kept"), ("bulk", "corrected")):
-        red = SimpleNamespace(columns=("phi", "rate"),
-                              job=SimpleNamespace(system=SimpleNamespace(geometry=geometry, n_particles=27)))
-        assert f"2 overlapping pairs {word} per step at the start" in warnings_of(red, [row])[0]
+        red = reduction_of(27, geometry)
+        assert f"2 overlapping pairs {word} per step at the start" in warnings_of(red, [overlap_row(2.0, 0.6)])[0]
 
 
-def test_overlap_warning_is_per_sphere():
+def test_overlap_warning_without_lubrication_is_per_sphere():
     """The pairs near contact grow with N, and so the corrections per step of a given dt:
-    the warning compares the corrections per step and sphere with OVERLAPS_PER_SPHERE_WARN.
-    0.5 corrections per step warn at N = 27 (0.0185 per sphere), not at N = 1000 (5e-4);
-    4 per step at N = 1000 (4e-3) do."""
-    from types import SimpleNamespace
-
+    without lubrication the warning compares the corrections per step and sphere with
+    OVERLAPS_PER_SPHERE_WARN. 0.5 corrections per step warn at N = 27 (0.0185 per sphere),
+    not at N = 1000 (5e-4); 4 per step at N = 1000 (4e-3) do."""
     def warned(n, per_step):
-        red = SimpleNamespace(columns=("phi", "rate"),
-                              job=SimpleNamespace(system=SimpleNamespace(geometry="bulk", n_particles=n)))
-        row = {"phi": 0.45, "rate": 1.0, "overlaps_per_step": per_step,
-               "midpoint_overlaps_per_step": 0.0, "min_gap_min": 0.0}
-        return warnings_of(red, [row])
+        return warnings_of(reduction_of(n, model="free-draining", lubrication=False), [overlap_row(per_step)])
 
     assert warned(27, 0.5) and not warned(1000, 0.5)
     assert "(0.004 per sphere, above 0.00075)" in warned(1000, 4.0)[0]
     assert not warned(27, 0.02)  # at the threshold: no warning
+
+
+def test_overlap_warning_with_lubrication_against_the_exact_floor_rate():
+    """With lubrication the warning compares the corrections with what the exact
+    near-contact transition leaves below the floor (bench/floor_hits.json, phi = 0.45,
+    min_gap = 1e-4, dt = 5e-4: 1.2-1.4e-3 per step and sphere): the dense backend with the
+    near-contact correction (N = 125: 1.38e-3) passes, petsc-krylov without it (N = 125:
+    2.9e-3; N = 1000: 2.5e-3) and the correction with kappa = 1 (N = 27: 3.0-3.4e-3) warn.
+    The rate scales with phi g(2a) (Carnahan-Starling) and with the floor."""
+    rows = [json.loads(line) for line in (ROOT / "bench" / "floor_hits.json").read_text().splitlines()]
+    exact = [r["exact_per_step"] / r["n_particles"] for r in rows if r["dt"] == 5e-4]
+    assert min(exact) > FLOOR_RATE / 1.15 and max(exact) < FLOOR_RATE * 1.1
+
+    def warned(n, per_step, phi=0.45, min_gap=1e-4):
+        return warnings_of(reduction_of(n, min_gap=min_gap), [overlap_row(per_step, phi)])
+
+    for r in (r for r in rows if r["dt"] == 5e-4):  # (at dt = 2.5e-4 kappa = 1 is 1.4-1.5 x: under the bar)
+        resolved = r["kappa"] != "1" and r.get("backend", "dense") == "dense"
+        assert bool(warned(r["n_particles"], r["observed_per_step"])) is not resolved, r
+    assert warned(1000, 2.48)
+    assert "above 1.5 x the 0.0013 that exact near-contact dynamics take below the floor" in warned(1000, 2.48)[0]
+    assert exact_floor_rate(0.45, 1e-4) == pytest.approx(FLOOR_RATE)
+    # phi g(2a): 0.3 * 0.85 / 0.343 against 0.45 * 0.775 / 0.166375
+    assert exact_floor_rate(0.3, 1e-4) / FLOOR_RATE == pytest.approx((0.3 * 0.85 / 0.343) / (0.45 * 0.775 / 0.166375))
+    assert exact_floor_rate(0.45, 1e-5) == pytest.approx(FLOOR_RATE / 10)
+    assert warned(125, 0.172, min_gap=1e-5) and not warned(125, 0.172)

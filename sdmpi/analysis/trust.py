@@ -23,10 +23,21 @@ file (docs/store.md):
   too small near contact) shows as a rise towards the first shell.
 
 Fields that a file does not hold are NaN. Warnings are raised when the overlap
-corrections per step and sphere exceed :data:`OVERLAPS_PER_SPHERE_WARN` at the start or at
-the midpoint (the time step is too large for the closest pairs; the pairs near contact,
-and so the corrections of a given dt, grow in proportion to N), or when the smallest gap
-is deeper than :data:`DEEP_OVERLAP` radii.
+corrections per step and sphere at the start or at the midpoint exceed what the time step
+should leave (`overlap_threshold`; the pairs near contact, and so the corrections of a
+given dt, grow in proportion to N), or when the smallest gap is deeper than
+:data:`DEEP_OVERLAP` radii. With lubrication no pair reaches contact, but the exact
+near-contact dynamics (the squared Bessel transition of the gap, docs/numerics.md) still
+take pairs below the floor hydrodynamics.min_gap, where the overlap correction places
+them: at phi = 0.45 and min_gap = 1e-4, :data:`FLOOR_RATE` per step and sphere
+(bench/floor_hits.py: 1.2-1.4e-3 at dt = 5e-4, N = 27 and 125, 1.1-1.2e-3 at dt = 2.5e-4),
+with a step that resolves the closest pairs 1.0-1.1 times that (the dense backends with the
+near-contact correction) and 2.3-2.5 times with one that does not. The warning for
+lubricated bulk suspensions therefore fires above :data:`FLOOR_EXCESS_WARN` times that rate,
+scaled to the run's phi by the hard-sphere contact density phi g(2a) (Carnahan-Starling)
+and to its floor in proportion to min_gap (the pairs below the floor of a finite density
+of pairs near contact); other runs (no lubrication, monolayers) warn above
+:data:`OVERLAPS_PER_SPHERE_WARN`.
 """
 
 from __future__ import annotations
@@ -36,11 +47,18 @@ from pathlib import Path
 
 import numpy as np
 
+from ..registry import HYDRODYNAMIC_MODELS
 from .tables import csv_value
 
-#: warn when more overlapping pairs than this are corrected per step and sphere (on
-#: average; 0.02 per step at N = 27)
+#: without lubrication: warn when more overlapping pairs than this are corrected per step
+#: and sphere (on average; 0.02 per step at N = 27)
 OVERLAPS_PER_SPHERE_WARN = 7.5e-4
+#: pairs per step and sphere that the exact near-contact transition takes below the floor
+#: at phi = 0.45, hydrodynamics.min_gap = 1e-4, dt = 5e-4 (bench/floor_hits.json, module
+#: docstring)
+FLOOR_RATE, FLOOR_RATE_PHI, FLOOR_RATE_GAP = 1.3e-3, 0.45, 1e-4
+#: with lubrication: warn above this multiple of the exact rate at the run's phi and floor
+FLOOR_EXCESS_WARN = 1.5
 #: warn when a step starts with an overlap deeper than this (surface gap, radii)
 DEEP_OVERLAP = -0.05
 
@@ -147,6 +165,27 @@ def trust_rows(red) -> list[dict]:
     return rows
 
 
+def exact_floor_rate(phi: float, min_gap: float) -> float:
+    """Pairs per step and sphere that the exact near-contact dynamics of a lubricated
+    suspension take below the floor min_gap (radii): :data:`FLOOR_RATE` scaled by the
+    hard-sphere contact density phi g(2a), g(2a) = (1 - phi/2)/(1 - phi)^3
+    (Carnahan & Starling, J. Chem. Phys. 51, 635 (1969)), and by min_gap."""
+    def contact_density(p):
+        return p * (1 - p / 2) / (1 - p) ** 3
+    return FLOOR_RATE * contact_density(phi) / contact_density(FLOOR_RATE_PHI) * min_gap / FLOOR_RATE_GAP
+
+
+def overlap_threshold(job, phi: float) -> tuple[float, str]:
+    """The overlap corrections per step and sphere above which the trust report warns, and
+    what it is (module docstring)."""
+    hyd = job.hydrodynamics
+    if job.system.geometry == "bulk" and hyd.lubrication and HYDRODYNAMIC_MODELS[hyd.model].lubrication:
+        rate = exact_floor_rate(phi, hyd.min_gap)
+        return FLOOR_EXCESS_WARN * rate, (f"{FLOOR_EXCESS_WARN:g} x the {rate:.2g} that exact "
+                                          f"near-contact dynamics take below the floor")
+    return OVERLAPS_PER_SPHERE_WARN, f"{OVERLAPS_PER_SPHERE_WARN:g}"
+
+
 def warnings_of(red, rows) -> list[str]:
     """The threshold warnings of the trust report (module docstring)."""
     out = []
@@ -155,14 +194,15 @@ def warnings_of(red, rows) -> list[str]:
     n = red.job.system.n_particles
     for row in rows:
         where = f"phi = {row['phi']:g}, {red.columns[1]} = {row[red.columns[1]]:.6g}"
+        limit, what = overlap_threshold(red.job, row["phi"])
         for key, name in (("overlaps_per_step", "start"),
                           ("midpoint_overlaps_per_step", "Brownian midpoint")):
-            if row[key] / n > OVERLAPS_PER_SPHERE_WARN:
+            if row[key] / n > limit:
                 out.append(f"{where}: {row[key]:.3g} overlapping pairs {handled} per step at "
-                           f"the {name} ({row[key] / n:.3g} per sphere, above "
-                           f"{OVERLAPS_PER_SPHERE_WARN:g}): the time step is "
-                           f"large for the closest pairs; if the moduli matter at this "
-                           f"level, check them at a smaller dt (docs/reduce.md#trust-report)")
+                           f"the {name} ({row[key] / n:.3g} per sphere, above {what}): the "
+                           f"time step is large for the closest pairs; if the moduli matter "
+                           f"at this level, check them at a smaller dt "
+                           f"(docs/reduce.md#trust-report)")
         if row["min_gap_min"] < DEEP_OVERLAP:
             out.append(f"{where}: a step started with an overlap of {-row['min_gap_min']:.3g} "
                        f"radii (deeper than {-DEEP_OVERLAP:g})")
