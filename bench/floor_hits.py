@@ -14,11 +14,13 @@ towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hit
 
     python bench/floor_hits.py [--n 27] [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0]
         [--kappa-one] [--backend petsc-krylov --tolerance 1e-4 --ewald-tolerance 1e-4]
+        [--scheme midpoint] [--no-near-contact]
 
 --kappa-one gives the near-contact correction the isolated pair's kappa = 1 for every pair
 (`near_contact_structure.use_kappa_one`, for comparison). --backend runs another solver
 backend (petsc-krylov: its midpoint scheme, without the near-contact correction), with the
-solver and Lanczos --tolerance and the far field's --ewald-tolerance.
+solver and Lanczos --tolerance and the far field's --ewald-tolerance; --scheme another
+drift scheme; --no-near-contact leaves the near-contact correction out.
 """
 
 import argparse
@@ -50,13 +52,15 @@ def exact_floor_probability(evaluation, kT, dt, min_gap):
     return float(ncx2.cdf(min_gap / half, 2, h0 / half).sum())
 
 
-def run(seed, n, phi, dt, relax, duration, backend=None, tolerance=None, ewald_tolerance=None):
+def run(seed, n, phi, dt, relax, duration, backend=None, tolerance=None, ewald_tolerance=None, scheme=None,
+        near_contact=True):
     """Observed floor hits and the exact prediction per step, over `duration` t_D after
-    `relax` t_D of one run at rest (backend, tolerance, ewald_tolerance None: the job
-    defaults)."""
+    `relax` t_D of one run at rest (backend, tolerance, ewald_tolerance, scheme None: the
+    job defaults; near_contact False: without the near-contact correction)."""
     job = job_at_rest("stokesian", n, phi, 10 ** 7, dt, seed=seed, backend=backend, tolerance=tolerance,
-                      ewald_tolerance=ewald_tolerance)
+                      ewald_tolerance=ewald_tolerance, scheme=scheme)
     real = Realisation(job, enumerate_tasks(job)[0])
+    real.model.near_contact = real.model.near_contact and near_contact
     real.advance(int(round(relax / dt)))
     predicted = [0.0]
     evaluate = real.model.at
@@ -87,15 +91,19 @@ def main():
     parser.add_argument("--backend", default=None)
     parser.add_argument("--tolerance", type=float, default=None)
     parser.add_argument("--ewald-tolerance", type=float, default=None)
+    parser.add_argument("--scheme", default=None, help="brownian.scheme (rfd, midpoint, ...)")
+    parser.add_argument("--no-near-contact", action="store_true", help="without the near-contact correction")
     args = parser.parse_args()
     if args.kappa_one:
         use_kappa_one()
     for seed in args.seeds:
         start = time.perf_counter()
         row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration, args.backend, args.tolerance,
-                  args.ewald_tolerance)
+                  args.ewald_tolerance, args.scheme, not args.no_near_contact)
         row["kappa"] = "1" if args.kappa_one else "the pair's own"
         row["backend"] = args.backend or "dense"
+        row["scheme"] = args.scheme or "job default"
+        row["near_contact_correction"] = not args.no_near_contact and (args.backend or "dense") != "petsc-krylov"
         row["seconds"] = round(time.perf_counter() - start)
         print(json.dumps(row), flush=True)
         with open(args.out, "a") as out:

@@ -60,6 +60,7 @@ phi = [{phi}]
 protocol = "none"
 [brownian]
 enabled = true
+{scheme}
 [integration]
 dt = {dt}
 n_steps = {steps}
@@ -108,15 +109,15 @@ def monte_carlo(n, phi, configs, eta_every, sweeps=5000, every=5, step=0.12):
 
 
 def job_at_rest(model, n, phi, steps, dt, collisions=None, ewald_tolerance=None, seed=11, backend=None,
-                tolerance=None):
+                tolerance=None, scheme=None):
     """The job of one run at rest (JOB; collisions, ewald_tolerance, backend, tolerance
-    (solver and Lanczos) None: the defaults)."""
+    (solver and Lanczos), scheme (brownian.scheme) None: the defaults)."""
     rule = f'collisions = "{collisions}"' if collisions else ""
     ewald = f"ewald_tolerance = {ewald_tolerance}" if ewald_tolerance else ""
     solver = "[solver]\n" + (f'backend = "{backend}"\n' if backend else "") + (
         f"tolerance = {tolerance}\nlanczos_tolerance = {tolerance}\n" if tolerance else "")
     return parse_job(JOB.format(seed=seed, n=n, phi=phi, steps=steps, model=model, dt=dt, collisions=rule,
-                                ewald=ewald, solver=solver))
+                                ewald=ewald, solver=solver, scheme=f'scheme = "{scheme}"' if scheme else ""))
 
 
 def use_kappa_one():
