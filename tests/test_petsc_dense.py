@@ -74,7 +74,7 @@ def test_dropped_solvers_leave_no_petsc_objects_two_ranks():
     """On two ranks petsc4py defers the destroy of a collected object to
     PETSc.garbage_cleanup: a new solver must free what the dropped ones held (three solvers
     with their solves dropped leave 21 objects on petsc-dense and 31 on petsc-krylov
-    otherwise; a run grew by ~1.2 MB a step at N = 64 on petsc-dense, ~0.3 MB at N = 1000
+    otherwise; a run would grow by ~1.2 MB a step at N = 64 on petsc-dense, ~0.3 MB at N = 1000
     on petsc-krylov)."""
     for out in rows_on_two_ranks("garbage_check", "petsc-dense", "petsc-krylov"):
         assert out["entries"] == [0, 0], out
