@@ -247,8 +247,8 @@ AUTO_KRYLOV_MIN_N = 300
 #: petsc-krylov's memory per sphere at phi = 0.45, tolerances 1e-4 (bytes): every rank holds
 #: about KRYLOV_BYTES, the task's ranks share KRYLOV_SPREAD_BYTES (real-space blocks,
 #: lubrication, stencils of the start and the midpoint, work vectors): with the 300 MiB base
-#: 1.06-1.22 x the peak resident memory per rank measured at N = 1000 on one rank and at
-#: N = 1000, 4096 and 10 000 on two (bench/memory.py, bench/memory.json; docs/performance.md)
+#: 1.06-1.28 x the peak resident memory per rank measured at N = 1000 on one rank and at
+#: N = 1000, 4096 and 10 000 on two (bench/memory.py, bench/krylov_shares.py; docs/performance.md)
 KRYLOV_BYTES, KRYLOV_SPREAD_BYTES = 40e3, 70e3
 #: 11N x 11N matrices alive at once in a dense evaluation, rounded up (it holds 218 N^2
 #: doubles: S^-1, X, U_b, the lubrication's dense partitions and R_FU's factor; assembling
