@@ -18,7 +18,7 @@ towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hit
 
 --kappa-one gives the near-contact correction the isolated pair's kappa = 1 for every pair
 (`near_contact_structure.use_kappa_one`, for comparison). --backend runs another solver
-backend (petsc-krylov: its midpoint scheme, without the near-contact correction), with the
+backend (petsc-krylov: by default its midpoint scheme), with the
 solver and Lanczos --tolerance and the far field's --ewald-tolerance; --scheme another
 drift scheme; --no-near-contact leaves the near-contact correction out.
 """
@@ -75,7 +75,8 @@ def run(seed, n, phi, dt, relax, duration, backend=None, tolerance=None, ewald_t
     observed = int(real.advance(steps)["n_overlaps"].sum())
     return {"seed": seed, "n_particles": n, "phi": phi, "dt": dt, "steps": steps,
             "relax_t_D": relax, "observed_per_step": observed / steps,
-            "exact_per_step": predicted[0] / steps, "ratio": observed / max(predicted[0], 1e-300)}
+            "exact_per_step": predicted[0] / steps, "ratio": observed / max(predicted[0], 1e-300),
+            "scheme": real.model.scheme, "near_contact_correction": real.model.near_contact}
 
 
 def main():
@@ -102,8 +103,6 @@ def main():
                   args.ewald_tolerance, args.scheme, not args.no_near_contact)
         row["kappa"] = "1" if args.kappa_one else "the pair's own"
         row["backend"] = args.backend or "dense"
-        row["scheme"] = args.scheme or "job default"
-        row["near_contact_correction"] = not args.no_near_contact and (args.backend or "dense") != "petsc-krylov"
         row["seconds"] = round(time.perf_counter() - start)
         print(json.dumps(row), flush=True)
         with open(args.out, "a") as out:

@@ -65,8 +65,11 @@ class BackendSpec(Spec):
         implementation: a `sdmpi.hydro.backend.SolverBackend` class, or "module:Class".
         matrix_free: solves without forming R, iteratively, from a
             `sdmpi.hydro.resistance.SplitResistance` (solver.far_field applies); such a
-            backend gets the drift schemes that suit it (`DriftSpec.matrix_free`) and no
-            near-contact correction.
+            backend gets the drift schemes that suit it (`DriftSpec.matrix_free`).
+        mobility_change: a matrix-free backend whose solver implements
+            ``mobility_change`` (the first-order change of a solve at nearby positions,
+            `sdmpi.hydro.krylov.KrylovSolver.mobility_change`): it runs the random finite
+            differences too (the direct backends always do).
         several_ranks: a task may solve on several ranks (ensemble.ranks_per_task > 1).
         needs_petsc: needs petsc4py (``sdmpi run`` refuses the job where it is missing).
         dense_matrices: how many (11 N)^2 matrices of doubles a task holds at once (the
@@ -75,6 +78,8 @@ class BackendSpec(Spec):
             dense matrices (the memory estimate of an O(N) backend, measured).
         spread_bytes_per_particle: bytes per sphere spread over the task's ranks (the
             same, for the part each rank holds a share of).
+        drift_scheme: the brownian.scheme it runs where the key is absent ("": the first
+            registered that suits it).
     """
 
     matrix_free: bool = False
@@ -83,6 +88,8 @@ class BackendSpec(Spec):
     dense_matrices: int = 0
     bytes_per_particle: float = 0.0
     spread_bytes_per_particle: float = 0.0
+    mobility_change: bool = False
+    drift_scheme: str = ""
 
     def memory_per_rank(self, n_particles: int, ranks: int) -> float:
         """Bytes per rank of the solver's data for N spheres solved on ``ranks`` ranks."""
@@ -134,11 +141,15 @@ class DriftSpec(Spec):
         stress_draw: it estimates the Brownian stresslets from a standard normal draw of
             their own (the ``z_stress`` of `sdmpi.dynamics.drift.DriftScheme.brownian`),
             drawn after the step's other noise.
+        near_contact: with lubrication it takes the near-contact correction
+            (`sdmpi.dynamics.drift.near_contact_velocities`, derived for a step whose drift
+            is taken along its own direction at its start: the random finite differences).
     """
 
     matrix_free: bool = True
     why_not: str = ""
     stress_draw: bool = False
+    near_contact: bool = True
 
 
 @dataclass(frozen=True)
@@ -268,7 +279,8 @@ SOLVER_BACKENDS.register(BackendSpec(
 SOLVER_BACKENDS.register(BackendSpec(
     "petsc-krylov", "matrix-free mixed-form GMRES and Lanczos Brownian forces (large N)",
     "sdmpi.hydro.krylov:KrylovSolver", matrix_free=True, several_ranks=True, needs_petsc=True,
-    bytes_per_particle=KRYLOV_BYTES, spread_bytes_per_particle=KRYLOV_SPREAD_BYTES))
+    bytes_per_particle=KRYLOV_BYTES, spread_bytes_per_particle=KRYLOV_SPREAD_BYTES, mobility_change=True,
+    drift_scheme="midpoint"))
 
 
 def backend_for(name: str, n_particles: int, ranks: int) -> str:
@@ -308,32 +320,35 @@ HYDRODYNAMIC_MODELS.register(ModelSpec(
 
 #: brownian.scheme absent: the first registered scheme that suits the backend
 DRIFT_SCHEMES: Registry[DriftSpec] = Registry("brownian.scheme")
-_RFD_ON_ITERATIVE = ("the random finite difference takes a difference over ~1e-6 a, which an "
-                     "iterative solver's tolerance would swamp")
+_RFD_NEEDS = ("the random finite difference needs the change of a solve at nearby positions "
+              "(mobility_change), which this matrix-free backend does not provide")
 DRIFT_SCHEMES.register(DriftSpec(
     "rfd", "random finite difference at every step (exact in the mean at every gap)",
-    "sdmpi.dynamics.drift:RandomFiniteDifference", matrix_free=False,
-    why_not=_RFD_ON_ITERATIVE))
+    "sdmpi.dynamics.drift:RandomFiniteDifference", matrix_free=False, why_not=_RFD_NEEDS))
 DRIFT_SCHEMES.register(DriftSpec(
     "rfd-split", "rfd, the Brownian stresslets from a random finite difference along a draw of their "
     "own, independent of the step's displacement (a control for stress correlations at rest; one "
     "more solve per step)",
-    "sdmpi.dynamics.drift:SplitRandomFiniteDifference", matrix_free=False,
-    why_not=_RFD_ON_ITERATIVE, stress_draw=True))
+    "sdmpi.dynamics.drift:SplitRandomFiniteDifference", matrix_free=False, why_not=_RFD_NEEDS,
+    stress_draw=True))
 DRIFT_SCHEMES.register(DriftSpec(
-    "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt)", "sdmpi.dynamics.drift:Midpoint"))
+    "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt)", "sdmpi.dynamics.drift:Midpoint",
+    near_contact=False))
 
 
 def drift_schemes_for(backend: str) -> tuple[str, ...]:
     """The brownian.scheme values that suit the solver backend ``backend`` (a registered
     name), the default first."""
-    matrix_free = SOLVER_BACKENDS[backend].matrix_free
-    return DRIFT_SCHEMES.names(lambda scheme: scheme.matrix_free or not matrix_free)
+    spec = SOLVER_BACKENDS[backend]
+    suits = DRIFT_SCHEMES.names(lambda scheme: scheme.matrix_free or not spec.matrix_free or spec.mobility_change)
+    first = spec.drift_scheme or suits[0]
+    return (first, *(name for name in suits if name != first))
 
 
 def default_drift_scheme(backend: str) -> str:
-    """The drift scheme a backend gets when brownian.scheme is absent: the first registered
-    that suits it (rfd on the direct backends, midpoint on the matrix-free ones)."""
+    """The drift scheme a backend gets when brownian.scheme is absent: its
+    `BackendSpec.drift_scheme`, else the first registered that suits it (rfd on the direct
+    backends, midpoint on petsc-krylov)."""
     return drift_schemes_for(backend)[0]
 
 

@@ -19,7 +19,8 @@ from sdmpi.hydro.farfield import NDOF, far_field_mobility, self_mobility
 from sdmpi.hydro.geometry import Lattice
 from sdmpi.hydro.krylov import FAR_FIELDS, DenseFarField, LongWaveFactor, long_waves
 from sdmpi.hydro.lubrication import lubrication_matrix, lubrication_sparse
-from sdmpi.hydro.resistance import DEFAULT_EWALD_TOL, grand_resistance, split_resistance
+from sdmpi.hydro.resistance import (DEFAULT_EWALD_TOL, DEFAULT_MIN_GAP, grand_resistance, mobility_change,
+                                    split_resistance)
 from sdmpi.hydro.solvers import make_solver
 
 from .petsc_check import N, STRAIN, configuration, print_per_rank
@@ -113,6 +114,14 @@ def compare(phi, comm=None, seed=1, far_field="dense"):
     far = (p @ inverse_root(p.T @ m @ p) @ z[:NDOF * N]).reshape(N, NDOF)[:, :6]
     f_b = krylov.brownian_forces(z)
     out["brownian_far"] = rel(far, f_b)
+    # a random finite difference's first-order change along m (the rfd scheme), from the
+    # same forces without strain: krylov's one solve of the change against dense's
+    zero = np.zeros((N, 5))
+    m_d, m_k = dense.velocities(forces, zero), krylov.velocities(forces, zero)
+    moved = res.positions + 1e-6 * m_d[:, :3]
+    change_d = mobility_change(res, dense, moved, m_d, DEFAULT_MIN_GAP)
+    change_k = krylov.mobility_change(moved, m_k, DEFAULT_MIN_GAP)
+    out["change_velocities"], out["change_stresslets"] = (rel(d, k) for d, k in zip(change_d, change_k))
     out["iterations"] = krylov.stats["iterations"]
     out["takeover_g"], out["takeover_u"], out["takeover_again"] = takeover(krylov, split, box, forces,
                                                                            einf, u_k, comm)

@@ -168,27 +168,6 @@ def test_lubrication_key_must_be_a_boolean():
         parse_job('[hydrodynamics]\nlubrication = "no"\n')
 
 
-def test_rfd_on_what_auto_picks_for_large_n_refused(tmp_path):
-    """solver.backend = "auto" stands for petsc-krylov from 1000 particles on (one rank
-    per task), where the random finite difference would be swamped: `validate` and `run`
-    name brownian.scheme and what "auto" stands for, exit 2, write nothing (the loader
-    alone cannot tell: it does not resolve "auto")."""
-    job = tmp_path / "job.toml"
-    job.write_text(ens.JOB)
-    sets = ["--set", 'solver.backend="auto"', "--set", "system.n_particles=1000",
-            "--set", 'brownian.scheme="rfd"']
-    for res in (python_m("validate", job, *sets), ens.sdmpi("run", job, "-o", tmp_path / "run.h5", *sets)):
-        assert res.returncode == 2, res.stderr
-        assert "brownian.scheme" in res.stderr and '"midpoint"' in res.stderr, res.stderr
-        assert 'what "auto" stands for with 1000 particles on 1 rank(s) per task' in res.stderr, res.stderr
-        assert "Traceback" not in res.stderr
-    assert sorted(os.listdir(tmp_path)) == ["job.toml"]
-    # below 1000 particles on one rank "auto" is a direct solver: the same job is valid
-    res = python_m("validate", job, "--set", 'solver.backend="auto"', "--set", "system.n_particles=343",
-                   "--set", 'brownian.scheme="rfd"')
-    assert res.returncode == 0, res.stderr
-
-
 def test_indefinite_far_field_stops_the_run_without_a_traceback(tmp_path):
     """Ewald sums too coarse for a tiny box: `sdmpi run` stops with exit 1 and one message
     that names the task, the step and hydrodynamics.ewald_tolerance; no traceback."""

@@ -235,8 +235,6 @@ def test_schema_text_documents_every_key():
      'n_steps = 10\ndiscard_steps = 0\n',
      ["hydrodynamics.lubrication = false", "monolayers", "allowed: true"]),
     ("[ensemble]\nrealisations = 1000000000000\n", ["ensemble.realisations", "realisations <= 100000"]),
-    ('[brownian]\nscheme = "rfd"\n[solver]\nbackend = "petsc-krylov"\n',
-     ["brownian.scheme", "iterative solver", '"midpoint"']),
     ('[hydrodynamics]\nmodel = "free-draining"\n[ensemble]\nranks_per_task = 2\n[solver]\n'
      'backend = "petsc-dense"\n', ["ensemble.ranks_per_task", "free-draining"]),
     # not TOML at all

@@ -15,6 +15,7 @@ import pytest
 import sdmpi
 from sdmpi.cli import main
 from sdmpi.config import JobError, parse_job, resources
+from sdmpi.config.checks import scheme_problems
 from sdmpi.dynamics.drift import BrownianTerms
 from sdmpi.registry import (DRIFT_SCHEMES, FORCES, HYDRODYNAMIC_MODELS, INTEGRATORS, SOLVER_BACKENDS,
                             WRITERS, BackendSpec, DriftSpec, ForceSpec, IntegratorSpec, ModelSpec, Spec)
@@ -264,9 +265,20 @@ def test_registered_drift_scheme_and_integrator_are_choices_and_checked(no_drift
     assert not np.asarray(ours["stress_brownian"]).any() and np.asarray(rfd["stress_brownian"]).any()
     assert np.array_equal(ours["stress_hydrodynamic"][0], rfd["stress_hydrodynamic"][0])
     assert not np.array_equal(ours["stress_hydrodynamic"][1:], rfd["stress_hydrodynamic"][1:])
-    with pytest.raises(JobError, match=r'brownian.scheme = "no-drift": a test of the direct backends; '
-                                       r'allowed: "midpoint" \(or absent\) with solver.backend = "petsc-krylov"'):
-        parse_job('[solver]\nbackend = "petsc-krylov"\n[brownian]\nscheme = "no-drift"\n')
+    # it suits the direct backends and petsc-krylov (which has mobility_change), not a
+    # matrix-free backend without it; solver.backend = "auto" is judged by what it stands
+    # for (`sdmpi run` and `validate` resolve it, the loader cannot)
+    assert parse_job('[solver]\nbackend = "petsc-krylov"\n[brownian]\nscheme = "no-drift"\n')
+    iterative = SOLVER_BACKENDS.register(BackendSpec("test-iterative", "a test", "nowhere:Cls", matrix_free=True))
+    try:
+        with pytest.raises(JobError, match=r'brownian.scheme = "no-drift": a test of the direct backends; '
+                                           r'allowed: "midpoint" \(or absent\) with solver.backend = "test-iterative"'):
+            parse_job('[solver]\nbackend = "test-iterative"\n[brownian]\nscheme = "no-drift"\n')
+        job = sdmpi.load_job(DEMO, ['solver.backend="auto"', 'brownian.scheme="no-drift"'])
+        assert 'with solver.backend = "test-iterative" (what "auto" stands for with' in str(
+            scheme_problems(job, "test-iterative")[0])
+    finally:
+        SOLVER_BACKENDS.unregister(iterative.name)
     with pytest.raises(JobError, match=r'integration.scheme = "test-deterministic": .* allowed: '
                                        r'"euler-maruyama", or brownian.enabled = false'):
         parse_job('[integration]\nscheme = "test-deterministic"\n')

@@ -62,6 +62,8 @@ CASES = {
     "frictional_mu0.3": ("frictional_mu0.3.toml", [], 13),
     "frictional_mu0.5": ("frictional_mu0.5.toml", [], 13),
     "large_n_krylov": ("large_n_krylov.toml", ["system.n_particles=8", "ensemble.ranks_per_task=1"], 0),
+    "large_n_krylov_rfd": ("large_n_krylov.toml", ["system.n_particles=8", "ensemble.ranks_per_task=1",
+                                                   'brownian.scheme="rfd"'], 0),
     "dratler1996_hydro": ("dratler1996_hydro.toml", ["system.n_particles=9"], 0),
     "dratler1996_repulsion": ("dratler1996_repulsion.toml", ["system.n_particles=9"], 0),
     "dratler1996_sensitivity": ("dratler1996_sensitivity.toml", ["system.n_particles=9"], 0),
@@ -84,7 +86,7 @@ CASES = {
     "steady_repulsion": ("steady_repulsion.toml", ["system.n_particles=8"], 0),
 }
 #: the cases whose backend needs petsc4py
-PETSC_CASES = {"large_n_krylov"}
+PETSC_CASES = {"large_n_krylov", "large_n_krylov_rfd"}
 
 
 def _le_bytes(array):

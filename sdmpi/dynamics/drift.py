@@ -34,7 +34,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..hydro.farfield import NDOF
 from ..hydro.lubrication import PairList
 from ..hydro.two_sphere import squeeze_slope
 
@@ -80,8 +79,10 @@ class SolverEvaluation(Protocol):
         evaluation's pair sets and strain, and the number of overlaps separated."""
         raise NotImplementedError
 
-    def resistance_change(self, positions: np.ndarray, vector: np.ndarray) -> np.ndarray:
-        """[R(positions) - R] vector (N, 11) to first order about this configuration."""
+    def mobility_change(self, positions: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(du, ds) to first order in Delta R = R(positions) - R, for velocities m = R_FU^-1 F
+        (N, 6) of a solve: du = [R_FU^-1(positions) - R_FU^-1] F (N, 6) and
+        ds = -[(R_SU R_FU^-1)(positions) - R_SU R_FU^-1] F (N, 5)."""
         raise NotImplementedError
 
     def forces_drawn(self) -> None:
@@ -113,22 +114,20 @@ def rfd_length(min_gap: float) -> float:
 
 
 def _rfd_difference(evaluation: SolverEvaluation, m: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """(eps, the resistance change Delta R applied to (m, 0) as (N, 11), the velocity change
-    dm = [R_FU^-1(x + eps m) - R_FU^-1(x)] F (N, 6)) of a random finite difference of length
-    eps = `rfd_length` along m = R_FU^-1 F, to first order in Delta R = R(x + eps m) - R."""
+    """(eps, the velocity change dm = [R_FU^-1(x + eps m) - R_FU^-1(x)] F (N, 6), the
+    stresslet change -[(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F (N, 5)) of a random
+    finite difference of length eps = `rfd_length` along m = R_FU^-1 F, to first order in
+    Delta R = R(x + eps m) - R (`SolverEvaluation.mobility_change`)."""
     step = rfd_length(evaluation.min_gap)
-    direction = np.zeros((evaluation.n_particles, NDOF))
-    direction[:, :6] = m
-    change = evaluation.resistance_change(evaluation.positions + step * m[:, :3], direction)
-    dm = -evaluation.solver.velocities(change[:, :6], np.zeros((evaluation.n_particles, 5)))
-    return step, change, dm
+    dm, ds = evaluation.mobility_change(evaluation.positions + step * m[:, :3], m)
+    return step, dm, ds
 
 
 def rfd_drift(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> np.ndarray:
     """The drift (N, 6) of one random finite difference along m = R_FU^-1 F:
     (kT/eps) [R_FU^-1(x + eps m) - R_FU^-1(x)] F, whose mean over F = C z is kT div R_FU^-1
     (`_rfd_difference`; docs/numerics.md)."""
-    step, _, dm = _rfd_difference(evaluation, m)
+    step, dm, _ = _rfd_difference(evaluation, m)
     return (kT / step) * dm
 
 
@@ -137,9 +136,8 @@ def rfd_terms(evaluation: SolverEvaluation, m: np.ndarray, kT: float) -> tuple[n
     direction m = R_FU^-1 F: the drift of `rfd_drift` and
     -(kT/eps) [(R_SU R_FU^-1)(x + eps m) - (R_SU R_FU^-1)(x)] F, whose mean over F = C z is
     -kT div(R_SU R_FU^-1) (docs/numerics.md)."""
-    step, change, dm = _rfd_difference(evaluation, m)
-    zero = np.zeros((evaluation.n_particles, 5))
-    return (kT / step) * dm, (kT / step) * (evaluation.solver.stresslets(dm, zero) - change[:, 6:])
+    step, dm, ds = _rfd_difference(evaluation, m)
+    return (kT / step) * dm, (kT / step) * ds
 
 
 class RandomFiniteDifference:

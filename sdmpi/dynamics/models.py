@@ -28,7 +28,8 @@ Models (``hydrodynamics.model``, registered in `sdmpi.registry.HYDRODYNAMIC_MODE
 
 The Brownian terms of the resistance models come from their drift scheme
 (``brownian.scheme``, `sdmpi.dynamics.drift`, registered in `sdmpi.registry.DRIFT_SCHEMES`)
-and, with lubrication on the direct backends, the near-contact correction beside them
+and, with lubrication and a scheme derived for it (`sdmpi.registry.DriftSpec.near_contact`:
+the random finite differences), the near-contact correction beside them
 (`sdmpi.dynamics.drift.near_contact_velocities`); derivations in docs/numerics.md, "Drift
 schemes and the near-contact correction".
 """
@@ -44,7 +45,7 @@ import numpy as np
 
 from ..hydro.geometry import Lattice
 from ..hydro.lubrication import PairList, close_pairs
-from ..hydro.resistance import resistance_change
+from ..hydro.resistance import mobility_change
 from ..hydro.solvers import assemble, make_solver, resolve_backend
 from ..registry import DRIFT_SCHEMES, SOLVER_BACKENDS, default_drift_scheme
 from .drift import BrownianTerms, near_contact_velocities, unit_pair_forces
@@ -298,20 +299,24 @@ class ResistanceEvaluation(HydrodynamicEvaluation):
         self._stats.append(solver.stats)
         return solver, found
 
-    def resistance_change(self, positions: np.ndarray, vector: np.ndarray) -> np.ndarray:
-        """[R(positions) - R] v (N, 11) about this configuration, to first order
-        (`hydro.resistance.resistance_change`).
+    def mobility_change(self, positions: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(du, ds) of the velocities m = R_FU^-1 F at nearby positions, to first order in
+        Delta R = R(positions) - R: du = -R_FU^-1 Delta R_FU m, ds = -(Delta R_SU m +
+        R_SU du). On the direct backends from Delta R (m, 0) and the solver
+        (`hydro.resistance.mobility_change`); on the matrix-free ones from one solve of the
+        change (`hydro.krylov.KrylovSolver.mobility_change`).
 
         Args:
             positions: nearby centres, shape (N, 3), in a.
-            vector: the vector v, shape (N, 11): (U, Omega) in a/t_D and 1/t_D, then E in
-                the 5-basis in 1/t_D.
+            velocities: m, shape (N, 6), in a/t_D and 1/t_D: a solve's velocities for
+                forces without imposed strain.
 
         Returns:
-            The change, shape (N, 11): forces, torques, stresslets (eta_m a^2/t_D, eta_m
-            a^3/t_D, eta_m a^3/t_D).
+            (du (N, 6) in a/t_D and 1/t_D, ds (N, 5) in eta_m a^3/t_D).
         """
-        return resistance_change(self.resistance, positions, vector, self.min_gap)
+        if SOLVER_BACKENDS[self.model.backend].matrix_free:
+            return self.solver.mobility_change(positions, velocities, self.min_gap)
+        return mobility_change(self.resistance, self.solver, positions, velocities, self.min_gap)
 
     def stats(self) -> dict[str, float]:
         """Iterations (Krylov, Lanczos) and the largest residual of the evaluation's solves."""
@@ -334,12 +339,10 @@ class ResistanceModel(HydrodynamicModel):
         self.drift = DRIFT_SCHEMES[self.scheme].load()()
         self.stress_draw = DRIFT_SCHEMES[self.scheme].stress_draw
         self.lubrication, self.cutoff, self.min_gap = lubrication, cutoff, min_gap
-        # the near-contact correction (`drift`): with lubrication, on the direct
-        # backends (an iterative solve's error is amplified in the small radial parts m_h)
-        matrix_free = SOLVER_BACKENDS[self.backend].matrix_free
-        self.near_contact = lubrication and not matrix_free
+        # the near-contact correction (`drift`): with lubrication, for the schemes derived for it
+        self.near_contact = lubrication and DRIFT_SCHEMES[self.scheme].near_contact
         self._hydro = dict(lubrication=lubrication, ewald_tol=ewald_tol, cutoff=cutoff, min_gap=min_gap)
-        if matrix_free:
+        if SOLVER_BACKENDS[self.backend].matrix_free:
             self._hydro["far_field"] = far_field
         self._solver_args = {} if tolerance is None else dict(tolerance=tolerance,
                                                                lanczos_tolerance=lanczos_tolerance)

@@ -66,8 +66,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .backend import SolverBackend
-from .farfield import NDOF, FarFieldIndefinite, far_field_mobility, plan_far_field, self_mobility
-from .lubrication import lubrication_rows
+from .farfield import (NDOF, FarFieldIndefinite, far_field_mobility, far_field_product, plan_far_field,
+                       self_mobility)
+from .lubrication import close_pairs, lubrication_rows
 from . import workspace
 
 if TYPE_CHECKING:
@@ -391,6 +392,7 @@ class DenseFarField:
         # plan: a `farfield.FarFieldPlan` to reuse (small displacements), else made here
         self.plan = plan_far_field(positions, radii, lattice, tol) if plan is None else plan
         self.matrix = far_field_mobility(positions, radii, plan=self.plan)
+        self.positions, self.radii = np.array(positions, dtype=float), np.asarray(radii, dtype=float)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """M_inf x.
@@ -402,6 +404,23 @@ class DenseFarField:
             (11N,) generalized velocities (U, Omega, E) (Stokes units, viscosity 1).
         """
         return self.matrix @ x
+
+    def change(self, displacement: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """[M_inf(positions + displacement) - M_inf] x for a small displacement (N, 3), by
+        two products (`farfield.far_field_product`) with this operator's plan (the same
+        images and wave vectors: the Ewald truncation of the change, not of M_inf;
+        `spectral.SpectralFarField.change`).
+
+        Args:
+            displacement: (N, 3) displacement of the sphere centres (length unit of the radii).
+            x: (11N,) generalized forces (F, L, S), sphere by sphere.
+
+        Returns:
+            (11N,) the change of the generalized velocities.
+        """
+        w = np.ascontiguousarray(np.reshape(x, (-1, NDOF)), dtype=float)
+        moved = far_field_product(self.positions + displacement, self.radii, self.plan, w)
+        return (moved - far_field_product(self.positions, self.radii, self.plan, w)).ravel()
 
     def release_real_space(self) -> None:
         """Nothing: the dense matrix (small N) is kept (`spectral.SpectralFarField.release_real_space`)."""
@@ -932,22 +951,70 @@ class KrylovSolver(SolverBackend):
         self._last = (u.copy(), np.array(einf, dtype=float), sol[:self.nl11])
         return u
 
-    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
-        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
-        v = self._generalized(velocities, einf)
+    def _lambda(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """This rank's rows of lambda = M^-1 V for V of (velocities, einf): the last
+        solve's where it solved for them, else by preconditioned CG."""
         last = self._last
         if last is not None and np.array_equal(last[0], velocities) and np.array_equal(last[1], einf):
-            lam = last[2]
-        else:  # lambda = M^-1 V by preconditioned CG
-            if self._mobility_ksp is None:
-                ml = self.nl11
-                mat = self._PETSc.Mat().createPython([(ml, NDOF * self.n), (ml, NDOF * self.n)],
-                                                     context=_FarField(self), comm=self.comm)
-                mat.setUp()
-                self._mobility_ksp = self._ksp(mat, "cg", _SelfPreconditioner(self))
-            lam = self._run(self._mobility_ksp, v[NDOF * self.p0:NDOF * self.p1])
-        minus_s = (lam.reshape(-1, NDOF) + (self.lub @ v).reshape(-1, NDOF))[:, 6:].ravel()
+            return last[2]
+        if self._mobility_ksp is None:
+            ml = self.nl11
+            mat = self._PETSc.Mat().createPython([(ml, NDOF * self.n), (ml, NDOF * self.n)],
+                                                 context=_FarField(self), comm=self.comm)
+            mat.setUp()
+            self._mobility_ksp = self._ksp(mat, "cg", _SelfPreconditioner(self))
+        v = self._generalized(velocities, einf)
+        return self._run(self._mobility_ksp, v[NDOF * self.p0:NDOF * self.p1])
+
+    def _stresslets_of(self, lam: np.ndarray, l_v: np.ndarray) -> np.ndarray:
+        """-P_e (lambda + L V) (N, 5) from this rank's rows of lambda and of L V."""
+        minus_s = (lam.reshape(-1, NDOF) + l_v.reshape(-1, NDOF))[:, 6:].ravel()
         return -self._gather(minus_s, 5 * (self.counts11 // NDOF)).reshape(self.n, 5)
+
+    def stresslets(self, velocities: np.ndarray, einf: np.ndarray) -> np.ndarray:
+        """(N, 5) stresslets for rigid-body velocities U' (N, 6) and einf (N, 5)."""
+        return self._stresslets_of(self._lambda(velocities, einf), self.lub @ self._generalized(velocities, einf))
+
+    def mobility_change(self, moved: np.ndarray, velocities: np.ndarray, min_gap: float) -> tuple[np.ndarray, np.ndarray]:
+        """(du (N, 6), ds (N, 5)) of the velocities m = R_FU^-1 F (N, 6), no imposed
+        strain, at the nearby positions moved (N, 3), to first order in Delta R =
+        R(moved) - R with this configuration's pair sets:
+        du = [R_FU^-1(moved) - R_FU^-1] F = -R_FU^-1 Delta R_FU m and
+        ds = -[(R_SU R_FU^-1)(moved) - R_SU R_FU^-1] F = -(Delta R_SU m + R_SU du).
+        With lambda_m = M^-1 (m, 0) and Delta(M^-1) = -M^-1 Delta M M^-1, both come from one
+        solve of the mixed system with the right-hand side (-Delta M lambda_m,
+        -Delta L_uu m): its U' is du, its lambda = M^-1 ((du, 0) - Delta M lambda_m), and
+        ds = -P_e (lambda + L (du, 0) + Delta L (m, 0)). The far-field change by
+        `far.change` (the same pair images and window points, double precision), the
+        lubrication's by this rank's rows of L at moved (min_gap: the floor of the gaps,
+        as in `lubrication.close_pairs`) less those here. The solve's error is relative to
+        the change itself (a difference of two solves at the tolerance would lose it).
+        Collective.
+
+        Args:
+            moved: (N, 3) nearby sphere centres (length unit of the radii).
+            velocities: (N, 6) m, the solution of a solve for forces without strain.
+            min_gap: the lubrication's floor of the gaps (mean radii).
+
+        Returns:
+            (du, ds): (N, 6) velocities and (N, 5) stresslets, Stokes units.
+        """
+        zero = np.zeros((self.n, 5))
+        lam = self._gather(self._lambda(velocities, zero), self.counts11)
+        far = self.far.change(moved - self.positions, lam)
+        v = self._generalized(velocities, zero)
+        lub_change = np.zeros((self.p1 - self.p0, NDOF))
+        r = self._resistance
+        if self.lubricated is not None:
+            pairs = close_pairs(moved, self.radii, None, min_gap=min_gap, images=r.plan.near_images)
+            rows = lubrication_rows(moved, self.radii, pairs, (self.p0, self.p1))[0]
+            lub_change = (rows @ v - self.lub @ v).reshape(-1, NDOF)
+        self._rigid_lubrication()
+        rhs = np.concatenate([-far[NDOF * self.p0:NDOF * self.p1], -lub_change[:, :6].ravel()])
+        sol = self._run(self.ksp, rhs)
+        du = self._gather(sol[self.nl11:], self.counts6).reshape(self.n, 6)
+        l_v = self.lub @ self._generalized(du, zero) + lub_change.ravel()
+        return du, self._stresslets_of(sol[:self.nl11], l_v)
 
     def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
         """f.R_FU^-1.f (P,) for each of the force sets ``forces`` (P, N, 6), the sets on

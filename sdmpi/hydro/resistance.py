@@ -528,6 +528,33 @@ def resistance_change(base: GrandResistance, moved: np.ndarray, vector: np.ndarr
     return out
 
 
+def mobility_change(base: GrandResistance, solver: Any, moved: np.ndarray, velocities: np.ndarray,
+                    min_gap: float) -> tuple[np.ndarray, np.ndarray]:
+    """(du, ds) of velocities m = R_FU^-1 F (no imposed strain) at moved positions, to first
+    order in Delta R = R(moved) - R(base) (`resistance_change` of (m, 0)):
+    du = [R_FU^-1(moved) - R_FU^-1] F = -R_FU^-1 Delta R_FU m (one solve with solver, a
+    direct solver of base) and ds = -[(R_SU R_FU^-1)(moved) - R_SU R_FU^-1] F =
+    -(Delta R_SU m + R_SU du) (the matrix-free backend's own: `krylov.KrylovSolver.mobility_change`).
+
+    Args:
+        base: the resistance at the base configuration.
+        solver: a solver of base (`backend.SolverBackend`).
+        moved: (N, 3) nearby sphere centres.
+        velocities: (N, 6) m.
+        min_gap: smallest gap of a close pair (as in `close_pairs`).
+
+    Returns:
+        (du (N, 6), ds (N, 5)), Stokes units.
+    """
+    n = base.n_particles
+    zero = np.zeros((n, 5))
+    direction = np.zeros((n, NDOF))
+    direction[:, :6] = velocities
+    change = resistance_change(base, moved, direction, min_gap)
+    du = -solver.velocities(change[:, :6], zero)
+    return du, solver.stresslets(du, zero) - change[:, 6:]
+
+
 def mobility_divergence(resistance_at: Callable[[np.ndarray, HydroPlan], GrandResistance], base: GrandResistance,
                         h: float = 1e-5) -> tuple[np.ndarray, np.ndarray]:
     """The divergences (div M (6N,), div A (5N,)), (div X)_i = sum_j dX_ij/dx_j over the

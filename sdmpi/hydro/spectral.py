@@ -150,15 +150,48 @@ def _pair_blocks(pos, radii, pi, pj, images, cell, table, xi, basis, blocks):
     block = np.empty((NDOF, NDOF))
     for p in range(pi.shape[0]):
         i, j = pi[p], pj[p]
-        n0, n1, n2 = images[p, 0], images[p, 1], images[p, 2]
-        rvec[0] = pos[i, 0] - pos[j, 0] - (n0 * cell[0] + n1 * cell[3])
-        rvec[1] = pos[i, 1] - pos[j, 1] - n1 * cell[1]
-        rvec[2] = pos[i, 2] - pos[j, 2] - n2 * cell[2]
+        _separation(pos, i, j, images[p], cell, rvec)
         block[:, :] = 0.0
         _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, block)
         for a in range(NDOF):
             for b in range(NDOF):
                 blocks[p, a, b] = block[a, b]
+
+
+@numba.njit(cache=True, inline="always")
+def _separation(pos, i, j, image, cell, rvec):
+    """rvec = x_i - x_j - (n0 L1 + n1 L2 + n2 L3) of the pair image with lattice indices
+    image (the shift formed as `geometry.find_pairs` forms it: the same bits)."""
+    n0, n1, n2 = image[0], image[1], image[2]
+    rvec[0] = pos[i, 0] - pos[j, 0] - (n0 * cell[0] + n1 * cell[3])
+    rvec[1] = pos[i, 1] - pos[j, 1] - n1 * cell[1]
+    rvec[2] = pos[i, 2] - pos[j, 2] - n2 * cell[2]
+
+
+@numba.njit(cache=True)
+def _pairs_change_product(pos, moved, radii, pi, pj, images, cell, table, xi, basis, x, y):
+    """y += sum over pair images of D_ij x_j + D_ij^T x_i, D_ij = M_ij(moved) - M_ij(pos):
+    the change of the real-space product between two configurations with the same pair
+    images, each block formed at both in double precision (not stored)."""
+    bounds = _power_bounds(table)
+    work = np.empty(80)
+    rvec = np.empty(3)
+    before = np.empty((NDOF, NDOF))
+    after = np.empty((NDOF, NDOF))
+    for p in range(pi.shape[0]):
+        i, j = pi[p], pj[p]
+        _separation(pos, i, j, images[p], cell, rvec)
+        before[:, :] = 0.0
+        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, before)
+        _separation(moved, i, j, images[p], cell, rvec)
+        after[:, :] = 0.0
+        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, after)
+        i0, j0 = NDOF * i, NDOF * j
+        for a in range(NDOF):
+            for c in range(NDOF):
+                d = after[a, c] - before[a, c]
+                y[i0 + a] += d * x[j0 + c]
+                y[j0 + c] += d * x[i0 + a]
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -233,7 +266,25 @@ class Stencils:
         n, p = len(frac), int(2 * half.max()) + 1
         st = cls(steps, np.empty((n, 2, p), dtype=np.int64), np.empty(n, dtype=np.int64), np.empty((n, 3)),
                  np.zeros((n, p, p)), np.zeros((n, p, p, 2), dtype=np.int32), np.empty((n, 4, p)))
-        _fill_stencils(frac, np.array(grid), steps, half, alpha, reach, *st.arrays()[1:])
+        _fill_stencils(frac, frac, np.array(grid), steps, half, alpha, reach, *st.arrays()[1:])
+        return st
+
+    def moved(self, frac: np.ndarray, anchor: np.ndarray, grid: tuple[int, int, int], half: np.ndarray,
+              alpha: float, reach: float) -> Stencils:
+        """The stencils of the same particles moved to frac (n, 3), on the grid points of
+        these (built at the fractional coordinates anchor, with the same arguments): the
+        window weights at the new offsets, the grid points and each row's range in reach
+        kept, so that a product with them is a smooth function of the displacement (a
+        particle moving across a grid plane or a point across the reach would change it
+        by the window's truncation).
+
+        Returns:
+            The stencils at frac.
+        """
+        st = Stencils(self.steps, np.empty_like(self.idx), np.empty_like(self.zb), np.empty_like(self.s0),
+                      np.zeros_like(self.e12), np.zeros_like(self.zr), np.empty_like(self.ez))
+        _fill_stencils(frac, anchor, np.array(grid), self.steps, half, alpha, reach, *st.arrays()[1:])
+        st.zr = self.zr
         return st
 
     @property
@@ -251,13 +302,15 @@ class Stencils:
 
 
 @numba.njit(cache=True)
-def _fill_stencils(frac, m, steps, half, alpha, reach, idx, zb, s0, e12, zr, ez):
-    """Fill the `Stencils` arrays."""
+def _fill_stencils(frac, anchor, m, steps, half, alpha, reach, idx, zb, s0, e12, zr, ez):
+    """Fill the `Stencils` arrays of particles at fractional coordinates frac, their first
+    grid points placed by the fractional coordinates anchor (frac itself, or those of
+    `Stencils.moved`'s base)."""
     hz = steps[2, 2]
     for i in range(frac.shape[0]):
         for c in range(3):
             t = frac[i, c] * m[c]
-            start = math.ceil(t - half[c])
+            start = math.ceil(anchor[i, c] * m[c] - half[c])
             s0[i, c] = start - t
             if c < 2:
                 for q in range(idx.shape[2]):
@@ -580,6 +633,7 @@ class SpectralFarField:
         self._order = np.array_split(np.lexsort(cells.T[::-1]), size)[rank]
         steps = lattice.vectors / np.array(par.grid)[:, None]
         self._stencils = Stencils.build(self._frac[self._order], par.grid, steps, half, par.alpha, par.window)
+        self._half, self._reciprocal = half, lattice.reciprocal
         if rank == 0:
             self._scale = _kernel_scale(lattice, par)
             self._recip = lattice.reciprocal
@@ -615,9 +669,9 @@ class SpectralFarField:
         Brownian step during its midpoint)."""
         self._blocks = None
 
-    def work_grids(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    def work_grids(self, precision: type | None = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """The work grids of a product, in the operator's precision (single from
-        `SINGLE_PRECISION_TOL` on): the grid padded along z for spreading and
+        `SINGLE_PRECISION_TOL` on) unless precision (np.float64) says otherwise: the grid padded along z for spreading and
         interpolation (M1, M2, M3 + pad, 3); with several ranks a contiguous copy of its
         periodic part for MPI (M1, M2, M3, 3), else None; on the rank that does the FFTs
         their output (M1, M2, M3//2 + 1, 3) complex, else None. Views of this thread's
@@ -630,7 +684,7 @@ class SpectralFarField:
             (padded grid, MPI grid or None, FFT output or None).
         """
         m1, m2, m3 = self.params.grid
-        real = self._precision
+        real = self._precision if precision is None else precision
         padded = work_array("spectral_padded_grid", (m1, m2, m3 + self._stencils.pad, 3), real)
         parallel = self.comm is not None and self.comm.size > 1
         grid = work_array("spectral_grid", (m1, m2, m3, 3), real) if parallel else None
@@ -650,7 +704,8 @@ class SpectralFarField:
             self._blocks = self._computed_blocks()
         _pairs_product(self._pi, self._pj, self._blocks, x, y)
 
-    def wave_space(self, x: np.ndarray, y: np.ndarray, meanwhile: Callable[[], Any] | None = None) -> None:
+    def wave_space(self, x: np.ndarray, y: np.ndarray, meanwhile: Callable[[], Any] | None = None,
+                   stencils: Stencils | None = None, precision: type | None = None) -> None:
         """y += the wave-space product at this rank's particles (collective over comm).
         meanwhile: local work (a callable, this rank's real-space share) that ranks 1.. do
         while rank 0 does the FFTs, and rank 0 after them.
@@ -659,10 +714,13 @@ class SpectralFarField:
             x: (11N,) generalized forces (F, L, S per sphere).
             y: (11N,) generalized velocities (U, Omega, E), added to in place.
             meanwhile: local work to overlap with the FFTs, or None.
+            stencils: this rank's particles' stencils (None: those of the configuration).
+            precision: of the grids (None: the operator's, `work_grids`).
         """
-        par, st = self.params, self._stencils
+        par = self.params
+        st = self._stencils if stencils is None else stencils
         parallel = self.comm is not None and self.comm.size > 1
-        (padded, contiguous, fk), m3 = self.work_grids(), par.grid[2]
+        (padded, contiguous, fk), m3 = self.work_grids(precision), par.grid[2]
         padded.fill(0.0)
         _spread(self._radii, self._order, x, par.alpha, BASIS, *st.arrays(), padded)
         _fold(padded, m3)
@@ -707,6 +765,41 @@ class SpectralFarField:
         lines = fk[:, :, z_kept]
         pypocketfft.c2c(lines, axes=(1,), forward=False, out=lines)
         pypocketfft.c2r(fk, axes=(2,), lastsize=grid.shape[2], forward=False, out=grid)
+
+    def change(self, displacement: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """[M_inf(positions + displacement) - M_inf] x (11N,) for a small displacement
+        (N, 3), with this configuration's pair images and window grid points
+        (`Stencils.moved`), so that the result is a smooth function of the displacement
+        and carries the Ewald truncation of the change, not of M_inf (the random finite
+        difference of `krylov.KrylovSolver.mobility_change`). Both products are formed in
+        double precision whatever the operator's (a change ~1e-6 of M_inf x would drown in
+        single-precision rounding); the real-space blocks of both configurations are formed
+        pair by pair and not stored. The self blocks do not change. Collective over comm.
+
+        Args:
+            displacement: (N, 3) displacement of the sphere centres (length unit of the radii).
+            x: (11N,) generalized forces (F, L, S per sphere).
+
+        Returns:
+            (11N,) the change of the generalized velocities, on every rank.
+        """
+        x = np.ascontiguousarray(x, dtype=float)
+        par = self.params
+        moved_frac = self._frac + np.asarray(displacement, dtype=float) @ self._reciprocal.T
+        moved = self._stencils.moved(moved_frac[self._order], self._frac[self._order], par.grid, self._half,
+                                     par.alpha, par.window)
+        y, before = np.zeros_like(x), np.zeros_like(x)
+        self.wave_space(x, y, stencils=moved, precision=np.float64)
+        self.wave_space(x, before, precision=np.float64)
+        y -= before
+        xi = par.xi
+        _pairs_change_product(self._positions, self._positions + displacement, self._radii, self._pi, self._pj,
+                              self._images, self._cell, _cached_radial_table(xi), xi, BASIS, x, y)
+        if self.comm is not None and self.comm.size > 1:
+            from mpi4py import MPI
+
+            self.comm.Allreduce(MPI.IN_PLACE, y, op=MPI.SUM)
+        return y
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """M_inf x for x of shape (11N,); collective over comm.
