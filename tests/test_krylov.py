@@ -481,15 +481,19 @@ KRYLOV = ["--set", "integration.steps_per_period=20", "--set", "shear.omega=[50.
 
 @needs_mpi
 @pytest.mark.mpi
-def test_two_ranks_per_task_same_stream(tmp_path):
+@pytest.mark.parametrize("scheme", ["midpoint", "rfd"])
+def test_two_ranks_per_task_same_stream(tmp_path, scheme):
     """A Brownian realisation (N = 27, phi = 0.45, 20 steps of 0.00625 t_D) with petsc-krylov
     (spectral far field) on a 2-rank
-    sub-communicator against one rank: the same noise, solves agreeing to ~1e-9 (tolerance
+    sub-communicator against one rank, with either drift scheme (rfd: its change solved for
+    on the two ranks, the near-contact correction's forms and solves): the same noise,
+    solves agreeing to ~1e-9 (tolerance
     1e-10), so the streams agree sample by sample to 1e-6 of their scale (the trajectories
     separate slowly), and so do their means and spreads; the solver statistics are
     recorded (iterations > 0, residual below the tolerance)."""
-    one = _run(tmp_path / "one.h5", *KRYLOV)
-    two = _run(tmp_path / "two.h5", *KRYLOV, "--set", "ensemble.ranks_per_task=2", ranks=2)
+    job = [*KRYLOV, "--set", f'brownian.scheme="{scheme}"']
+    one = _run(tmp_path / "one.h5", *job)
+    two = _run(tmp_path / "two.h5", *job, "--set", "ensemble.ranks_per_task=2", ranks=2)
     assert_same_stream(one, two, rtol=1e-6, mean_tol=1e-4)
     for run in (one, two):
         assert np.all(run["solver_iterations"] > 0) and np.all(run["lanczos_iterations"] > 0)
