@@ -135,8 +135,8 @@ class DriftSpec(Spec):
         summary: what it is, one phrase (the key reference).
         implementation: a `sdmpi.dynamics.drift.DriftScheme` class (built without
             arguments), or "module:Class".
-        matrix_free: it suits the matrix-free (iterative) backends (`BackendSpec.matrix_free`);
-            every scheme suits the direct ones.
+        matrix_free: it suits every matrix-free (iterative) backend (`BackendSpec.matrix_free`);
+            every scheme suits the direct ones and those with `BackendSpec.mobility_change`.
         why_not: why it does not suit the matrix-free backends (the checks' message).
         stress_draw: it estimates the Brownian stresslets from a standard normal draw of
             their own (the ``z_stress`` of `sdmpi.dynamics.drift.DriftScheme.brownian`),
@@ -318,7 +318,7 @@ HYDRODYNAMIC_MODELS.register(ModelSpec(
 
 # --------------------------------------------------------------------------- drift schemes
 
-#: brownian.scheme absent: the first registered scheme that suits the backend
+#: brownian.scheme absent: the backend's `BackendSpec.drift_scheme`, or the first registered scheme that suits it
 DRIFT_SCHEMES: Registry[DriftSpec] = Registry("brownian.scheme")
 _RFD_NEEDS = ("the random finite difference needs the change of a solve at nearby positions "
               "(mobility_change), which this matrix-free backend does not provide")
@@ -332,7 +332,7 @@ DRIFT_SCHEMES.register(DriftSpec(
     "sdmpi.dynamics.drift:SplitRandomFiniteDifference", matrix_free=False, why_not=_RFD_NEEDS,
     stress_draw=True))
 DRIFT_SCHEMES.register(DriftSpec(
-    "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt)", "sdmpi.dynamics.drift:Midpoint",
+    "midpoint", "Fixman's midpoint (too small a drift at gaps below ~4 dt; no near-contact correction)", "sdmpi.dynamics.drift:Midpoint",
     near_contact=False))
 
 

@@ -293,8 +293,8 @@ def _repulsion_length(job):
 def _model(job):
     """What the hydrodynamic models support (`sdmpi.registry.ModelSpec`): lubrication is
     the models' that have it; monolayers and frictional contacts are built on lubrication;
-    a model that solves nothing has nothing to share over several ranks; the rfd drift
-    needs a direct solver (`scheme_problems`)."""
+    a model that solves nothing has nothing to share over several ranks; the drift scheme
+    must suit the backend (`scheme_problems`)."""
     hyd, problems = job.hydrodynamics, []
     model = HYDRODYNAMIC_MODELS[hyd.model]
     with_lubrication = HYDRODYNAMIC_MODELS.names(lambda m: m.lubrication)
@@ -318,8 +318,9 @@ def _model(job):
 
 
 def scheme_problems(job, backend: str) -> list[Problem]:
-    """brownian.scheme must suit the backend (`sdmpi.registry.DriftSpec.matrix_free`): the
-    rfd difference over ~1e-6 a would be swamped by an iterative solver's tolerance.
+    """brownian.scheme must suit the backend (`sdmpi.registry.drift_schemes_for`): the
+    random finite differences need a direct backend or one with
+    `sdmpi.registry.BackendSpec.mobility_change`.
     backend: the one the job runs on (the loader passes solver.backend, whose rule "auto" is
     judged once resolved; `sdmpi run` and `sdmpi validate` pass what it stands for,
     `sdmpi.registry.backend_for`)."""
