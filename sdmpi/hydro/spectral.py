@@ -149,23 +149,23 @@ def _pair_blocks(pos, radii, pi, pj, images, cell, table, xi, basis, blocks):
     rvec = np.empty(3)
     block = np.empty((NDOF, NDOF))
     for p in range(pi.shape[0]):
-        i, j = pi[p], pj[p]
-        _separation(pos, i, j, images[p], cell, rvec)
-        block[:, :] = 0.0
-        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, block)
+        _image_block(pos, radii, pi[p], pj[p], images[p], cell, table, bounds, xi, basis, work, rvec, block)
         for a in range(NDOF):
             for b in range(NDOF):
                 blocks[p, a, b] = block[a, b]
 
 
 @numba.njit(cache=True, inline="always")
-def _separation(pos, i, j, image, cell, rvec):
-    """rvec = x_i - x_j - (n0 L1 + n1 L2 + n2 L3) of the pair image with lattice indices
-    image (the shift formed as `geometry.find_pairs` forms it: the same bits)."""
+def _image_block(pos, radii, i, j, image, cell, table, bounds, xi, basis, work, rvec, block):
+    """block = the 11x11 real-space block of the pair image (i, j) with lattice indices
+    image at the positions pos: separation x_i - x_j - (n0 L1 + n1 L2 + n2 L3), the shift
+    formed as `geometry.find_pairs` forms it (the same bits). rvec, work: scratch."""
     n0, n1, n2 = image[0], image[1], image[2]
     rvec[0] = pos[i, 0] - pos[j, 0] - (n0 * cell[0] + n1 * cell[3])
     rvec[1] = pos[i, 1] - pos[j, 1] - n1 * cell[1]
     rvec[2] = pos[i, 2] - pos[j, 2] - n2 * cell[2]
+    block[:, :] = 0.0
+    _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, block)
 
 
 @numba.njit(cache=True)
@@ -180,12 +180,8 @@ def _pairs_change_product(pos, moved, radii, pi, pj, images, cell, table, xi, ba
     after = np.empty((NDOF, NDOF))
     for p in range(pi.shape[0]):
         i, j = pi[p], pj[p]
-        _separation(pos, i, j, images[p], cell, rvec)
-        before[:, :] = 0.0
-        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, before)
-        _separation(moved, i, j, images[p], cell, rvec)
-        after[:, :] = 0.0
-        _pair_block(rvec, radii[i], radii[j], table, bounds, xi, basis, work, after)
+        _image_block(pos, radii, i, j, images[p], cell, table, bounds, xi, basis, work, rvec, before)
+        _image_block(moved, radii, i, j, images[p], cell, table, bounds, xi, basis, work, rvec, after)
         i0, j0 = NDOF * i, NDOF * j
         for a in range(NDOF):
             for c in range(NDOF):
