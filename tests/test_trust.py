@@ -185,7 +185,8 @@ def test_overlap_warning_with_lubrication_against_the_exact_floor_rate():
     """With lubrication the warning compares the corrections with what the exact
     near-contact transition leaves below the floor (bench/floor_hits.json, phi = 0.45,
     min_gap = 1e-4, dt = 5e-4: 1.2-1.4e-3 per step and sphere): rfd with the near-contact
-    correction (N = 125: 1.38e-3; petsc-krylov N = 27: 1.18e-3, 1.33e-3) passes, the midpoint
+    correction (N = 125: 1.38e-3 on dense, 1.20e-3 on petsc-krylov; petsc-krylov N = 27:
+    1.18e-3, 1.33e-3) passes, the midpoint
     (N = 125: dense 2.4e-3, petsc-krylov 2.9e-3; N = 1000: 2.5e-3) and the correction with
     kappa = 1 (N = 27: 3.0-3.4e-3) warn.
     The rate scales with phi g(2a) (Carnahan-Starling) and with the floor."""

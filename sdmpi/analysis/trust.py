@@ -31,8 +31,8 @@ near-contact dynamics (the squared Bessel transition of the gap, docs/numerics.m
 take pairs below the floor hydrodynamics.min_gap, where the overlap correction places
 them: at phi = 0.45 and min_gap = 1e-4, :data:`FLOOR_RATE` per step and sphere
 (bench/floor_hits.py: 1.2-1.4e-3 at dt = 5e-4, N = 27 and 125, 1.1-1.2e-3 at dt = 2.5e-4),
-with a step that resolves the closest pairs 1.0-1.1 times that (``rfd`` with the
-near-contact correction, the dense backends' default) and 2.0-2.5 times with one that does
+with a step that resolves the closest pairs 0.96-1.1 times that (``rfd`` with the
+near-contact correction, the dense backends' default, on any backend) and 2.0-2.5 times with one that does
 not (the midpoint scheme, petsc-krylov's default, or the correction with kappa = 1). The warning for
 lubricated bulk suspensions therefore fires above :data:`FLOOR_EXCESS_WARN` times that rate,
 scaled to the run's phi by the hard-sphere contact density phi g(2a) (Carnahan-Starling)
