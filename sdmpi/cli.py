@@ -266,6 +266,21 @@ def hydrodynamics_line(job) -> str:
     return hyd.model
 
 
+def brownian_line(job) -> str:
+    """"off", or "on" with the drift scheme the job runs (brownian.scheme, or the default
+    of the backend it runs on, `sdmpi.registry.default_drift_scheme`) and whether its
+    near-contact correction applies (lubrication on and `DriftSpec.near_contact`)."""
+    from .dynamics.setup import job_backend
+    from .registry import DRIFT_SCHEMES, default_drift_scheme
+
+    model = HYDRODYNAMIC_MODELS[job.hydrodynamics.model]
+    if not job.brownian.enabled or not model.solves:
+        return "on" if job.brownian.enabled else "off"
+    scheme = job.brownian.scheme or default_drift_scheme(job_backend(job))
+    near = model.lubrication and job.hydrodynamics.lubrication and DRIFT_SCHEMES[scheme].near_contact
+    return f"on (drift {scheme}{', near-contact correction' if near else ''})"
+
+
 def integrator_line(job) -> str:
     """The time integrator (integration.scheme) and, where the far field is held between
     refreshes (hydrodynamics.far_field_refresh > 0), its interval."""
@@ -293,8 +308,7 @@ def summary(job) -> str:
         f"job {job.job.name!r}: valid (hash {job_hash(job)[:16]})",
         f"  N = {job.system.n_particles}, {phi} = "
         + ", ".join(f"{p:g}" for p in job.system.phi) + f", medium {medium}",
-        f"  shear {shear}; Brownian {'on' if job.brownian.enabled else 'off'}; "
-        f"time unit {unit}",
+        f"  shear {shear}; Brownian {brownian_line(job)}; time unit {unit}",
         f"  hydrodynamics: {hydrodynamics_line(job)}",
         f"  integrator: {integrator_line(job)}",
     ]

@@ -141,15 +141,20 @@ def test_validate_summary_shows_what_run_uses(monkeypatch, capsys):
 def test_validate_summary_names_the_hydrodynamics_run_uses(capsys):
     """hydrodynamics.lubrication = false turns the stokesian model into its far field
     alone: `sdmpi validate` says so rather than printing the model's name only; the
-    integrator and a held far field are named too."""
+    integrator, a held far field, and the drift scheme the backend runs (with the
+    near-contact correction where it applies) are named too."""
     from sdmpi.cli import main
 
     demo = str(Path(__file__).parents[1] / "jobs" / "demo.toml")
     assert main(["validate", demo]) == 0
-    assert "  hydrodynamics: stokesian\n" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "  hydrodynamics: stokesian\n" in out and "Brownian on (drift rfd, near-contact correction);" in out
     assert main(["validate", demo, "--set", "hydrodynamics.lubrication=false"]) == 0
     out = capsys.readouterr().out
     assert "stokesian without lubrication" in out and 'as hydrodynamics.model = "far-field"' in out
+    assert "Brownian on (drift rfd);" in out
+    assert main(["validate", demo, "--set", 'solver.backend="petsc-krylov"']) == 0
+    assert "Brownian on (drift midpoint);" in capsys.readouterr().out
     monolayer = str(Path(__file__).parents[1] / "jobs" / "dratler1996_hydro.toml")
     assert main(["validate", monolayer, "--set", 'integration.scheme="adams-bashforth-4"',
                  "--set", "hydrodynamics.far_field_refresh=0.1"]) == 0
