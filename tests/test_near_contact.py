@@ -86,6 +86,30 @@ def test_near_contact_correction_has_zero_mean():
     assert np.abs(mean).max() < 1e-12 * scale
 
 
+@pytest.mark.parametrize("backend", ["dense", "petsc-krylov"])
+def test_near_contact_correction_goes_with_the_random_finite_differences(backend):
+    """With lubrication the correction is applied with rfd and rfd-split on every backend
+    (their drift is taken along the step's own direction at its start, which the correction
+    is derived for) and never with the midpoint; without lubrication never. On
+    petsc-krylov an rfd step of a close pair draws the correction's own noise and changes
+    with it."""
+    if backend == "petsc-krylov":
+        pytest.importorskip("petsc4py")
+    for scheme, applied in (("rfd", True), ("rfd-split", True), ("midpoint", False)):
+        for lubrication in (True, False):
+            model = ResistanceModel(np.ones(2), BOX, lubrication=lubrication, ewald_tol=1e-6, cutoff=2.0,
+                                    min_gap=MIN_GAP, backend=backend, scheme=scheme)
+            assert model.near_contact is (applied and lubrication), (scheme, lubrication)
+    model = ResistanceModel(np.ones(2), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP,
+                            backend=backend, scheme="rfd", tolerance=1e-10, lanczos_tolerance=1e-10)
+    at = model.at(_pair(1e-3), 0.0)
+    z, z_near, other = (np.random.default_rng(k).standard_normal(at.solver.noise_shape) for k in range(3))
+    with_near = at.brownian_terms(z, KT_REDUCED, 5e-4, z_near).velocities
+    assert not np.allclose(with_near, at.brownian_terms(z, KT_REDUCED, 5e-4, other).velocities)
+    assert np.allclose(with_near - at.brownian_terms(z, KT_REDUCED, 5e-4).velocities,
+                       near_contact_velocities(at, at.solver.brownian_velocities(z), z_near, KT_REDUCED, 5e-4))
+
+
 def test_near_contact_correction_is_pair_forces_through_the_mobility():
     """Three spheres, two close pairs sharing sphere 0 (a many-body case): R_FU times the
     correction's velocities is a sum of forces along the close pairs' lines of centres
