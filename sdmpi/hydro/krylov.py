@@ -11,7 +11,10 @@ and the auxiliary unknown lambda = M^-1 V, the problem (F, L, -S) = R V becomes
     P_u lambda + L_uu U' = F - L_ue (-e_inf)            (viscosity 1)
 
 solved for (lambda, U') by left-preconditioned GMRES in PETSc (a shell matrix: the far
-field as a product `matvec`, L_uu a PETSc BAIJ matrix); -S = P_e (lambda + L V).
+field as a product `matvec`, L_uu a PETSc BAIJ matrix); -S = P_e (lambda + L V). The
+first-order change of a solve at nearby positions (a random finite difference,
+`KrylovSolver.mobility_change`) is the same system with the right-hand side
+(-Delta M lambda, -Delta L_uu U').
 
 Preconditioner: the same system with M replaced by the block-diagonal D (isolated-sphere
 self blocks divided by `self_resistance_scale(phi)`, weighted by
