@@ -145,14 +145,17 @@ def test_group_labels_name_the_control_variable():
     assert group_labels(SimpleNamespace(columns=("phi", "rate")), rows) == ["φ = 0.3, γ̇ = 2"]
 
 
-def reduction_of(n, geometry="bulk", model="stokesian", lubrication=True, min_gap=1e-4):
-    """A stand-in for the reduction warnings_of reads: the job's geometry, N and
-    hydrodynamics."""
+def reduction_of(n, geometry="bulk", model="stokesian", lubrication=True, min_gap=1e-4, backend="dense",
+                 scheme=None):
+    """A stand-in for the reduction warnings_of reads: the job's geometry, N,
+    hydrodynamics, solver backend and drift scheme (Brownian)."""
     from types import SimpleNamespace
 
     return SimpleNamespace(columns=("phi", "rate"), job=SimpleNamespace(
         system=SimpleNamespace(geometry=geometry, n_particles=n),
-        hydrodynamics=SimpleNamespace(model=model, lubrication=lubrication, min_gap=min_gap)))
+        hydrodynamics=SimpleNamespace(model=model, lubrication=lubrication, min_gap=min_gap),
+        solver=SimpleNamespace(backend=backend), ensemble=SimpleNamespace(ranks_per_task=1),
+        brownian=SimpleNamespace(enabled=True, scheme=scheme)))
 
 
 def overlap_row(per_step, phi=0.45):
@@ -205,6 +208,13 @@ def test_overlap_warning_with_lubrication_against_the_exact_floor_rate():
         assert bool(warned(r["n_particles"], r["observed_per_step"])) is (r["ratio"] > 1.5), r
     assert warned(1000, 2.48)
     assert "above 1.5 x the 0.0013 that exact near-contact dynamics take below the floor" in warned(1000, 2.48)[0]
+    # a scheme without the near-contact correction is named (petsc-krylov's default, or named)
+    for backend, scheme in (("petsc-krylov", None), ("dense", "midpoint"), ("auto", None)):
+        text = warnings_of(reduction_of(1000, backend=backend, scheme=scheme), [overlap_row(2.48)])[0]
+        assert "the midpoint scheme takes no near-contact correction" in text, (backend, text)
+    for backend, scheme in (("dense", None), ("petsc-krylov", "rfd")):
+        text = warnings_of(reduction_of(125, backend=backend, scheme=scheme), [overlap_row(0.4)])[0]
+        assert "near-contact correction" not in text, (backend, text)
     assert exact_floor_rate(0.45, 1e-4) == pytest.approx(FLOOR_RATE)
     # phi g(2a): 0.3 * 0.85 / 0.343 against 0.45 * 0.775 / 0.166375
     assert exact_floor_rate(0.3, 1e-4) / FLOOR_RATE == pytest.approx((0.3 * 0.85 / 0.343) / (0.45 * 0.775 / 0.166375))

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..registry import HYDRODYNAMIC_MODELS
+from ..registry import DRIFT_SCHEMES, HYDRODYNAMIC_MODELS, SOLVER_BACKENDS, backend_for, default_drift_scheme
 from .tables import csv_value
 
 #: without lubrication: warn when more overlapping pairs than this are corrected per step
@@ -179,12 +179,30 @@ def exact_floor_rate(phi: float, min_gap: float) -> float:
 def overlap_threshold(job, phi: float) -> tuple[float, str]:
     """The overlap corrections per step and sphere above which the trust report warns, and
     what it is (module docstring)."""
-    hyd = job.hydrodynamics
-    if job.system.geometry == "bulk" and hyd.lubrication and HYDRODYNAMIC_MODELS[hyd.model].lubrication:
-        rate = exact_floor_rate(phi, hyd.min_gap)
+    if _lubricated_bulk(job):
+        rate = exact_floor_rate(phi, job.hydrodynamics.min_gap)
         return FLOOR_EXCESS_WARN * rate, (f"{FLOOR_EXCESS_WARN:g} x the {rate:.2g} that exact "
                                           f"near-contact dynamics take below the floor")
     return OVERLAPS_PER_SPHERE_WARN, f"{OVERLAPS_PER_SPHERE_WARN:g}"
+
+
+def _lubricated_bulk(job) -> bool:
+    """A bulk suspension with lubrication (the overlap bar of the exact near-contact dynamics)."""
+    hyd = job.hydrodynamics
+    return job.system.geometry == "bulk" and hyd.lubrication and HYDRODYNAMIC_MODELS[hyd.model].lubrication
+
+
+def _scheme_hint(job) -> str:
+    """For a lubricated bulk Brownian run whose drift scheme takes no near-contact
+    correction (the midpoint; brownian.scheme or its backend's default), what the overlap
+    warning says of it; else ""."""
+    backend = backend_for(job.solver.backend, job.system.n_particles, job.ensemble.ranks_per_task)
+    scheme = job.brownian.scheme or (default_drift_scheme(backend) if backend in SOLVER_BACKENDS else None)
+    if not (_lubricated_bulk(job) and job.brownian.enabled and scheme in DRIFT_SCHEMES) or \
+            DRIFT_SCHEMES[scheme].near_contact:
+        return ""
+    return (f"; the {scheme} scheme takes no near-contact correction and leaves about twice the "
+            f'exact count below the floor (brownian.scheme = "rfd" does not)')
 
 
 def warnings_of(red, rows) -> list[str]:
@@ -196,13 +214,14 @@ def warnings_of(red, rows) -> list[str]:
     for row in rows:
         where = f"phi = {row['phi']:g}, {red.columns[1]} = {row[red.columns[1]]:.6g}"
         limit, what = overlap_threshold(red.job, row["phi"])
+        hint = _scheme_hint(red.job)
         for key, name in (("overlaps_per_step", "start"),
                           ("midpoint_overlaps_per_step", "Brownian midpoint")):
             if row[key] / n > limit:
                 out.append(f"{where}: {row[key]:.3g} overlapping pairs {handled} per step at "
                            f"the {name} ({row[key] / n:.3g} per sphere, above {what}): the "
                            f"time step is large for the closest pairs; if the moduli matter "
-                           f"at this level, check them at a smaller dt "
+                           f"at this level, check them at a smaller dt{hint} "
                            f"(docs/reduce.md#trust-report)")
         if row["min_gap_min"] < DEEP_OVERLAP:
             out.append(f"{where}: a step started with an overlap of {-row['min_gap_min']:.3g} "
