@@ -211,10 +211,10 @@ def warnings_of(red, rows) -> list[str]:
     # monolayers keep and count their overlaps (Dratler & Schowalter 1996), others correct them
     handled = "kept" if red.job.system.geometry == "monolayer" else "corrected"
     n = red.job.system.n_particles
+    hint = _scheme_hint(red.job)
     for row in rows:
         where = f"phi = {row['phi']:g}, {red.columns[1]} = {row[red.columns[1]]:.6g}"
         limit, what = overlap_threshold(red.job, row["phi"])
-        hint = _scheme_hint(red.job)
         for key, name in (("overlaps_per_step", "start"),
                           ("midpoint_overlaps_per_step", "Brownian midpoint")):
             if row[key] / n > limit:
