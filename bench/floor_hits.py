@@ -13,11 +13,16 @@ mobility. A ratio above 1 is the time-step error of the step near contact; it sh
 towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hits.json.
 
     python bench/floor_hits.py [--n 27] [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0]
-        [--kappa-one] [--backend petsc-krylov --tolerance 1e-4 --ewald-tolerance 1e-4]
+        [--kappa-one | --kappa-scale 1.03] [--correction-below 0.01]
+        [--backend petsc-krylov --tolerance 1e-4 --ewald-tolerance 1e-4]
         [--scheme midpoint] [--no-near-contact]
 
 --kappa-one gives the near-contact correction the isolated pair's kappa = 1 for every pair
-(`near_contact_structure.use_kappa_one`, for comparison). --backend runs another solver
+(`near_contact_structure.use_kappa_one`, for comparison); --kappa-scale multiplies every
+pair's kappa (an error of G_p) and --correction-below gives the correction only to the
+pairs below that gap (the exact count still sums every pair below NEAR_CONTACT_GAP). Each
+row also has the gaps' distribution near contact: `gap_histogram`, the number of pairs
+per bin of GAP_BINS summed over the steps' starts. --backend runs another solver
 backend (petsc-krylov: by default its midpoint scheme), with the
 solver and Lanczos --tolerance and the far field's --ewald-tolerance; --scheme another
 drift scheme; --no-near-contact leaves the near-contact correction out.
@@ -31,17 +36,22 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import ncx2
 
-from near_contact_structure import job_at_rest, use_kappa_one
+from near_contact_structure import job_at_rest, scale_kappa, use_kappa_one
 from sdmpi.config.tasks import enumerate_tasks
 from sdmpi.dynamics import drift
 from sdmpi.dynamics.realisation import Realisation
 
+#: the pairs the exact count sums (the near-contact correction's reach as the package has it)
+EXACT_REACH = drift.NEAR_CONTACT_GAP
+#: bins of the gaps' distribution (surface gap, radius 1)
+GAP_BINS = np.linspace(0.0, 0.05, 21)
+
 
 def exact_floor_probability(evaluation, kT, dt, min_gap):
-    """Sum over the pairs of evaluation closer than NEAR_CONTACT_GAP of the exact squared
+    """Sum over the pairs of evaluation closer than EXACT_REACH of the exact squared
     Bessel probability that one step of dt leaves the pair below min_gap."""
     pairs = evaluation.pairs
-    close = pairs.gap < drift.NEAR_CONTACT_GAP
+    close = pairs.gap < EXACT_REACH
     if not close.any():
         return 0.0
     i, j, dx = pairs.i[close], pairs.j[close], pairs.dx[close]
@@ -63,11 +73,13 @@ def run(seed, n, phi, dt, relax, duration, backend=None, tolerance=None, ewald_t
     real.model.near_contact = real.model.near_contact and near_contact
     real.advance(int(round(relax / dt)))
     predicted = [0.0]
+    histogram = np.zeros(len(GAP_BINS) - 1)
     evaluate = real.model.at
 
     def at(positions, strain):  # the step's own evaluation, instrumented
         evaluation = evaluate(positions, strain)
         predicted[0] += exact_floor_probability(evaluation, real.kT, dt, job.hydrodynamics.min_gap)
+        histogram[:] += np.histogram(evaluation.pairs.gap, GAP_BINS)[0]
         return evaluation
 
     real.model.at = at
@@ -76,7 +88,8 @@ def run(seed, n, phi, dt, relax, duration, backend=None, tolerance=None, ewald_t
     return {"seed": seed, "n_particles": n, "phi": phi, "dt": dt, "steps": steps,
             "relax_t_D": relax, "observed_per_step": observed / steps,
             "exact_per_step": predicted[0] / steps, "ratio": observed / max(predicted[0], 1e-300),
-            "scheme": real.model.scheme, "near_contact_correction": real.model.near_contact}
+            "scheme": real.model.scheme, "near_contact_correction": real.model.near_contact,
+            "gap_histogram": histogram.astype(int).tolist()}
 
 
 def main():
@@ -89,6 +102,9 @@ def main():
     parser.add_argument("--duration", type=float, default=2.0, help="t_D counted")
     parser.add_argument("--out", default=str(Path(__file__).with_name("floor_hits.json")))
     parser.add_argument("--kappa-one", action="store_true")
+    parser.add_argument("--kappa-scale", type=float, default=None, help="every kappa times this")
+    parser.add_argument("--correction-below", type=float, default=None,
+                        help="the near-contact correction only below this gap")
     parser.add_argument("--backend", default=None)
     parser.add_argument("--tolerance", type=float, default=None)
     parser.add_argument("--ewald-tolerance", type=float, default=None)
@@ -97,11 +113,17 @@ def main():
     args = parser.parse_args()
     if args.kappa_one:
         use_kappa_one()
+    if args.kappa_scale is not None:
+        scale_kappa(args.kappa_scale)
+    if args.correction_below is not None:
+        drift.NEAR_CONTACT_GAP = args.correction_below
     for seed in args.seeds:
         start = time.perf_counter()
         row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration, args.backend, args.tolerance,
                   args.ewald_tolerance, args.scheme, not args.no_near_contact)
-        row["kappa"] = "1" if args.kappa_one else "the pair's own"
+        row["kappa"] = "1" if args.kappa_one else "the pair's own" + (
+            f" x {args.kappa_scale}" if args.kappa_scale is not None else "")
+        row["correction_below"] = drift.NEAR_CONTACT_GAP
         row["backend"] = args.backend or "dense"
         row["seconds"] = round(time.perf_counter() - start)
         print(json.dumps(row), flush=True)

@@ -126,6 +126,13 @@ def use_kappa_one():
     drift.squeeze_fraction = lambda mobility, gap, radius_i, radius_j: np.ones(len(gap))
 
 
+def scale_kappa(factor):
+    """The near-contact correction with every pair's kappa times factor (an error of its
+    relative mobility G_p) in this process and the worker processes it forks."""
+    exact = drift.squeeze_fraction
+    drift.squeeze_fraction = lambda mobility, gap, radius_i, radius_j: factor * exact(mobility, gap, radius_i, radius_j)
+
+
 def dynamics(model, n, phi, steps, eta_every, dt, collisions, ewald_tolerance=None, seed=11):
     """g per shell (one row per step) and eta_H every eta_every steps of one run at rest, of
     the configurations the model is evaluated at (each step's start, overlaps corrected)."""

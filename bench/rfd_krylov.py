@@ -3,9 +3,10 @@ configuration (the start of jobs/large_n_krylov.toml at rest, one rank, its tole
 
 For `rfd`: the Brownian forces and m = R_FU^-1 F_B (Lanczos and one solve), the random
 finite difference's change (`KrylovSolver.mobility_change`: the far-field change and one
-solve), and what the near-contact correction would need for the pairs' relative
-mobilities G_p (the pairs below `drift.NEAR_CONTACT_GAP`, the solves `mobility_forms`
-groups them into, and the time of one such solve). For `midpoint`: the whole Brownian
+solve), and the near-contact correction (`drift.near_contact_velocities`: its independent
+direction m' (Lanczos and one solve), the relative mobilities G_p of the pairs below
+`drift.NEAR_CONTACT_GAP` in the solves `mobility_forms` groups them into, and the
+velocities of the correction's forces). For `midpoint`: the whole Brownian
 part (forces, m, the displaced evaluation and its solve). Seconds of wall time beside a
 297 x 297 LAPACK Cholesky timed in the same process (its Cholesky-equivalents). Prints
 one JSON row; --out FILE appends it.
@@ -24,7 +25,7 @@ import numpy as np
 from bench_step import cholesky_matrix, cholesky_ms
 
 from sdmpi.config.tasks import enumerate_tasks
-from sdmpi.dynamics.drift import NEAR_CONTACT_GAP, rfd_terms, unit_pair_forces
+from sdmpi.dynamics.drift import NEAR_CONTACT_GAP, near_contact_velocities, rfd_terms
 from sdmpi.dynamics.realisation import Realisation
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,14 +62,16 @@ def measure(n):
         _, row["rfd_change_s"] = timed(rfd_terms, evaluation, m, kT)
         row["rfd_change_iterations"] = solver.stats["iterations"] - before
         pairs = evaluation.pairs
-        close = pairs.gap < NEAR_CONTACT_GAP * 0.5 * pairs.radii_sum
-        e = pairs.dx[close] / np.linalg.norm(pairs.dx[close], axis=1)[:, None]
-        forces = unit_pair_forces(pairs.i[close], pairs.j[close], e, n)
-        groups = solver.form_groups(forces)
-        row["near_contact_pairs"], row["near_contact_solves"] = int(close.sum()), len(groups)
-        zero = np.zeros((n, 5))
-        _, seconds = timed(lambda: [solver.velocities(forces[g].sum(axis=0), zero) for g in groups[:5]])
-        row["one_form_solve_s"] = seconds / min(5, len(groups))
+        row["near_contact_pairs"] = int((pairs.gap < NEAR_CONTACT_GAP * 0.5 * pairs.radii_sum).sum())
+        forms = solver.form_groups
+        groups = []
+        solver.form_groups = lambda *args: groups.append(forms(*args)) or groups[-1]  # count the solves
+        z_near = np.random.default_rng(2).standard_normal(solver.noise_shape)
+        before, lanczos = solver.stats["iterations"], solver.stats["lanczos"]
+        _, row["near_contact_s"] = timed(near_contact_velocities, evaluation, m, z_near, kT, dt)
+        row["near_contact_iterations"] = solver.stats["iterations"] - before
+        row["near_contact_lanczos"] = solver.stats["lanczos"] - lanczos
+        row["near_contact_form_solves"] = len(groups[0])
     row["cholesky_ms"] = float(np.median([cholesky_ms(cholesky_matrix())[0] for _ in range(5)]))
     for key in [k for k in row if k.endswith("_s")]:
         row[key[:-2] + "_cholesky_equivalents"] = round(1e3 * row[key] / row["cholesky_ms"])

@@ -34,6 +34,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ..hydro.backend import FORM_ACCURACY
 from ..hydro.lubrication import PairList
 from ..hydro.two_sphere import squeeze_slope
 
@@ -43,6 +44,14 @@ RFD_STEP = 1e-2
 #: (docs/numerics.md); there lubrication dominates: D_rr/h = 4.0 (h -> 0) to 3.1
 #: (h = 5e-2) D0/a for an isolated pair of equal spheres
 NEAR_CONTACT_GAP = 5e-2
+#: ... of which those within FLOOR_REACH c dt of contact (c = D_rr/h of the isolated pair)
+#: can reach the floor in one step (the squared Bessel transition's probability falls like
+#: exp(-h/(c dt))), and kappa_p's error there moves the floor hits: their relative
+#: mobilities G_p are asked to the solver's default accuracy (`mobility_forms`), those of
+#: the farther pairs only to NEAR_CONTACT_FAR_ACCURACY (relative), where an error in kappa
+#: changes the step's variance by ~ its error times c dt / h
+FLOOR_REACH = 6.0
+NEAR_CONTACT_FAR_ACCURACY = 2e-2
 
 
 @dataclass
@@ -224,7 +233,9 @@ def near_contact_velocities(evaluation: SolverEvaluation, m: np.ndarray, z_near:
     and the independent noise z_near (the solver's noise_shape): R_FU^-1 of the pair forces
     w_p f_p of the pairs with gaps below NEAR_CONTACT_GAP,
     w_p = (2 kappa_p - 1)^+ kT (m'_h^2 - m_h^2) / (2 G_p h_p), m' = R_FU^-1 C z_near
-    (docs/numerics.md). Mean zero at every gap."""
+    (docs/numerics.md). Mean zero at every gap, whatever G_p's error; G_p (`mobility_forms`)
+    is asked to FORM_ACCURACY within FLOOR_REACH c dt of contact and to
+    NEAR_CONTACT_FAR_ACCURACY beyond."""
     pairs, solver = evaluation.pairs, evaluation.solver
     mean_radius = 0.5 * pairs.radii_sum
     close = pairs.gap < NEAR_CONTACT_GAP * mean_radius
@@ -238,7 +249,9 @@ def near_contact_velocities(evaluation: SolverEvaluation, m: np.ndarray, z_near:
     m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
     gap = np.maximum(pairs.gap[close], evaluation.min_gap * mean_radius[close])  # the lubrication's floor
     forces = unit_pair_forces(i, j, e, n)
-    mobility = solver.mobility_forms(forces)
+    # beyond FLOOR_REACH c dt: h / (c dt) = h^2 slope / (4 kT dt), c = kT G / h at kappa = 1
+    far = gap ** 2 * squeeze_slope(gap, evaluation.radii[i], evaluation.radii[j]) >= 4.0 * FLOOR_REACH * kT * dt
+    mobility = solver.mobility_forms(forces, np.where(far, NEAR_CONTACT_FAR_ACCURACY, FORM_ACCURACY))
     kappa = squeeze_fraction(mobility, gap, evaluation.radii[i], evaluation.radii[j])
     weight = np.maximum(2.0 * kappa - 1.0, 0.0) * 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility * gap)
     return solver.velocities(np.einsum("p,pkc->kc", weight, forces), zero)

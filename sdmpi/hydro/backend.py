@@ -26,6 +26,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
+#: the relative error `SolverBackend.mobility_forms` may leave in a form where its caller
+#: asks for no other accuracy (a direct backend's forms are exact to rounding; an iterative
+#: one may solve for several sets at once, `sdmpi.hydro.krylov.FORMS_SEPARATION`)
+FORM_ACCURACY = 1e-3
+
 
 class SolverBackend(Protocol):
     """A solver of the resistance problem at one configuration of N spheres.
@@ -98,12 +103,14 @@ class SolverBackend(Protocol):
         """
         return self.velocities(self.brownian_forces(noise), np.zeros((self.n, 5)))
 
-    def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
-        """f.R_FU^-1.f (P,) for each of the force sets ``forces`` (P, N, 6). Generic form:
-        one solve per set.
+    def mobility_forms(self, forces: np.ndarray, accuracy: np.ndarray | None = None) -> np.ndarray:
+        """f.R_FU^-1.f (P,) for each of the force sets ``forces`` (P, N, 6), each within its
+        relative ``accuracy`` (a backend may spend less work on a form asked for less).
+        Generic form: one solve per set, exact to the solver's tolerance.
 
         Args:
             forces: (P, N, 6) force/torque sets.
+            accuracy: (P,) relative error each form may have (None: FORM_ACCURACY for all).
 
         Returns:
             (P,) the quadratic forms f.R_FU^-1.f.

@@ -68,7 +68,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .backend import SolverBackend
+from .backend import FORM_ACCURACY, SolverBackend
 from .farfield import (NDOF, FarFieldIndefinite, far_field_mobility, far_field_product, plan_far_field,
                        self_mobility)
 from .lubrication import close_pairs, lubrication_rows
@@ -110,13 +110,16 @@ INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "ilu", "pc_factor_levels": st
 #: per solve; below a gap of 1 the iterations grow, near contact most (measurements:
 #: docs/numerics.md, "Parameter choices")
 PRECONDITIONER_MAX_GAP = 1.0
-#: mobility forms (`KrylovSolver.mobility_forms`): force sets on a lubricated pair closer
-#: than this surface gap (mean radii) share one solve with the sets of other such pairs at
-#: least FORMS_SEPARATION apart
+#: mobility forms (`KrylovSolver.mobility_forms`): force sets on two lubricated pairs share
+#: a solve when every centre distance between their spheres is at least
+#: FORMS_SEPARATION * max(1, (h / FORMS_MAX_GAP * FORM_ACCURACY / accuracy)^(1/3)) times
+#: the sum of the two spheres' radii, h the other pair's surface gap (mean radii) and
+#: accuracy the relative accuracy asked of this pair's form (both ways): the cross term
+#: f_p.R_FU^-1.f_q is ~ (1 - kappa_q) ~ h_q times a coupling falling like the distance
+#: cubed, and two pairs below a gap of FORMS_MAX_GAP at FORMS_SEPARATION (2: one sphere
+#: diameter of space between unit spheres) leave each other's form within ~FORM_ACCURACY
+#: (`sdmpi.hydro.backend`, 1e-3)
 FORMS_MAX_GAP = 0.005
-#: ... where every centre distance between the spheres of two sets sharing a solve is at
-#: least this many times the sum of the two spheres' radii (2: one sphere diameter of
-#: space between unit spheres)
 FORMS_SEPARATION = 2.0
 #: forces (no imposed strain) within this relative distance of a combination of the force
 #: sums the last `mobility_forms` solved take the combination of their solutions instead
@@ -1019,9 +1022,9 @@ class KrylovSolver(SolverBackend):
         l_v = self.lub @ self._generalized(du, zero) + lub_change.ravel()
         return du, self._stresslets_of(sol[:self.nl11], l_v)
 
-    def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
+    def mobility_forms(self, forces: np.ndarray, accuracy: np.ndarray | None = None) -> np.ndarray:
         """f.R_FU^-1.f (P,) for each of the force sets ``forces`` (P, N, 6), the sets on
-        near-contact pairs several to a solve (`form_groups`): for the sets f_p of one solve,
+        lubricated pairs several to a solve (`form_groups`): for the sets f_p of one solve,
         u = R_FU^-1 sum_q f_q gives f_p.u = f_p.R_FU^-1.f_p + sum_{q != p} f_p.R_FU^-1.f_q.
         The cross terms are small for pair forces on lubricated pairs near contact: such a
         pair moves apart only against its squeeze resistance, so its relative mobility
@@ -1031,11 +1034,13 @@ class KrylovSolver(SolverBackend):
         gaps below 0.02: |f_p.R_FU^-1.f_q| / G_p <= 2 G_q eta_m a (centres >= 4 a apart),
         <= 8 G_q eta_m a (sharing a sphere); pairs at gaps of the collisions, G_p ~ 1e-4
         1/(eta_m a): each form within 1e-3 of one solve per set, N = 1000; docs/numerics.md,
-        "Krylov backend").
-        Other sets (other supports, wider gaps, no lubrication) are solved one by one.
+        "Krylov backend"). The pairs' distances in a solve grow with their gaps and with
+        the accuracy asked (FORMS_SEPARATION). Other sets (other supports, no lubrication)
+        are solved one by one.
 
         Args:
             forces: (P, N, 6) force/torque sets.
+            accuracy: (P,) relative accuracy each form needs (None: FORM_ACCURACY for all).
 
         Returns:
             (P,) the quadratic forms f.R_FU^-1.f.
@@ -1044,7 +1049,7 @@ class KrylovSolver(SolverBackend):
         forms = np.zeros(len(forces))
         sums, velocities, lams = [], [], []
         self._forms = None  # (each group solved afresh)
-        for group in self.form_groups(forces):
+        for group in self.form_groups(forces, accuracy):
             sums.append(forces[group].sum(axis=0))
             u = self.velocities(sums[-1], zero)
             forms[group] = [np.vdot(forces[p], u) for p in group]
@@ -1075,50 +1080,61 @@ class KrylovSolver(SolverBackend):
         self._last = (u.copy(), np.zeros((self.n, 5)), np.tensordot(coefficients, lams, axes=1))
         return u
 
-    def form_groups(self, forces: np.ndarray) -> list[list[int]]:
+    def form_groups(self, forces: np.ndarray, accuracy: np.ndarray | None = None) -> list[list[int]]:
         """The force sets (P, N, 6) that `mobility_forms` solves together: each set acting
-        on the two spheres of a lubricated pair with a surface gap below FORMS_MAX_GAP (mean
-        radii) joins the first group whose sets all lie FORMS_SEPARATION apart from it
-        (every centre distance between their spheres at least FORMS_SEPARATION times the
-        sum of the two radii, nearest images); every other set is a group of its own, and
-        sets without force none.
+        on the two spheres of a lubricated pair joins the first group whose sets all lie far
+        enough from it (every centre distance between their spheres, nearest images, at
+        least the separation of FORMS_SEPARATION's rule times the sum of the two radii, for
+        the pairs' gaps and the accuracies asked of their forms); every other set is a
+        group of its own, and sets without force none.
 
         Args:
             forces: (P, N, 6) force/torque sets.
+            accuracy: (P,) relative accuracy each form needs (None: FORM_ACCURACY for all).
 
         Returns:
             Lists of set indices, in order of their first set.
         """
-        supports = [np.flatnonzero(np.any(f != 0.0, axis=1)) for f in forces]
-        near = set()
+        accuracy = np.full(len(forces), FORM_ACCURACY) if accuracy is None else np.asarray(accuracy, float)
+        gaps = {}
         pairs = self.lubricated
         if pairs is not None:
-            close = 2 * pairs.gap < FORMS_MAX_GAP * pairs.radii_sum
-            near = {(min(a, b), max(a, b)) for a, b in zip(pairs.i[close], pairs.j[close])}
-        groups, shared = [], []  # shared: the groups that near-pair sets may join
-        for p, support in enumerate(supports):
+            relative = 2 * pairs.gap / pairs.radii_sum
+            gaps = {(min(a, b), max(a, b)): g for a, b, g in zip(pairs.i, pairs.j, relative)}
+        groups, shared = [], []  # shared: (its sets, their spheres (M, 2), gaps, accuracies)
+        for p, f in enumerate(forces):
+            support = np.flatnonzero(np.any(f != 0.0, axis=1))
             if len(support) == 0:
                 continue
-            if len(support) != 2 or tuple(support) not in near:
+            gap = gaps.get(tuple(support)) if len(support) == 2 else None
+            if gap is None:
                 groups.append([p])
                 continue
             for group in shared:
-                if all(self._apart(support, supports[q]) for q in group):
-                    group.append(p)
+                if self._apart(support, gap, accuracy[p], *group[1:]):
+                    group[0].append(p)
+                    group[1].append(support)
+                    group[2].append(gap)
+                    group[3].append(accuracy[p])
                     break
             else:
                 groups.append([p])
-                shared.append(groups[-1])
+                shared.append((groups[-1], [support], [gap], [accuracy[p]]))
         return groups
 
-    def _apart(self, first, second):
-        """Whether every centre distance between the spheres first and second (indices) is
-        at least FORMS_SEPARATION times the sum of their radii (nearest images)."""
-        d = self.positions[second][None, :, :] - self.positions[first][:, None, :]
+    def _apart(self, support, gap, accuracy, spheres, gaps, accuracies):
+        """Whether the pair support (its 2 sphere indices, surface gap in mean radii and the
+        accuracy asked of its form) lies far enough from every pair of a group (their
+        spheres (M, 2), gaps and accuracies) to share its solve (FORMS_SEPARATION)."""
+        spheres, gaps, accuracies = np.asarray(spheres), np.asarray(gaps), np.asarray(accuracies)
+        scale = FORM_ACCURACY / FORMS_MAX_GAP
+        separation = FORMS_SEPARATION * np.cbrt(np.maximum(np.maximum(gaps, FORMS_MAX_GAP) * scale / accuracy,
+                                                           max(gap, FORMS_MAX_GAP) * scale / accuracies))
+        d = self.positions[spheres][:, :, None, :] - self.positions[support][None, None, :, :]
         if self.lattice is not None:
             d = self.lattice.nearest_image(d)
-        reach = FORMS_SEPARATION * (self.radii[first][:, None] + self.radii[second][None, :])
-        return bool(np.all(np.einsum("abc,abc->ab", d, d) >= reach ** 2))
+        reach = separation[:, None, None] * (self.radii[spheres][:, :, None] + self.radii[support][None, None, :])
+        return bool(np.all(np.einsum("abcx,abcx->abc", d, d) >= reach ** 2))
 
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
         """F (N, 6) with covariance R_FU over the noise (flat, noise_shape, standard

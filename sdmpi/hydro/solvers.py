@@ -65,9 +65,9 @@ class DenseSolver(SolverBackend):
             raise ValueError(f"trtrs: illegal argument {-info}")
         return sol.reshape(self.n, 6)
 
-    def mobility_forms(self, forces: np.ndarray) -> np.ndarray:
+    def mobility_forms(self, forces: np.ndarray, accuracy: np.ndarray | None = None) -> np.ndarray:
         """f.R_FU^-1.f for each of the force sets forces (P, N, 6): |U^-T f|^2 with R_FU =
-        U^T U, one triangular solve for all P."""
+        U^T U, one triangular solve for all P (exact to rounding whatever the accuracy)."""
         y, info = lapack.dtrtrs(self._upper, forces.reshape(len(forces), -1).T, lower=0, trans=1)
         if info != 0:
             raise ValueError(f"trtrs: illegal argument {-info}")
