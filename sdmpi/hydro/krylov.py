@@ -113,9 +113,10 @@ INNER_OPTIONS = {"ksp_type": "preonly", "pc_type": "ilu", "pc_factor_levels": st
 PRECONDITIONER_MAX_GAP = 1.0
 #: mobility forms (`KrylovSolver.mobility_forms`): force sets on two lubricated pairs share
 #: a solve when every centre distance between their spheres is at least
-#: FORMS_SEPARATION * max(1, (h / FORMS_MAX_GAP * FORM_ACCURACY / accuracy)^(1/3)) times
-#: the sum of the two spheres' radii, h the other pair's surface gap (mean radii) and
-#: accuracy the relative accuracy asked of this pair's form (both ways): the cross term
+#: FORMS_SEPARATION * (max(h, FORMS_MAX_GAP) / FORMS_MAX_GAP * FORM_ACCURACY / accuracy)^(1/3)
+#: times the sum of the two spheres' radii, h the other pair's surface gap (mean radii) and
+#: accuracy the relative accuracy asked of this pair's form (both ways; pairs sharing a
+#: sphere never share a solve): the cross term
 #: f_p.R_FU^-1.f_q is ~ (1 - kappa_q) ~ h_q times a coupling falling like the distance
 #: cubed, and two pairs below a gap of FORMS_MAX_GAP at FORMS_SEPARATION (2: one sphere
 #: diameter of space between unit spheres) leave each other's form within ~FORM_ACCURACY
@@ -1041,8 +1042,8 @@ class KrylovSolver(SolverBackend):
         gaps below 0.02: |f_p.R_FU^-1.f_q| / G_p <= 2 G_q eta_m a (centres >= 4 a apart),
         <= 8 G_q eta_m a (sharing a sphere); pairs at gaps of the collisions, G_p ~ 1e-4
         1/(eta_m a): each form within 1e-3 of one solve per set, N = 1000; docs/numerics.md,
-        "Krylov backend"). The pairs' distances in a solve grow with their gaps and with
-        the accuracy asked (FORMS_SEPARATION). Forms of lubricated pairs asked to
+        "Krylov backend"). The separations of pairs sharing a solve grow with their gaps
+        and with the accuracy asked (FORMS_SEPARATION). Forms of lubricated pairs asked to
         ESTIMATE_ACCURACY or less take no solve where enough others are solved
         (`_estimated_forms`). Other sets (other supports, no lubrication) are solved one by
         one.
