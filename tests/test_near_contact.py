@@ -110,6 +110,33 @@ def test_near_contact_correction_goes_with_the_random_finite_differences(backend
                        near_contact_velocities(at, at.solver.brownian_velocities(z), z_near, KT_REDUCED, 5e-4))
 
 
+
+def test_near_contact_correction_asks_g_precisely_within_reach_of_the_floor():
+    """The correction asks each close pair's G_p to FORM_ACCURACY within FLOOR_REACH c dt
+    of contact, where one step can take the pair to the floor (c = D_rr/h of the isolated
+    pair: 4 D0/a at contact, 3.1 at a gap of 0.05), and to NEAR_CONTACT_FAR_ACCURACY
+    beyond: two pairs at gaps of 0.8 and 1.2 times 4 FLOOR_REACH dt (dt = 5e-4), and
+    with dt halved both are beyond."""
+    from sdmpi.dynamics.drift import FLOOR_REACH, NEAR_CONTACT_FAR_ACCURACY
+    from sdmpi.hydro.backend import FORM_ACCURACY
+
+    dt = 5e-4
+    reach = 4.0 * FLOOR_REACH * dt
+    pos = np.array([[5.0, 5.0, 5.0], [7.0 + 0.8 * reach, 5.0, 5.0], [5.0, 7.0 + 1.2 * reach, 5.0]])
+    model = ResistanceModel(np.ones(3), BOX, lubrication=True, ewald_tol=1e-6, cutoff=2.0, min_gap=MIN_GAP)
+    at = model.at(pos, 0.0)
+    asked = []
+    forms = at.solver.mobility_forms
+    at.solver.mobility_forms = lambda forces, accuracy: asked.append(accuracy) or forms(forces, accuracy)
+    z, z_near = np.random.default_rng(5).standard_normal((2, 3, 6))
+    m = at.solver.brownian_velocities(z)
+    for step in (dt, dt / 2):
+        near_contact_velocities(at, m, z_near, KT_REDUCED, step)
+    gaps = at.pairs.gap[at.pairs.gap < 0.05]
+    assert np.allclose(np.sort(gaps), [0.8 * reach, 1.2 * reach])
+    assert list(asked[0][np.argsort(gaps)]) == [FORM_ACCURACY, NEAR_CONTACT_FAR_ACCURACY]
+    assert list(asked[1]) == [NEAR_CONTACT_FAR_ACCURACY] * 2
+
 def test_near_contact_correction_is_pair_forces_through_the_mobility():
     """Three spheres, two close pairs sharing sphere 0 (a many-body case): R_FU times the
     correction's velocities is a sum of forces along the close pairs' lines of centres
