@@ -105,10 +105,12 @@ finite-size-n343: setup
 	$(FS_TABLES)
 
 # A 5 000-step realisation of jobs/large_n_krylov.toml (N = 1000, phi = 0.45, oscillatory,
-# petsc-krylov on 2 ranks; docs/performance.md "A 5 000-step realisation at N = 1000"): the
+# petsc-krylov on 2 ranks, the rfd scheme with its near-contact correction; docs/performance.md
+# "A 5 000-step realisation at N = 1000"): the
 # cost estimate of `sdmpi validate --time-steps` on the task's 2 ranks (kept from the first
 # call), the run into out/large_n/ (run again to resume after a stop), its trust report.
-LN_SET = --set ensemble.realisations=1 --set integration.steps_per_period=2500 --set integration.periods=2
+LN_SET = --set ensemble.realisations=1 --set integration.steps_per_period=2500 --set integration.periods=2 \
+	 --set 'brownian.scheme="rfd"'
 large-n-1000: setup
 	mkdir -p out/large_n
 	test -s out/large_n/n1000_estimate.txt || { mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi validate \
