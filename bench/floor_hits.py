@@ -13,13 +13,15 @@ mobility. A ratio above 1 is the time-step error of the step near contact; it sh
 towards 1 as dt does. Prints one JSON line per seed, appended to bench/floor_hits.json.
 
     python bench/floor_hits.py [--n 27] [--dt 5e-4] [--seeds 21 22] [--relax 1.0] [--duration 2.0]
-        [--kappa-one | --kappa-scale 1.03] [--correction-below 0.01]
+        [--kappa-one | --kappa-scale 1.03 [--scale-beyond 3]] [--correction-below 0.01]
         [--backend petsc-krylov --tolerance 1e-4 --ewald-tolerance 1e-4]
         [--scheme midpoint] [--no-near-contact]
 
 --kappa-one gives the near-contact correction the isolated pair's kappa = 1 for every pair
 (`near_contact_structure.use_kappa_one`, for comparison); --kappa-scale multiplies every
-pair's kappa (an error of G_p) and --correction-below gives the correction only to the
+pair's kappa (an error of G_p), with --scale-beyond R only of the pairs at least R c dt
+from contact (where `drift.near_contact_velocities` asks G_p less precisely beyond
+FLOOR_REACH), and --correction-below gives the correction only to the
 pairs below that gap (the exact count still sums every pair below NEAR_CONTACT_GAP). Each
 row also has the gaps' distribution near contact: `gap_histogram`, the number of pairs
 per bin of GAP_BINS summed over the steps' starts. --backend runs another solver
@@ -103,6 +105,8 @@ def main():
     parser.add_argument("--out", default=str(Path(__file__).with_name("floor_hits.json")))
     parser.add_argument("--kappa-one", action="store_true")
     parser.add_argument("--kappa-scale", type=float, default=None, help="every kappa times this")
+    parser.add_argument("--scale-beyond", type=float, default=None,
+                        help="--kappa-scale only for pairs at least this many c dt from contact")
     parser.add_argument("--correction-below", type=float, default=None,
                         help="the near-contact correction only below this gap")
     parser.add_argument("--backend", default=None)
@@ -114,7 +118,7 @@ def main():
     if args.kappa_one:
         use_kappa_one()
     if args.kappa_scale is not None:
-        scale_kappa(args.kappa_scale)
+        scale_kappa(args.kappa_scale, args.scale_beyond, 6.0 * np.pi, args.dt)  # (kT = 6 pi: D0 = 1)
     if args.correction_below is not None:
         drift.NEAR_CONTACT_GAP = args.correction_below
     for seed in args.seeds:
@@ -122,7 +126,8 @@ def main():
         row = run(seed, args.n, args.phi, args.dt, args.relax, args.duration, args.backend, args.tolerance,
                   args.ewald_tolerance, args.scheme, not args.no_near_contact)
         row["kappa"] = "1" if args.kappa_one else "the pair's own" + (
-            f" x {args.kappa_scale}" if args.kappa_scale is not None else "")
+            f" x {args.kappa_scale}" if args.kappa_scale is not None else "") + (
+            f" beyond {args.scale_beyond} c dt" if args.scale_beyond is not None else "")
         row["correction_below"] = drift.NEAR_CONTACT_GAP
         row["backend"] = args.backend or "dense"
         row["seconds"] = round(time.perf_counter() - start)

@@ -716,7 +716,7 @@ def test_mobility_forms_to_the_accuracy_asked():
     """The near-contact correction asks each pair's G_p to FORM_ACCURACY only where a step
     can bring the pair to the floor and to NEAR_CONTACT_FAR_ACCURACY farther out
     (`drift.near_contact_velocities`): 125 spheres at phi = 0.45, the 72 pairs below
-    NEAR_CONTACT_GAP, the 16 below 0.012 a (FLOOR_REACH c dt at dt = 5e-4) asked to 1e-3
+    NEAR_CONTACT_GAP, the 16 below 0.012 a (2 FLOOR_REACH c dt at dt = 5e-4) asked to 1e-3
     and solved, the others asked to 2e-2 and estimated from the preconditioner calibrated
     on the solved ones (`KrylovSolver._estimated_forms`): 8 times fewer GMRES iterations
     than every form asked to 1e-3 (280 against 2288), the solved forms within 2.3e-3 of

@@ -50,7 +50,7 @@ NEAR_CONTACT_GAP = 5e-2
 #: mobilities G_p are asked to the solver's default accuracy (`mobility_forms`), those of
 #: the farther pairs only to NEAR_CONTACT_FAR_ACCURACY (relative), where an error in kappa
 #: changes the step's variance by ~ its error times c dt / h
-FLOOR_REACH = 6.0
+FLOOR_REACH = 3.0
 NEAR_CONTACT_FAR_ACCURACY = 2e-2
 
 
