@@ -114,7 +114,7 @@ LN_SET = --set ensemble.realisations=1 --set integration.steps_per_period=2500 -
 large-n-1000: setup
 	mkdir -p out/large_n
 	test -s out/large_n/n1000_estimate.txt || { mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi validate \
-	  jobs/large_n_krylov.toml $(LN_SET) --time-steps 3 > out/large_n/n1000_estimate.tmp && \
+	  jobs/large_n_krylov.toml $(LN_SET) --time-steps 10 > out/large_n/n1000_estimate.tmp && \
 	  mv out/large_n/n1000_estimate.tmp out/large_n/n1000_estimate.txt; }
 	cat out/large_n/n1000_estimate.txt
 	mpirun --oversubscribe -n 2 $(VENV)/bin/sdmpi run jobs/large_n_krylov.toml $(LN_SET) \

@@ -84,7 +84,8 @@ def _add_validate(subparsers) -> None:
     parser.add_argument("--time-steps", type=int, default=0, metavar="K",
                         help="time K steps of the first task (after one untimed step that "
                              "compiles or loads the kernels) and estimate the run's "
-                             "core-hours and wall time from them; default 0: no timing. A "
+                             "core-hours and wall time from their mean (steps vary: 10 or "
+                             "more for a long job); default 0: no timing. A "
                              "job of R > 1 ranks per task is timed on its R ranks under "
                              "mpirun -n R, on one rank without mpirun")
     parser.set_defaults(handler=_validate)
@@ -200,9 +201,9 @@ def _timing_group(ranks_per_task: int):
     return MPI.COMM_WORLD if MPI.COMM_WORLD.size > 1 else None
 
 
-def _seconds_per_step(job, task, k: int, comm) -> float:
-    """Wall seconds per step of ``k`` steps of a task's realisation (after one untimed
-    step), on ``comm``'s ranks (the slowest rank's time) or, for None, on this process."""
+def _step_seconds(job, task, k: int, comm) -> list[float]:
+    """Wall seconds of each of ``k`` steps of a task's realisation (after one untimed
+    step), on ``comm``'s ranks (each step's slowest rank) or, for None, on this process."""
     import time
 
     from .dynamics import Realisation
@@ -210,11 +211,13 @@ def _seconds_per_step(job, task, k: int, comm) -> float:
     try:
         real = Realisation(job, task, comm)
         real.advance(1)
-        if comm is not None:
-            comm.Barrier()
-        t0 = time.perf_counter()
-        real.advance(k)
-        per_step = (time.perf_counter() - t0) / k
+        seconds = []
+        for _ in range(k):
+            if comm is not None:
+                comm.Barrier()
+            t0 = time.perf_counter()
+            real.advance(1)
+            seconds.append(time.perf_counter() - t0)
     except Exception as err:
         if comm is None:
             raise
@@ -223,7 +226,7 @@ def _seconds_per_step(job, task, k: int, comm) -> float:
         print(f"sdmpi validate: rank {comm.rank}: timing task 0 failed: {type(err).__name__}: "
               f"{err}", file=sys.__stderr__, flush=True)
         comm.Abort(EXIT_FAILED)
-    return per_step if comm is None else max(comm.allgather(per_step))
+    return seconds if comm is None else [max(s) for s in zip(*comm.allgather(seconds))]
 
 
 def cost_text(job, ranks: int, k: int) -> str:
@@ -242,15 +245,17 @@ def cost_text(job, ranks: int, k: int) -> str:
     timing = rpt if comm is not None else 1
     print(f"timing {k} step(s) of task 0 on {timing} rank(s) (after one untimed step that "
           "compiles or loads the kernels)...", file=sys.stderr, flush=True)
-    per_step = _seconds_per_step(job, tasks[0], k, comm)
+    seconds = _step_seconds(job, tasks[0], k, comm)
+    per_step = sum(seconds) / k
     steps = {t.task_id: float(t.n_steps) for t in tasks}
     makespan = max(sum(steps[tid] for tid in group) for group in assign(steps, groups))
     core_hours = sum(steps.values()) * per_step * rpt / 3600.0
     note = ("" if timing == rpt else
             f"; a task runs on {rpt} ranks, whose step takes another time: "
             f"mpirun -n {rpt} sdmpi validate ... times it on them")
-    return (f"  cost (measured: {per_step:.3g} s per step of task 0 on {timing} rank(s) of "
-            f"this machine{note}): {core_hours:.3g} core-hours, wall time "
+    timed = "1 step" if k == 1 else f"mean of {k} steps, {min(seconds):.3g}-{max(seconds):.3g} s"
+    return (f"  cost (measured: {per_step:.3g} s per step of task 0 ({timed}) on {timing} rank(s) "
+            f"of this machine{note}): {core_hours:.3g} core-hours, wall time "
             f"{hms(makespan * per_step)} on {ranks} rank(s)")
 
 

@@ -5,6 +5,7 @@ the key named, nothing written)."""
 import errno
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -137,7 +138,11 @@ def test_validate_measures_the_cost(capsys):
     out = capsys.readouterr().out
     assert "run file: about" in out and "memory: about" in out
     line = next(x for x in out.splitlines() if "cost (measured:" in x)
-    assert "s per step of task 0 on 1 rank(s) of this machine): " in line and "core-hours" in line
+    m = re.search(r"measured: (\S+) s per step of task 0 \(mean of 2 steps, (\S+)-(\S+) s\) on 1 "
+                  r"rank\(s\) of this machine\): ", line)
+    assert m and "core-hours" in line
+    mean, low, high = (float(x) for x in m.groups())
+    assert 0 < low <= mean <= high  # the mean of the two steps lies within their range
     assert line.endswith("on 2 rank(s)")
     assert main(["validate", DEMO, "--ranks", "3", "--set", "ensemble.ranks_per_task=2"]) == 2
 
@@ -160,7 +165,7 @@ def test_validate_times_a_task_on_its_ranks_under_mpirun():
                           text=True, env=ens.child_env(), timeout=600)
     assert both.returncode == 0, both.stderr
     lines = [x for x in both.stdout.splitlines() if "cost (measured:" in x]
-    assert len(lines) == 1 and "s per step of task 0 on 2 rank(s) of this machine): " in lines[0]
+    assert len(lines) == 1 and "s per step of task 0 (1 step) on 2 rank(s) of this machine): " in lines[0]
     assert both.stdout.count("job 'large-n-krylov': valid") == 1
     three = subprocess.run([ens.MPIRUN, "--oversubscribe", "-n", "3", *cmd], capture_output=True,
                            text=True, env=ens.child_env(), timeout=600)
