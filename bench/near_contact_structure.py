@@ -129,15 +129,15 @@ def use_kappa_one():
 def scale_kappa(factor, beyond=None, kT=None, dt=None):
     """The near-contact correction with every pair's kappa times factor (an error of its
     relative mobility G_p) in this process and the worker processes it forks; with beyond,
-    only the pairs at least beyond c dt from contact (h / (c dt) = h^2 s / (4 kT dt), s the
-    isolated pair's squeeze slope, as `drift.near_contact_velocities` measures the reach)."""
+    only the pairs at least beyond c dt from contact (`drift.contact_reach`, as
+    `drift.near_contact_velocities` measures the reach)."""
     exact = drift.squeeze_fraction
 
     def scaled(mobility, gap, radius_i, radius_j):
         kappa = exact(mobility, gap, radius_i, radius_j)
         if beyond is None:
             return factor * kappa
-        reach = gap ** 2 * drift.squeeze_slope(gap, radius_i, radius_j) / (4.0 * kT * dt)
+        reach = drift.contact_reach(gap, radius_i, radius_j, kT, dt)
         return np.where(reach >= beyond, factor, 1.0) * kappa
 
     drift.squeeze_fraction = scaled

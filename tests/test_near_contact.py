@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from sdmpi.dynamics.collisions import SEPARATION, remove_overlaps, separate
-from sdmpi.dynamics.drift import near_contact_velocities, squeeze_fraction, unit_pair_forces
+from sdmpi.dynamics.drift import contact_reach, near_contact_velocities, squeeze_fraction, unit_pair_forces
 from sdmpi.dynamics.models import ResistanceModel
 from sdmpi.dynamics.realisation import KT_REDUCED
 from sdmpi.hydro.geometry import Lattice
@@ -109,6 +109,20 @@ def test_near_contact_correction_goes_with_the_random_finite_differences(backend
     assert np.allclose(with_near - at.brownian_terms(z, KT_REDUCED, 5e-4).velocities,
                        near_contact_velocities(at, at.solver.brownian_velocities(z), z_near, KT_REDUCED, 5e-4))
 
+
+
+def test_contact_reach_is_the_gap_over_the_relative_diffusivity_of_a_step():
+    """h / (c dt) with c = D_rr / h of an isolated pair: Batchelor's relative diffusivity
+    of equal spheres near contact, D_rr = 2 D0 G(h) with G ~ 2 h / a, gives c -> 4 D0 / a
+    (units D0 = a = 1), approached from below as the log terms of the squeeze resistance
+    grow with h (to 1e-3 at h = 1e-4, whose next term is O(h log h)); dt scales it as
+    h / (c dt) says. Unequal spheres: symmetric in the radii."""
+    gaps = np.array([1e-5, 1e-4, 1e-2, 5e-2])
+    c = gaps / contact_reach(gaps, 1.0, 1.0, KT_REDUCED, 1.0)
+    assert np.allclose(c[:2], 4.0, rtol=1e-3) and np.all(np.diff(c) < 0) and c[-1] > 3.0
+    assert np.allclose(contact_reach(gaps, 1.0, 1.0, KT_REDUCED, 5e-4), gaps / (c * 5e-4), rtol=1e-12)
+    assert np.allclose(contact_reach(gaps, 1.0, 2.0, KT_REDUCED, 1.0),
+                       contact_reach(gaps, 2.0, 1.0, KT_REDUCED, 1.0), rtol=1e-12)
 
 
 def test_near_contact_correction_asks_g_precisely_within_reach_of_the_floor():

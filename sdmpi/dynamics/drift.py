@@ -220,6 +220,15 @@ def squeeze_fraction(mobility: np.ndarray, gap: np.ndarray, radius_i: np.ndarray
     return mobility * squeeze_slope(gap, radius_i, radius_j) / 4.0
 
 
+def contact_reach(gap: np.ndarray, radius_i: np.ndarray, radius_j: np.ndarray, kT: float,
+                  dt: float) -> np.ndarray:
+    """h / (c dt): the gap h of pairs in units of the distance c dt their relative motion
+    covers in a step of dt near contact, c = D_rr / h = kT G / h of the isolated pair
+    (kappa = 1: G = 4 / s, `squeeze_fraction`): h^2 s / (4 kT dt), s the two-sphere
+    squeeze slope (`hydro.two_sphere.squeeze_slope`)."""
+    return gap ** 2 * squeeze_slope(gap, radius_i, radius_j) / (4.0 * kT * dt)
+
+
 def unit_pair_forces(i: np.ndarray, j: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
     """Force sets (P, N, 6): for each pair p a unit force e_p on j_p and -e_p on i_p (its
     line of centres), no torques."""
@@ -252,8 +261,7 @@ def near_contact_velocities(evaluation: SolverEvaluation, m: np.ndarray, z_near:
     m_h, m_indep_h = (np.einsum("pc,pc->p", e, u[j, :3] - u[i, :3]) for u in (m, m_indep))
     gap = np.maximum(pairs.gap[close], evaluation.min_gap * mean_radius[close])  # the lubrication's floor
     forces = unit_pair_forces(i, j, e, n)
-    # beyond FLOOR_REACH c dt: h / (c dt) = h^2 slope / (4 kT dt), c = kT G / h at kappa = 1
-    far = gap ** 2 * squeeze_slope(gap, evaluation.radii[i], evaluation.radii[j]) >= 4.0 * FLOOR_REACH * kT * dt
+    far = contact_reach(gap, evaluation.radii[i], evaluation.radii[j], kT, dt) >= FLOOR_REACH
     mobility = solver.mobility_forms(forces, np.where(far, NEAR_CONTACT_FAR_ACCURACY, FORM_ACCURACY))
     kappa = squeeze_fraction(mobility, gap, evaluation.radii[i], evaluation.radii[j])
     weight = np.maximum(2.0 * kappa - 1.0, 0.0) * 0.5 * kT * (m_indep_h ** 2 - m_h ** 2) / (mobility * gap)
