@@ -164,7 +164,7 @@ def _validate_job(args) -> int:
             print(f"sdmpi validate: timing task 0 failed: {type(err).__name__}: {err}", file=sys.stderr)
             return EXIT_FAILED
     else:
-        print("  cost: give --time-steps K (e.g. 3) to time K steps here and estimate the "
+        print("  cost: give --time-steps K (e.g. 10) to time K steps here and estimate the "
               "core-hours and wall time")
     return EXIT_OK
 
