@@ -144,6 +144,8 @@ def test_validate_measures_the_cost(capsys):
     mean, low, high = (float(x) for x in m.groups())
     assert 0 < low <= mean <= high  # the mean of the two steps lies within their range
     assert line.endswith("on 2 rank(s)")
+    assert main(["validate", DEMO, "--time-steps", "1"]) == 0
+    assert "s per step of task 0 (1 step) on 1 rank(s) of this machine): " in capsys.readouterr().out
     assert main(["validate", DEMO, "--ranks", "3", "--set", "ensemble.ranks_per_task=2"]) == 2
 
 
@@ -154,7 +156,7 @@ def test_validate_times_a_task_on_its_ranks_under_mpirun():
     times the task on both, and rank 0 alone prints;
     under mpirun -n 3 it refuses (exit 2) and names the count."""
     small = ["--set", "system.n_particles=64", "--set", "ensemble.realisations=1"]
-    cmd = [sys.executable, "-m", "sdmpi", "validate", str(KRYLOV_JOB), *small, "--time-steps", "1"]
+    cmd = [sys.executable, "-m", "sdmpi", "validate", str(KRYLOV_JOB), *small, "--time-steps", "2"]
     # a plain process of a Slurm batch script (SLURM_PROCID=0, one rank) times alone too
     alone = subprocess.run(cmd, capture_output=True, text=True, env=ens.child_env({"SLURM_PROCID": "0"}),
                            timeout=600)
@@ -165,7 +167,11 @@ def test_validate_times_a_task_on_its_ranks_under_mpirun():
                           text=True, env=ens.child_env(), timeout=600)
     assert both.returncode == 0, both.stderr
     lines = [x for x in both.stdout.splitlines() if "cost (measured:" in x]
-    assert len(lines) == 1 and "s per step of task 0 (1 step) on 2 rank(s) of this machine): " in lines[0]
+    assert len(lines) == 1
+    m = re.search(r"measured: (\S+) s per step of task 0 \(mean of 2 steps, (\S+)-(\S+) s\) on 2 "
+                  r"rank\(s\) of this machine\): ", lines[0])
+    mean, low, high = (float(x) for x in m.groups())
+    assert 0 < low <= mean <= high  # each step's slowest rank, then their mean
     assert both.stdout.count("job 'large-n-krylov': valid") == 1
     three = subprocess.run([ens.MPIRUN, "--oversubscribe", "-n", "3", *cmd], capture_output=True,
                            text=True, env=ens.child_env(), timeout=600)
