@@ -84,8 +84,8 @@ def _add_validate(subparsers) -> None:
     parser.add_argument("--time-steps", type=int, default=0, metavar="K",
                         help="time K steps of the first task (after one untimed step that "
                              "compiles or loads the kernels) and estimate the run's "
-                             "core-hours and wall time from their mean (steps vary: 10 or "
-                             "more for a long job); default 0: no timing. A "
+                             "core-hours and wall time from their mean (steps vary; give 10 "
+                             "or more for a long job); default 0: no timing. A "
                              "job of R > 1 ranks per task is timed on its R ranks under "
                              "mpirun -n R, on one rank without mpirun")
     parser.set_defaults(handler=_validate)
