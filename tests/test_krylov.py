@@ -712,6 +712,54 @@ def test_mobility_forms_share_solves_between_distant_near_contact_pairs():
     assert np.abs(together / exact[:len(near)] - 1).max() > 2 * error.max()
 
 
+def test_colouring_separates_neighbours_with_few_colours():
+    """The solves of `mobility_forms` are the colours of the graph of pairs too close to
+    share one (`_dsatur`): never two neighbours alike, on random graphs; two colours on a
+    crown graph (u_i adjacent to v_j for i != j, 6 + 6 vertices) listed u_1, v_1, u_2, v_2,
+    ..., where taking the vertices in order with the lowest free colour needs 6; and on
+    the near-contact pairs of a suspension no more groups than in order."""
+    from sdmpi.dynamics.drift import NEAR_CONTACT_GAP, unit_pair_forces
+    from sdmpi.hydro.krylov import _dsatur
+
+    rng = np.random.default_rng(5)
+    for density in (0.05, 0.2, 0.5):
+        upper = np.triu(rng.random((40, 40)) < density, 1)
+        adjacent = upper | upper.T
+        colour = _dsatur(adjacent)
+        assert colour.min() == 0 and not np.any(adjacent & (colour[:, None] == colour[None, :]))
+    m = 6
+    crown = np.zeros((2 * m, 2 * m), dtype=bool)
+    for i in range(m):
+        for j in range(m):
+            if i != j:
+                crown[2 * i, 2 * j + 1] = crown[2 * j + 1, 2 * i] = True
+    in_order = np.full(2 * m, -1)
+    for v in range(2 * m):
+        in_order[v] = min(set(range(2 * m)) - set(in_order[crown[v]]))
+    assert in_order.max() + 1 == m and _dsatur(crown).max() + 1 == 2
+
+    n, pos, box, res = _near_contact_suspension()
+    pairs = res.pairs
+    chosen = np.flatnonzero(pairs.gap < NEAR_CONTACT_GAP)
+    forces = unit_pair_forces(pairs.i[chosen], pairs.j[chosen],
+                              pairs.dx[chosen] / np.linalg.norm(pairs.dx[chosen], axis=1)[:, None], n)
+    solver = make_solver("petsc-krylov", res, tolerance=1e-4)
+    groups = solver.form_groups(forces)
+    too_close = solver._too_close(np.stack([pairs.i[chosen], pairs.j[chosen]], axis=1), pairs.gap[chosen],
+                                  np.full(len(chosen), 1e-3))
+    assert sorted(sum(groups, [])) == list(range(len(chosen)))
+    assert all(not too_close[np.ix_(g, g)][~np.eye(len(g), dtype=bool)].any() for g in groups)
+    in_order = []
+    for p in range(len(chosen)):
+        for group in in_order:
+            if not too_close[p, group].any():
+                group.append(p)
+                break
+        else:
+            in_order.append([p])
+    assert len(groups) <= len(in_order)
+
+
 def test_mobility_forms_to_the_accuracy_asked():
     """The near-contact correction asks each pair's G_p to FORM_ACCURACY only where a step
     can bring the pair to the floor and to NEAR_CONTACT_FAR_ACCURACY farther out

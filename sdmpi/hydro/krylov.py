@@ -71,6 +71,7 @@ import numpy as np
 from .backend import FORM_ACCURACY, SolverBackend
 from .farfield import (NDOF, FarFieldIndefinite, far_field_mobility, far_field_product, plan_far_field,
                        self_mobility)
+from .geometry import find_pairs
 from .lubrication import close_pairs, lubrication_rows
 from .two_sphere import squeeze_slope
 from . import workspace
@@ -1134,12 +1135,12 @@ class KrylovSolver(SolverBackend):
         return u
 
     def form_groups(self, forces: np.ndarray, accuracy: np.ndarray | None = None) -> list[list[int]]:
-        """The force sets (P, N, 6) that `mobility_forms` solves together: each set acting
-        on the two spheres of a lubricated pair joins the first group whose sets all lie far
-        enough from it (every centre distance between their spheres, nearest images, at
-        least the separation of FORMS_SEPARATION's rule times the sum of the two radii, for
-        the pairs' gaps and the accuracies asked of their forms); every other set is a
-        group of its own, and sets without force none.
+        """The force sets (P, N, 6) that `mobility_forms` solves together: the sets acting
+        on the two spheres of a lubricated pair in groups whose sets all lie far enough
+        apart (every centre distance between their spheres, any lattice images, at least
+        the separation of FORMS_SEPARATION's rule times the sum of the two radii, for the
+        pairs' gaps and the accuracies asked of their forms), as few groups as `_groups`
+        finds; every other set is a group of its own, and sets without force none.
 
         Args:
             forces: (P, N, 6) force/torque sets.
@@ -1164,40 +1165,46 @@ class KrylovSolver(SolverBackend):
 
     def _groups(self, supports, gaps, accuracy):
         """`form_groups` of sets with these supports, lubricated pairs' gaps (NaN: none) and
-        accuracies."""
-        groups, shared = [], []  # shared: (its sets, their spheres (M, 2), gaps, accuracies)
-        for p, support in enumerate(supports):
-            if len(support) == 0:
-                continue
-            if np.isnan(gaps[p]):
-                groups.append([p])
-                continue
-            gap = 2 * gaps[p] / self.radii[support].sum()  # (mean radii)
-            for group in shared:
-                if self._apart(support, gap, accuracy[p], *group[1:]):
-                    group[0].append(p)
-                    group[1].append(support)
-                    group[2].append(gap)
-                    group[3].append(accuracy[p])
-                    break
-            else:
-                groups.append([p])
-                shared.append((groups[-1], [support], [gap], [accuracy[p]]))
-        return groups
+        accuracies: the sets on lubricated pairs coloured so that no two of a colour lie
+        too close (`_too_close`), by DSatur (Brelaz, Commun. ACM 22, 251 (1979): the set
+        whose neighbours already take the most colours first, ties to the most neighbours,
+        then the lowest index; each set the lowest colour its neighbours leave), which needs
+        fewer colours, so fewer solves, than taking the sets in order (N = 1000, phi = 0.45,
+        the near-contact correction: 4-5 against 5-6)."""
+        shared = [p for p, support in enumerate(supports) if len(support) == 2 and not np.isnan(gaps[p])]
+        alone = set(range(len(supports))) - set(shared)
+        groups = [[p] for p in sorted(alone) if len(supports[p])]
+        if shared:
+            colour = _dsatur(self._too_close(np.array([supports[p] for p in shared]), np.asarray(gaps)[shared],
+                                             np.asarray(accuracy, float)[shared]))
+            groups += [[shared[k] for k in np.flatnonzero(colour == c)] for c in range(colour.max() + 1)]
+        return sorted(groups)
 
-    def _apart(self, support, gap, accuracy, spheres, gaps, accuracies):
-        """Whether the pair support (its 2 sphere indices, surface gap in mean radii and the
-        accuracy asked of its form) lies far enough from every pair of a group (their
-        spheres (M, 2), gaps and accuracies) to share its solve (FORMS_SEPARATION)."""
-        spheres, gaps, accuracies = np.asarray(spheres), np.asarray(gaps), np.asarray(accuracies)
-        scale = FORM_ACCURACY / FORMS_MAX_GAP
-        separation = FORMS_SEPARATION * np.cbrt(np.maximum(np.maximum(gaps, FORMS_MAX_GAP) * scale / accuracy,
-                                                           max(gap, FORMS_MAX_GAP) * scale / accuracies))
-        d = self.positions[spheres][:, :, None, :] - self.positions[support][None, None, :, :]
-        if self.lattice is not None:
-            d = self.lattice.nearest_image(d)
-        reach = separation[:, None, None] * (self.radii[spheres][:, :, None] + self.radii[support][None, None, :])
-        return bool(np.all(np.einsum("abcx,abcx->abc", d, d) >= reach ** 2))
+    def _too_close(self, spheres, gaps, accuracy):
+        """(S, S) whether two lubricated pairs (their spheres (S, 2), surface gaps and the
+        accuracies asked of their forms) lie too close to share a solve: some centre
+        distance between their spheres (any lattice images) below FORMS_SEPARATION's rule
+        times the sum of the two radii; a pair is too close to itself. The candidates are
+        the pairs whose middles lie within the largest such reach (`geometry.find_pairs`),
+        so the cost grows with S, not S^2."""
+        gap = 2 * gaps / self.radii[spheres].sum(axis=1)  # in mean radii
+        term = np.maximum(gap, FORMS_MAX_GAP) * (FORM_ACCURACY / FORMS_MAX_GAP)
+        x0, x1 = self.positions[spheres[:, 0]], self.positions[spheres[:, 1]]
+        half = 0.5 * (x1 - x0 if self.lattice is None else self.lattice.nearest_image(x1 - x0))
+        middle = x0 + half if self.lattice is None else self.lattice.wrap(x0 + half)
+        offsets = np.stack([-half, half], axis=1)  # (S, 2, 3): each pair's spheres from its middle
+        radii = self.radii[spheres]
+        largest = (FORMS_SEPARATION * np.cbrt(term.max() / accuracy.min()) * 2 * radii.max()
+                   + 2 * np.linalg.norm(half, axis=1).max())
+        p, q, shift = find_pairs(middle, np.zeros(len(middle)), self.lattice, largest, 0.0)
+        separation = FORMS_SEPARATION * np.cbrt(np.maximum(term[q] / accuracy[p], term[p] / accuracy[q]))
+        d = ((middle[q] + shift - middle[p])[:, None, None, :] + offsets[q][:, None, :, :]
+             - offsets[p][:, :, None, :])  # (C, 2, 2, 3): p's sphere, q's sphere
+        reach = separation[:, None, None] * (radii[p][:, :, None] + radii[q][:, None, :])
+        hit = np.any(np.einsum("cabx,cabx->cab", d, d) < reach ** 2, axis=(1, 2))
+        close = np.eye(len(spheres), dtype=bool)
+        close[p[hit], q[hit]] = close[q[hit], p[hit]] = True
+        return close
 
     def brownian_forces(self, noise: np.ndarray) -> np.ndarray:
         """F (N, 6) with covariance R_FU over the noise (flat, noise_shape, standard
@@ -1230,3 +1237,21 @@ class KrylovSolver(SolverBackend):
             mine = (spheres >= self.p0) & (spheres < self.p1)
             np.add.at(force, spheres[mine] - self.p0, part[mine])
         return self._gather(force.ravel(), self.counts6).reshape(n, 6)
+
+
+def _dsatur(adjacent: np.ndarray) -> np.ndarray:
+    """Colours (S,) of the vertices of the graph with boolean adjacency (S, S) (the diagonal
+    ignored), no two adjacent vertices alike, by DSatur (Brelaz 1979); deterministic."""
+    n = len(adjacent)
+    adjacent = adjacent & ~np.eye(n, dtype=bool)
+    colour = np.full(n, -1)
+    taken = np.zeros((n, n + 1), dtype=bool)  # taken[v, c]: a neighbour of v has colour c
+    saturation, degree = np.zeros(n, dtype=np.int64), adjacent.sum(axis=1)
+    for _ in range(n):
+        v = int(np.argmax(np.where(colour < 0, saturation * (n + 1) + degree, -1)))
+        c = int(np.argmin(taken[v]))
+        colour[v] = c
+        fresh = adjacent[v] & ~taken[:, c]
+        saturation[fresh] += 1
+        taken[fresh, c] = True
+    return colour
